@@ -1,0 +1,108 @@
+"""What every controller implements, and what the closed loop gives it each sample."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from auvmpc.vehicle import VehicleParams
+
+__all__ = [
+    "ControlResult",
+    "ControlStatus",
+    "Controller",
+    "Observation",
+    "ObstacleState",
+    "feasible_thrust_box",
+    "project_to_limits",
+]
+
+
+@dataclass(frozen=True)
+class ObstacleState:
+    """A keep-out disc as the controller sees it at the current sample."""
+
+    center: np.ndarray  # (2,) world position now (m)
+    radius: float  # m
+    velocity: np.ndarray  # (2,) world velocity (m/s); zero for a fixed obstacle
+
+    def center_at(self, dt: float) -> np.ndarray:
+        """Predicted centre ``dt`` seconds ahead (constant velocity)."""
+        return self.center + self.velocity * dt
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the closed loop hands a controller at sample k."""
+
+    k: int
+    t: float  # s
+    state: np.ndarray  # (6,) measured [x, y, psi, u, v, r], possibly noisy
+    reference: np.ndarray  # (preview_steps + 1, 6): reference at t_k + i * Te, i = 0..
+    obstacles: tuple[ObstacleState, ...] = ()
+
+
+class ControlStatus(StrEnum):
+    """Outcome of one controller step, as logged."""
+
+    OK = "ok"
+    RELAXED = "relaxed"  # obstacle constraints softened by slack to stay feasible
+    FALLBACK = "fallback"  # solver failed or timed out: previous plan's next move applied
+    SATURATED = "saturated"  # command clipped to the thrust or rate limits
+
+
+@dataclass
+class ControlResult:
+    """One step's command and how it was obtained."""
+
+    thrust: np.ndarray  # (n,) N, applied over [t_k, t_k+1)
+    status: ControlStatus = ControlStatus.OK
+    solve_time_s: float = 0.0  # the optimiser's own time (the loop also times the whole call)
+    predicted_states: np.ndarray | None = None  # (N + 1, 6) if the controller predicts
+    info: dict[str, float] = field(default_factory=dict)
+
+
+class Controller(ABC):
+    """A discrete-time controller run every ``sample_time`` seconds.
+
+    The closed loop calls ``reset`` once, then ``compute`` at every sample with
+    the measured state and a reference preview of ``preview_steps + 1`` rows.
+    A controller owns its internal model (built from the *nominal* vehicle), so
+    plant-model mismatch is a property of the scenario, not of the controller.
+    """
+
+    sample_time: float
+    preview_steps: int
+
+    @abstractmethod
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        """Forget all history; ``initial_thrust`` is F(-1) for the first rate limit."""
+
+    @abstractmethod
+    def compute(self, observation: Observation) -> ControlResult:
+        """The thrust to apply over the next sample."""
+
+
+def feasible_thrust_box(
+    previous_thrust: np.ndarray, params: VehicleParams, sample_time: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-thruster [lower, upper] reachable in one sample under both hard limits."""
+    max_step = params.thrust_rate_limit * sample_time
+    lower = np.maximum(params.thrust_min, previous_thrust - max_step)
+    upper = np.minimum(params.thrust_max, previous_thrust + max_step)
+    # A previous thrust outside the force limits (never ours) leaves an empty box:
+    # move towards the force box as fast as the rate allows.
+    upper = np.maximum(upper, lower)
+    return lower, upper
+
+
+def project_to_limits(
+    thrust: np.ndarray, previous_thrust: np.ndarray, params: VehicleParams, sample_time: float
+) -> tuple[np.ndarray, bool]:
+    """Clip a command into the hard-limit box; also say whether it had to move."""
+    lower, upper = feasible_thrust_box(previous_thrust, params, sample_time)
+    clipped = np.clip(thrust, lower, upper)
+    return clipped, bool(np.any(np.abs(clipped - thrust) > 1e-9))

@@ -1,0 +1,127 @@
+"""External forces on the plant and noise on what the controller measures.
+
+Every random quantity comes from an injected ``numpy.random.Generator``: same
+seed, same bits. Forces are given in the world frame as ``[X, Y, N]`` (N, N,
+N m) and rotated into the body frame by the plant (paper-model.md section 6).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field
+
+from auvmpc.config import StrictModel
+
+__all__ = [
+    "DisturbanceConfig",
+    "GaussMarkovConfig",
+    "SensorNoiseConfig",
+    "WaveForceConfig",
+    "WorldDisturbance",
+    "SensorNoise",
+]
+
+NonNegative = Annotated[float, Field(ge=0)]
+Positive = Annotated[float, Field(gt=0)]
+
+
+class GaussMarkovConfig(StrictModel):
+    """A slowly varying current: first-order Gauss-Markov force on top of the mean."""
+
+    std_N: NonNegative = Field(description="stationary standard deviation per axis (N)")
+    time_constant_s: Positive = Field(description="correlation time (s)")
+
+
+class WaveForceConfig(StrictModel):
+    """A wave-like oscillating world-frame force along one direction."""
+
+    amplitude_N: NonNegative = Field(description="force amplitude (N)")
+    period_s: Positive = Field(description="oscillation period (s)")
+    direction_deg: float = Field(default=0.0, description="direction of the force, deg from +x")
+
+
+class DisturbanceConfig(StrictModel):
+    """Everything pushing on the vehicle that the controller is not told about."""
+
+    current_force_world: tuple[float, float] = Field(
+        default=(0.0, 0.0), description="constant current force (X, Y) in the world frame (N)"
+    )
+    moment_N_m: float = Field(default=0.0, description="constant yaw moment (N m)")
+    current_variation: GaussMarkovConfig | None = Field(
+        default=None, description="slowly varying part of the current, if any"
+    )
+    waves: WaveForceConfig | None = Field(default=None, description="oscillating force, if any")
+
+
+class SensorNoiseConfig(StrictModel):
+    """Zero-mean Gaussian noise on the state the controller sees (the log keeps the truth)."""
+
+    std: tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative] = (
+        Field(
+            default=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            description="standard deviation of [x, y, psi, u, v, r] (m, m, rad, m/s, m/s, rad/s)",
+        )
+    )
+
+
+class WorldDisturbance:
+    """Constant current + Gauss-Markov variation + waves, as a force in the world frame.
+
+    The Gauss-Markov part is held over each control sample and advanced with its
+    exact discretisation at sample boundaries; the wave part is a smooth function
+    of time evaluated wherever the integrator asks.
+    """
+
+    def __init__(self, config: DisturbanceConfig, sample_time: float, rng: np.random.Generator):
+        self.config = config
+        self.sample_time = sample_time
+        self._rng = rng
+        self._mean = np.array([*config.current_force_world, config.moment_N_m], dtype=float)
+        self._variation = np.zeros(3)
+        variation = config.current_variation
+        if variation is not None and variation.std_N > 0:
+            # Start from the stationary distribution so the statistics do not drift.
+            self._variation[:2] = rng.normal(0.0, variation.std_N, size=2)
+        self._wave_phase = 0.0
+        if config.waves is not None:
+            self._wave_phase = float(rng.uniform(0.0, 2.0 * math.pi))
+
+    @property
+    def is_constant(self) -> bool:
+        return self.config.current_variation is None and self.config.waves is None
+
+    def advance(self) -> None:
+        """Move the Gauss-Markov state forward by one control sample."""
+        variation = self.config.current_variation
+        if variation is None or variation.std_N == 0:
+            return
+        decay = math.exp(-self.sample_time / variation.time_constant_s)
+        drive = variation.std_N * math.sqrt(1.0 - decay * decay)
+        self._variation[:2] = decay * self._variation[:2] + drive * self._rng.normal(size=2)
+
+    def force_world(self, t: float) -> np.ndarray:
+        """World-frame ``[X, Y, N]`` at time t within the current sample."""
+        force = self._mean + self._variation
+        waves = self.config.waves
+        if waves is not None and waves.amplitude_N > 0:
+            angle = math.radians(waves.direction_deg)
+            magnitude = waves.amplitude_N * math.sin(2.0 * math.pi * t / waves.period_s + self._wave_phase)
+            force = force + magnitude * np.array([math.cos(angle), math.sin(angle), 0.0])
+        return force
+
+
+class SensorNoise:
+    """Adds Gaussian noise to a true state; a no-op (and draws nothing) when all std are 0."""
+
+    def __init__(self, config: SensorNoiseConfig, rng: np.random.Generator):
+        self._std = np.array(config.std, dtype=float)
+        self._rng = rng
+        self._active = bool(np.any(self._std > 0))
+
+    def measure(self, true_state: np.ndarray) -> np.ndarray:
+        if not self._active:
+            return true_state.copy()
+        return true_state + self._std * self._rng.standard_normal(self._std.shape)

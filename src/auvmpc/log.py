@@ -1,0 +1,123 @@
+"""SimLog: what a closed-loop run did, sample by sample, and its CSV form.
+
+Row k holds the TRUE plant state at t_k and the reference at t_k; the thrust on
+row k is what was applied over [t_k, t_k+1), so the last row has none
+(``shared/spec/interfaces.md``). Arrays are preallocated and time-major.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from auvmpc.vehicle import STATE_NAMES
+
+__all__ = ["SimLog", "REFERENCE_NAMES"]
+
+REFERENCE_NAMES = tuple(f"{name}_ref" for name in STATE_NAMES)
+DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
+
+
+@dataclass
+class SimLog:
+    """Time-major record of one run (N samples, n thrusters)."""
+
+    t: np.ndarray  # (N+1,) s
+    state: np.ndarray  # (N+1, 6) true plant state
+    reference: np.ndarray  # (N+1, 6)
+    thrust: np.ndarray  # (N, n) applied over [t_k, t_k+1)
+    solve_ms: np.ndarray  # (N,) wall time of the controller call
+    status: list[str]  # (N,) ControlStatus values
+    disturbance_world: np.ndarray  # (N+1, 3) world force [X, Y, N] at t_k
+    clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
+    sample_time: float
+    initial_thrust: np.ndarray  # (n,) F(-1), what the first rate limit is measured from
+
+    @classmethod
+    def allocate(cls, steps: int, n_thrusters: int, sample_time: float) -> SimLog:
+        return cls(
+            t=sample_time * np.arange(steps + 1, dtype=float),
+            state=np.zeros((steps + 1, 6)),
+            reference=np.zeros((steps + 1, 6)),
+            thrust=np.zeros((steps, n_thrusters)),
+            solve_ms=np.zeros(steps),
+            status=[""] * steps,
+            disturbance_world=np.zeros((steps + 1, 3)),
+            clearance_m=np.full(steps + 1, math.inf),
+            sample_time=sample_time,
+            initial_thrust=np.zeros(n_thrusters),
+        )
+
+    @property
+    def steps(self) -> int:
+        return len(self.thrust)
+
+    @property
+    def n_thrusters(self) -> int:
+        return self.thrust.shape[1]
+
+    def columns(self) -> list[str]:
+        thrusters = [f"F{i + 1}" for i in range(self.n_thrusters)]
+        return [
+            "t", *STATE_NAMES, *REFERENCE_NAMES, *thrusters, "solve_ms", "status",
+            *DISTURBANCE_NAMES, "clearance_m",
+        ]  # fmt: skip
+
+    def to_csv_text(self) -> str:
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(self.columns())
+        for k in range(self.steps + 1):
+            applied = k < self.steps
+            thrust = [_num(f) for f in self.thrust[k]] if applied else [""] * self.n_thrusters
+            writer.writerow(
+                [
+                    _num(self.t[k]),
+                    *(_num(v) for v in self.state[k]),
+                    *(_num(v) for v in self.reference[k]),
+                    *thrust,
+                    _num(self.solve_ms[k]) if applied else "",
+                    self.status[k] if applied else "",
+                    *(_num(v) for v in self.disturbance_world[k]),
+                    _num(self.clearance_m[k]) if math.isfinite(self.clearance_m[k]) else "",
+                ]
+            )
+        return buffer.getvalue()
+
+    @classmethod
+    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> SimLog:
+        """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
+        with open(path, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        if not rows:
+            raise ValueError(f"{path}: empty log")
+        thrust_names = sorted(
+            (name for name in rows[0] if name[0] == "F" and name[1:].isdigit()),
+            key=lambda name: int(name[1:]),
+        )
+        steps = len(rows) - 1
+        sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
+        log = cls.allocate(steps, len(thrust_names), sample_time)
+        for k, row in enumerate(rows):
+            log.t[k] = float(row["t"])
+            log.state[k] = [float(row[name]) for name in STATE_NAMES]
+            log.reference[k] = [float(row[name]) for name in REFERENCE_NAMES]
+            log.disturbance_world[k] = [float(row[name]) for name in DISTURBANCE_NAMES]
+            log.clearance_m[k] = float(row["clearance_m"]) if row["clearance_m"] else math.inf
+            if k < steps:
+                log.thrust[k] = [float(row[name]) for name in thrust_names]
+                log.solve_ms[k] = float(row["solve_ms"])
+                log.status[k] = row["status"]
+        if initial_thrust is not None:
+            log.initial_thrust = np.asarray(initial_thrust, dtype=float)
+        return log
+
+
+def _num(value: float) -> str:
+    """Shortest text that reads back to the same float."""
+    return repr(float(value))

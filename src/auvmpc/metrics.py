@@ -1,0 +1,86 @@
+"""Run metrics: pure functions of a SimLog (names and units per interfaces.md)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from auvmpc.controllers.base import ControlStatus
+from auvmpc.log import SimLog
+from auvmpc.vehicle import VehicleParams
+
+__all__ = ["compute_metrics", "position_error", "heading_error", "LIMIT_TOLERANCE_N"]
+
+# Slack for float round-off when checking hard limits: far below any physical meaning.
+LIMIT_TOLERANCE_N = 1e-9
+
+
+def position_error(log: SimLog) -> np.ndarray:
+    """(N+1,) Euclidean distance to the reference position (m)."""
+    return np.hypot(*(log.state[:, :2] - log.reference[:, :2]).T)
+
+
+def heading_error(log: SimLog) -> np.ndarray:
+    """(N+1,) heading error wrapped to (-pi, pi] (rad)."""
+    return wrap_angle(log.state[:, 2] - log.reference[:, 2])
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Wrap to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
+
+
+def thrust_increments(log: SimLog) -> np.ndarray:
+    """(N, n) change of each thruster's force at every sample, from F(-1)."""
+    return np.diff(np.vstack([log.initial_thrust, log.thrust]), axis=0)
+
+
+def compute_metrics(
+    log: SimLog, limits: VehicleParams, transient_s: float = 20.0
+) -> dict[str, float | int | None]:
+    """All interfaces.md metrics, plus steady-state errors after ``transient_s``.
+
+    ``limits`` supplies the hard thrust and rate limits the log is checked against
+    (the controller's nominal vehicle: the limits are the hardware's).
+    """
+    error = position_error(log)
+    heading = heading_error(log)
+    increments = thrust_increments(log)
+    max_step = limits.thrust_rate_limit * log.sample_time
+    lower, upper = limits.thrust_limits
+    force_violations = (log.thrust < lower - LIMIT_TOLERANCE_N) | (log.thrust > upper + LIMIT_TOLERANCE_N)
+    rate_violations = np.abs(increments) > max_step + LIMIT_TOLERANCE_N
+    solve = log.solve_ms
+    steady = log.t >= transient_s - 1e-9
+    clearance = log.clearance_m
+    return {
+        "rms_position_error_m": _rms(error),
+        "max_position_error_m": float(error.max()),
+        "final_position_error_m": float(error[-1]),
+        "rms_heading_error_rad": _rms(heading),
+        "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
+        "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
+        if log.steps
+        else 0.0,
+        "thrust_limit_violations": int(force_violations.sum()),
+        "thrust_rate_violations": int(rate_violations.sum()),
+        "min_obstacle_clearance_m": float(clearance.min()) if np.isfinite(clearance).any() else None,
+        "solve_ms_median": _percentile(solve, 50),
+        "solve_ms_p99": _percentile(solve, 99),
+        "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
+        "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+        "solver_failures": sum(status == ControlStatus.FALLBACK for status in log.status),
+        "transient_s": float(transient_s),
+        "rms_position_error_after_transient_m": _rms(error[steady]),
+        "max_position_error_after_transient_m": float(error[steady].max()) if steady.any() else None,
+        "rms_heading_error_after_transient_rad": _rms(heading[steady]),
+    }
+
+
+def _rms(values: np.ndarray) -> float | None:
+    return float(math.sqrt(np.mean(values**2))) if len(values) else None
+
+
+def _percentile(values: np.ndarray, q: float) -> float:
+    return float(np.percentile(values, q)) if len(values) else 0.0

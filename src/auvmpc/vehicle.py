@@ -1,0 +1,295 @@
+"""Vehicle parameters, thrust allocation and the 3-DOF horizontal-plane model.
+
+This module is the single source of truth for the plant equations (Fossen 2021,
+Ch. 6, restated in ``shared/spec/paper-model.md`` section 1):
+
+    x'   = u cos(psi) - v sin(psi)
+    y'   = u sin(psi) + v cos(psi)
+    psi' = r
+    m11 u' = Xu u + Xuu |u| u + m22 v r + f_u + d_u
+    m22 v' = Yv v + Yvv |v| v - m11 u r + f_v + d_v
+    Iz  r' = Nr r + Nrr |r| r + (m11 - m22) u v + M_r + d_r
+
+State ``[x, y, psi, u, v, r]``: world position (m), heading (rad), body surge
+and sway (m/s), yaw rate (rad/s). Body frame x forward, y starboard. Input: one
+force per thruster (N); ``tau = [f_u, f_v, M_r] = T @ F``. ``d`` is the external
+force in the body frame. The same function evaluates on NumPy arrays (plant
+simulation) and on CasADi symbols (controller models).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import casadi as ca
+import numpy as np
+import yaml
+from pydantic import Field, ValidationError, field_validator, model_validator
+
+from auvmpc.config import StrictModel
+from auvmpc.errors import ConfigError, format_validation_error
+
+__all__ = [
+    "STATE_NAMES",
+    "Thruster",
+    "VehicleParams",
+    "allocation_matrix",
+    "body_from_world",
+    "dynamics",
+    "load_vehicle",
+    "preset_names",
+    "scaled",
+]
+
+STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
+NX = 6
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+Damping = Annotated[float, Field(le=0, description="damping coefficient (Fossen: negative or zero)")]
+
+
+class Thruster(StrictModel):
+    """A horizontal thruster: where it sits and which way it pushes (body frame)."""
+
+    position: tuple[float, float] = Field(description="(x forward, y starboard) in m")
+    angle_deg: float = Field(description="thrust direction, deg from +x towards +y")
+
+
+class HeaveParams(StrictModel):
+    """1-DOF heave model (paper-model.md section 8); z up, negative below the surface."""
+
+    m_heave: PositiveFloat = Field(description="heave mass incl. added mass, m - Z_wdot (kg)")
+    Zw: Damping = Field(description="linear heave damping (N s/m)")
+    Zww: Damping = Field(description="quadratic heave damping (N s2/m2)")
+    net_buoyancy_N: float = Field(
+        description="buoyancy minus weight (N): positive floats up, negative sinks"
+    )
+    thruster_count: int = Field(ge=1, description="number of vertical thrusters")
+    thrust_limits: tuple[float, float] = Field(description="per vertical thruster [min, max] (N)")
+    thrust_rate_limit: PositiveFloat = Field(description="per vertical thruster (N/s)")
+
+    @field_validator("thrust_limits")
+    @classmethod
+    def _ordered(cls, limits: tuple[float, float]) -> tuple[float, float]:
+        if not limits[0] < limits[1]:
+            raise ValueError(f"need min < max, got {list(limits)}")
+        return limits
+
+
+class VehicleParams(StrictModel):
+    """Everything the 3-DOF model needs, validated and immutable.
+
+    Field names follow ``shared/spec/interfaces.md`` (the vehicle file contract).
+    """
+
+    name: str = Field(description="short identifier")
+    description: str = Field(default="", description="one line for humans")
+    source: str = Field(default="", description="where the numbers come from")
+    estimated: tuple[str, ...] = Field(
+        default=(), description="fields whose values are estimates, not published data"
+    )
+    mass: PositiveFloat = Field(description="rigid-body mass (kg)")
+    m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
+    m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")
+    Iz_rb: PositiveFloat = Field(description="rigid-body yaw inertia (kg m2)")
+    Iz_added: Annotated[float, Field(ge=0)] = Field(description="added yaw inertia, -N_rdot (kg m2)")
+    Xu: Damping = Field(description="linear surge damping (N s/m)")
+    Xuu: Damping = Field(description="quadratic surge damping (N s2/m2)")
+    Yv: Damping = Field(description="linear sway damping (N s/m)")
+    Yvv: Damping = Field(description="quadratic sway damping (N s2/m2)")
+    Nr: Damping = Field(description="linear yaw damping (N m s)")
+    Nrr: Damping = Field(description="quadratic yaw damping (N m s2)")
+    thrusters: tuple[Thruster, ...] = Field(min_length=3, description="horizontal thrusters")
+    thrust_limits: tuple[float, float] = Field(description="per thruster [min, max] (N)")
+    thrust_rate_limit: PositiveFloat = Field(description="per thruster |dF/dt| bound (N/s)")
+    heave: HeaveParams | None = Field(default=None, description="depth model, if any")
+
+    @field_validator("thrust_limits")
+    @classmethod
+    def _ordered(cls, limits: tuple[float, float]) -> tuple[float, float]:
+        if not limits[0] < limits[1]:
+            raise ValueError(f"need min < max, got {list(limits)}")
+        return limits
+
+    @model_validator(mode="after")
+    def _controllable(self) -> VehicleParams:
+        rank = np.linalg.matrix_rank(allocation_matrix(self.thrusters))
+        if rank < 3:
+            raise ValueError(
+                f"thrusters: the layout spans only {rank} of surge, sway and yaw (need all 3)"
+            )
+        return self
+
+    @property
+    def Iz(self) -> float:
+        """Total yaw inertia, rigid body plus added (kg m2)."""
+        return self.Iz_rb + self.Iz_added
+
+    @property
+    def n_thrusters(self) -> int:
+        return len(self.thrusters)
+
+    @cached_property
+    def T(self) -> np.ndarray:
+        """Allocation matrix (3, n): tau = [f_u, f_v, M_r] = T @ F."""
+        matrix = allocation_matrix(self.thrusters)
+        matrix.setflags(write=False)
+        return matrix
+
+    @cached_property
+    def T_pinv(self) -> np.ndarray:
+        """Minimum-norm allocation (n, 3): F = T_pinv @ tau."""
+        matrix = np.linalg.pinv(self.T)
+        matrix.setflags(write=False)
+        return matrix
+
+    @property
+    def thrust_min(self) -> float:
+        return self.thrust_limits[0]
+
+    @property
+    def thrust_max(self) -> float:
+        return self.thrust_limits[1]
+
+
+def allocation_matrix(thrusters: tuple[Thruster, ...] | list[Thruster]) -> np.ndarray:
+    """Columns [cos a, sin a, px sin a - py cos a] per thruster (interfaces.md)."""
+    columns = []
+    for thruster in thrusters:
+        angle = math.radians(thruster.angle_deg)
+        px, py = thruster.position
+        columns.append([math.cos(angle), math.sin(angle), px * math.sin(angle) - py * math.cos(angle)])
+    return np.array(columns, dtype=float).T
+
+
+def body_from_world(force_world, psi):
+    """Rotate a world-frame planar force (X, Y) into the body frame at heading psi.
+
+    Returns ``(d_u, d_v)`` with d_u = X cos psi + Y sin psi, d_v = -X sin psi + Y cos psi.
+    """
+    fx, fy = force_world[0], force_world[1]
+    cos_psi, sin_psi = _cos(psi), _sin(psi)
+    return fx * cos_psi + fy * sin_psi, -fx * sin_psi + fy * cos_psi
+
+
+def dynamics(state, thrust, params: VehicleParams, disturbance_body=None):
+    """State derivative of the 3-DOF model (module docstring).
+
+    Parameters
+    ----------
+    state : (6,) array or CasADi column
+    thrust : (n,) array or CasADi column, one force per thruster (N)
+    params : VehicleParams
+    disturbance_body : (3,) [d_u, d_v, d_r] or None
+
+    Returns
+    -------
+    (6,) NumPy array for numeric input, CasADi column for symbolic input.
+    """
+    symbolic = isinstance(state, ca.SX | ca.MX) or isinstance(thrust, ca.SX | ca.MX)
+    _, _, psi, u, v, r = (state[i] for i in range(NX))
+    if symbolic:
+        tau = ca.mtimes(ca.DM(params.T), thrust)
+        tau_u, tau_v, tau_r = tau[0], tau[1], tau[2]
+        cos_psi, sin_psi, absolute = ca.cos(psi), ca.sin(psi), ca.fabs
+    else:
+        tau_u, tau_v, tau_r = params.T @ np.asarray(thrust, dtype=float)
+        cos_psi, sin_psi, absolute = math.cos(psi), math.sin(psi), abs
+    if disturbance_body is not None:
+        tau_u = tau_u + disturbance_body[0]
+        tau_v = tau_v + disturbance_body[1]
+        tau_r = tau_r + disturbance_body[2]
+    p = params
+    derivative = (
+        u * cos_psi - v * sin_psi,
+        u * sin_psi + v * cos_psi,
+        r,
+        (p.Xu * u + p.Xuu * absolute(u) * u + p.m22 * v * r + tau_u) / p.m11,
+        (p.Yv * v + p.Yvv * absolute(v) * v - p.m11 * u * r + tau_v) / p.m22,
+        (p.Nr * r + p.Nrr * absolute(r) * r + (p.m11 - p.m22) * u * v + tau_r) / p.Iz,
+    )
+    if symbolic:
+        return ca.vertcat(*derivative)
+    return np.array(derivative, dtype=float)
+
+
+def _cos(angle):
+    return ca.cos(angle) if isinstance(angle, ca.SX | ca.MX) else np.cos(angle)
+
+
+def _sin(angle):
+    return ca.sin(angle) if isinstance(angle, ca.SX | ca.MX) else np.sin(angle)
+
+
+# Fields a scenario's ``plant.scale`` may multiply (scalars; thrust_limits scales both ends).
+SCALABLE_FIELDS = (
+    "mass", "m11", "m22", "Iz_rb", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr",
+    "thrust_limits", "thrust_rate_limit",
+)  # fmt: skip
+
+
+def scaled(params: VehicleParams, scale: Mapping[str, float]) -> VehicleParams:
+    """A copy of ``params`` with named fields multiplied by the given factors."""
+    changes: dict[str, Any] = {}
+    for field, factor in scale.items():
+        if field not in SCALABLE_FIELDS:
+            raise ConfigError(
+                f"plant.scale.{field}", factor, f"not a scalable field; one of {list(SCALABLE_FIELDS)}"
+            )
+        if not (math.isfinite(factor) and factor > 0):
+            raise ConfigError(f"plant.scale.{field}", factor, "factor must be finite and > 0")
+        value = getattr(params, field)
+        changes[field] = tuple(v * factor for v in value) if isinstance(value, tuple) else value * factor
+    if not changes:
+        return params
+    data = params.model_dump()
+    data.update(changes)
+    try:
+        return VehicleParams.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error, "plant") from None
+
+
+def preset_names() -> list[str]:
+    """Names of the vehicle presets shipped with the package."""
+    folder = resources.files("auvmpc.presets") / "vehicles"
+    return sorted(p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:
+    """Vehicle from a preset name, a YAML file path, or an inline mapping."""
+    if isinstance(spec, Mapping):
+        data, where = dict(spec), field
+    else:
+        text_spec = str(spec)
+        if text_spec in preset_names():
+            resource = resources.files("auvmpc.presets") / "vehicles" / f"{text_spec}.yaml"
+            data, where = _read_yaml_text(resource.read_text(), field, text_spec), field
+        elif text_spec.endswith((".yaml", ".yml")) or Path(text_spec).exists():
+            path = Path(text_spec)
+            if not path.is_file():
+                raise ConfigError(field, text_spec, "vehicle file not found")
+            data, where = _read_yaml_text(path.read_text(), field, text_spec), field
+        else:
+            raise ConfigError(field, text_spec, f"unknown preset; known: {preset_names()}")
+    try:
+        return VehicleParams.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error, where) from None
+
+
+def _read_yaml_text(text: str, field: str, origin: str) -> dict[str, Any]:
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(field, origin, f"not valid YAML{where}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(field, origin, "expected a mapping of vehicle fields")
+    return data

@@ -1,0 +1,34 @@
+"""Shared tolerances, each with the reason for its size, and small fixtures."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+# Issue 2's one-step replay bound: 0.1 mm and 1e-4 rad per 0.5 s sample.
+REPLAY_POSITION_TOL_M = 1e-4
+REPLAY_ANGLE_TOL_RAD = 1e-4
+# Velocity replay bound: same relative size as the position bound over a 0.5 s sample.
+REPLAY_VELOCITY_TOL = 2e-4
+# Plant RK4 at 0.05 s against solve_ivp at rtol 1e-11: RK4's local error is
+# O(h^5) ~ 1e-7 relative per step for this model's time constants; 1e-6 keeps margin.
+PLANT_VS_SOLVE_IVP_TOL = 1e-6
+# Symbolic (CasADi) and numeric evaluation of the same formula: round-off only.
+ROUND_OFF_TOL = 1e-12
+
+PAPER_INITIAL_STATE = (7.5, -12.0, math.pi / 2, 0.4, 0.1, 0.02 * math.pi)
+
+
+@pytest.fixture
+def jmse():
+    from auvmpc.vehicle import load_vehicle
+
+    return load_vehicle("jmse2210")
+
+
+@pytest.fixture
+def bluerov():
+    from auvmpc.vehicle import load_vehicle
+
+    return load_vehicle("bluerov2-heavy")
