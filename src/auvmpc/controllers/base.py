@@ -94,8 +94,16 @@ def feasible_thrust_box(
     lower = np.maximum(params.thrust_min, previous_thrust - max_step)
     upper = np.minimum(params.thrust_max, previous_thrust + max_step)
     # A previous thrust outside the force limits (never ours) leaves an empty box:
-    # move towards the force box as fast as the rate allows.
-    upper = np.maximum(upper, lower)
+    # the rate limit wins, moving towards the force box as fast as it allows.
+    empty = lower > upper
+    if np.any(empty):
+        towards = np.clip(
+            np.clip(previous_thrust, params.thrust_min, params.thrust_max),
+            previous_thrust - max_step,
+            previous_thrust + max_step,
+        )
+        lower = np.where(empty, towards, lower)
+        upper = np.where(empty, towards, upper)
     return lower, upper
 
 

@@ -1,0 +1,150 @@
+"""Command line: parse, call the library, print. Bad input -> one line, exit code 2."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from auvmpc.errors import ConfigError
+
+app = typer.Typer(
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    no_args_is_help=True,
+    help="Model-predictive trajectory tracking for AUVs: simulate, reproduce, benchmark.",
+)
+console = Console()
+errors = Console(stderr=True)
+
+USER_ERROR_EXIT = 2
+
+
+def main() -> None:
+    """Console-script entry point: user errors become one line on stderr, never a traceback."""
+    try:
+        app()
+    except ConfigError as error:
+        errors.print(f"error: {error}", highlight=False, soft_wrap=True)
+        sys.exit(USER_ERROR_EXIT)
+    except KeyboardInterrupt:
+        errors.print("interrupted: nothing half-written was left behind", highlight=False)
+        sys.exit(130)
+
+
+def progress_bar() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=errors,
+        transient=True,
+    )
+
+
+@app.command()
+def run(
+    scenario: Annotated[str, typer.Argument(help="built-in name or path to a scenario YAML")],
+    out: Annotated[Path | None, typer.Option("--out", help="run folder to write")] = None,
+    controller: Annotated[
+        str | None, typer.Option("--controller", help="override controller.type")
+    ] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
+    ] = None,
+    figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+) -> None:
+    """Simulate one scenario and write log.csv, run.json and figures."""
+    from auvmpc.runner import simulate, write_run
+    from auvmpc.scenario import load_scenario
+
+    overrides = list(set_ or [])
+    if controller is not None:
+        overrides.append(f"controller.type={controller}")
+    resolved = load_scenario(scenario, overrides)
+    name = resolved.scenario.name
+    out_dir = out if out is not None else Path("runs") / f"{name}-{resolved.scenario.controller.type}"
+    with progress_bar() as progress:
+        task = progress.add_task(f"{name}", total=None)
+        result = simulate(resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n))
+    write_run(result, out_dir, figures=figures)
+    print_metrics(result.metrics, title=f"{name} ({resolved.scenario.controller.type})")
+    console.print(f"wrote {out_dir}")
+
+
+@app.command()
+def reproduce(
+    out: Annotated[Path, typer.Option("--out", help="folder for runs, tables, figures")] = Path(
+        "results/paper"
+    ),
+    sweep: Annotated[bool, typer.Option(help="include the inertia-uncertainty sweep")] = True,
+    figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+) -> None:
+    """Reproduce the paper's simulations (section 4.1) into one folder."""
+    from auvmpc.reproduce import reproduce as run_all
+
+    with progress_bar() as progress:
+        task = progress.add_task("reproduce", total=None)
+
+        def advance(done: int, total: int, name: str) -> None:
+            progress.update(task, completed=done, total=total, description=name)
+
+        run_all(out, include_sweep=sweep, figures=figures, on_run=advance)
+    console.print((out / "summary.md").read_text(), highlight=False)
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def scenarios() -> None:
+    """List the built-in scenarios."""
+    from auvmpc.scenario import builtin_scenarios
+
+    for name, description in builtin_scenarios().items():
+        console.print(f"{name:<22} {description}", highlight=False)
+
+
+@app.command()
+def vehicles() -> None:
+    """List the built-in vehicle presets."""
+    from auvmpc.vehicle import load_vehicle, preset_names
+
+    for name in preset_names():
+        console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
+
+
+@app.command()
+def plot(
+    run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+) -> None:
+    """Re-draw the figures of a saved run from its log.csv and run.json."""
+    from auvmpc.runner import draw_figures, read_run
+    from auvmpc.scenario import Scenario
+    from auvmpc.vehicle import VehicleParams
+
+    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
+        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
+    info, log = read_run(run_dir)
+    draw_figures(log, Scenario.model_validate(info["scenario"]), VehicleParams.model_validate(info["model"]), run_dir)
+    console.print(f"redrew figures in {run_dir}")
+
+
+def print_metrics(metrics: dict, title: str) -> None:
+    table = Table(title=title, show_header=True)
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for key, value in metrics.items():
+        text = "-" if value is None else (f"{value:.4g}" if isinstance(value, float) else str(value))
+        table.add_row(key, text)
+    console.print(table)
+
+
+if __name__ == "__main__":
+    main()

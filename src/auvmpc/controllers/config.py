@@ -1,0 +1,107 @@
+"""Controller choice and tuning as a scenario states it (``controller:`` in the YAML)."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from auvmpc.config import StrictModel
+from auvmpc.controllers.baseline import BaselineConfig
+from auvmpc.controllers.qp import QpSolverName
+
+__all__ = ["ControllerConfig", "ControllerType", "ThrustPenalty"]
+
+NonNegative = Annotated[float, Field(ge=0)]
+Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
+
+
+class ControllerType(StrEnum):
+    """Controllers a scenario can name."""
+
+    BASELINE = "baseline"
+    MPC = "mpc"  # the paper's: SDC model frozen at the current state (paper-model.md sec. 3-4)
+    LTV_MPC = "ltv-mpc"  # linearised along the shifted previous solution, exact Jacobians
+
+
+class ThrustPenalty(StrEnum):
+    """What R weights: the absolute thrust (paper's energy term) or its change per sample."""
+
+    ABSOLUTE = "absolute"
+    INCREMENT = "increment"
+
+
+class ControllerConfig(StrictModel):
+    """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
+
+    type: ControllerType = Field(default=ControllerType.BASELINE, description="which controller")
+    sample_time: Annotated[float, Field(gt=0)] = Field(default=0.5, description="Te (s)")
+    prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
+    control_horizon: Annotated[int, Field(ge=1)] = Field(
+        default=2, description="nc (steps): moves after nc are held"
+    )
+    move_steps: tuple[Annotated[int, Field(ge=0)], ...] | None = Field(
+        default=None,
+        description="move blocking: the samples of the horizon at which the thrust may change, "
+        "starting with 0 and increasing; overrides control_horizon (nc = len(move_steps))",
+    )
+    Q: Weights6 = Field(default=(5, 5, 5, 1, 1, 1), description="stage weights on [x y psi u v r]")
+    S: Weights6 = Field(default=(10, 10, 10, 2, 2, 2), description="terminal weights")
+    R: tuple[NonNegative, ...] = Field(
+        default=(0.01,), description="thrust weights, one per thruster or one for all"
+    )
+    vehicle_radius: NonNegative = Field(
+        default=0.5, description="vehicle envelope disc for obstacle constraints and clearance (m)"
+    )
+    thrust_penalty: ThrustPenalty = Field(
+        default=ThrustPenalty.ABSOLUTE, description="R on F (paper) or on dF"
+    )
+    obstacle_margin: NonNegative = Field(
+        default=0.1,
+        description="extra clearance added to every obstacle constraint (m), covers the "
+        "gap between the prediction model and the plant between samples",
+    )
+    obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
+        default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
+    )
+    qp_solver: QpSolverName = Field(default=QpSolverName.DAQP, description="QP backend")
+    qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
+        default=None, description="cap on QP iterations; hitting it counts as a solver failure"
+    )
+    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="a step whose optimisation takes longer is treated as a failure "
+        "(the previous plan's next move is applied), as on a real-time computer",
+    )
+    model_substeps: Annotated[int, Field(ge=1, le=20)] = Field(
+        default=1, description="RK4 steps per sample in the controller's prediction model"
+    )
+    baseline: BaselineConfig = Field(
+        default_factory=BaselineConfig, description="gains of the classical baseline tracker"
+    )
+
+    @model_validator(mode="after")
+    def _horizons(self) -> ControllerConfig:
+        if self.control_horizon > self.prediction_horizon:
+            raise ValueError(
+                f"control_horizon {self.control_horizon} exceeds prediction_horizon "
+                f"{self.prediction_horizon}"
+            )
+        steps = self.move_steps
+        if steps is not None:
+            if not steps or steps[0] != 0 or any(b <= a for a, b in zip(steps, steps[1:])):
+                raise ValueError(f"move_steps must start at 0 and increase, got {list(steps)}")
+            if steps[-1] >= self.prediction_horizon:
+                raise ValueError(
+                    f"move_steps {list(steps)} reach past prediction_horizon {self.prediction_horizon}"
+                )
+        return self
+
+    def move_schedule(self) -> tuple[int, ...]:
+        """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
+        return self.move_steps if self.move_steps is not None else tuple(range(self.control_horizon))
+
+    def thrust_weights(self, n_thrusters: int) -> tuple[float, ...]:
+        """R expanded to one weight per thruster."""
+        return self.R * n_thrusters if len(self.R) == 1 else self.R

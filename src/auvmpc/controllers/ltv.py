@@ -1,0 +1,58 @@
+"""LTV-MPC: the RK4 model linearised along the previous solution shifted one step.
+
+The paper freezes the state-dependent matrices at the current state, so over its
+15 s look-ahead the predicted heading never turns. Here the nonlinear RK4 model
+is rolled out from the measured state under the previous plan's thrusts
+(shifted one sample), and linearised at every point of that rollout with exact
+CasADi Jacobians, so the prediction follows the turn.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.controllers.config import ControllerConfig
+from auvmpc.controllers.mpc import NX, AffinePrediction, LinearMpc
+from auvmpc.integrators import rk4
+from auvmpc.vehicle import VehicleParams, dynamics
+
+__all__ = ["LtvMpc", "linearised_rollout"]
+
+
+def linearised_rollout(model: VehicleParams, sample_time: float, substeps: int, horizon: int) -> ca.Function:
+    """CasADi function (x0 (6), F (n, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
+
+    X[:, i] is the state after step i of the rollout; A_i, B_i are the Jacobians of
+    the one-sample RK4 map at (X_{i-1}, F_i), built once and evaluated many times.
+    """
+    state = ca.SX.sym("x", NX)
+    thrust = ca.SX.sym("F", model.n_thrusters)
+    next_state = rk4(lambda x, u: dynamics(x, u, model), state, thrust, sample_time, substeps)
+    step = ca.Function(
+        "step",
+        [state, thrust],
+        [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
+    )
+    return step.mapaccum("rollout", horizon)
+
+
+class LtvMpc(LinearMpc):
+    """Condensed MPC on the model linearised along the shifted previous solution."""
+
+    def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+        super().__init__(model, config)
+        self._rollout = linearised_rollout(
+            model, config.sample_time, config.model_substeps, config.prediction_horizon
+        )
+
+    def prediction_model(self, state: np.ndarray, nominal_thrust: np.ndarray) -> AffinePrediction:
+        ny, n = self.horizon, self.model.n_thrusters
+        states, jac_x, jac_u = self._rollout(state, nominal_thrust.T)
+        states = np.asarray(states)  # (6, ny)
+        A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
+        B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
+        nominal = np.vstack([state, states.T])  # (ny + 1, 6)
+        # Offsets so that the affine model reproduces the rollout exactly at the nominal point.
+        c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1]) - np.einsum("nij,nj->ni", B, nominal_thrust)
+        return AffinePrediction(A=A, B=B, c=c, nominal=nominal)

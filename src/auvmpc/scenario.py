@@ -1,0 +1,187 @@
+"""Scenario files: a typed, validated schema and the loader with command-line overrides.
+
+The key names are a contract (``shared/spec/interfaces.md``). Every field has a
+default and a description; unknown keys, wrong types and non-finite numbers are
+errors that name the field (:class:`auvmpc.errors.ConfigError`).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import yaml
+from pydantic import Field, ValidationError, model_validator
+
+from auvmpc.config import StrictModel
+from auvmpc.controllers.config import ControllerConfig, ControllerType
+from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
+from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.obstacles import ObstacleConfig
+from auvmpc.references import ReferenceConfig
+from auvmpc.vehicle import VehicleParams, load_vehicle, scaled
+
+__all__ = [
+    "ControllerConfig",
+    "ControllerType",
+    "PlantConfig",
+    "Scenario",
+    "builtin_scenarios",
+    "load_scenario",
+    "apply_override",
+]
+
+NonNegative = Annotated[float, Field(ge=0)]
+
+
+class PlantConfig(StrictModel):
+    """How the simulated vehicle differs from the controller's model, and how it is integrated."""
+
+    scale: dict[str, Annotated[float, Field(gt=0)]] = Field(
+        default_factory=dict, description="factor per vehicle field, e.g. {Iz_rb: 0.75}"
+    )
+    max_step: Annotated[float, Field(gt=0, le=0.5)] = Field(
+        default=0.05, description="longest RK4 step of the plant integration (s)"
+    )
+
+
+class Scenario(StrictModel):
+    """One closed-loop experiment, fully specified."""
+
+    name: str = Field(description="identifier")
+    description: str = Field(default="", description="one line for humans")
+    duration: Annotated[float, Field(gt=0)] = Field(description="simulated time (s)")
+    vehicle: str | dict[str, Any] = Field(
+        default="jmse2210", description="preset name, vehicle file path, or inline mapping"
+    )
+    plant: PlantConfig = Field(default_factory=PlantConfig)
+    disturbance: DisturbanceConfig = Field(default_factory=DisturbanceConfig)
+    sensing: SensorNoiseConfig = Field(default_factory=SensorNoiseConfig)
+    reference: ReferenceConfig
+    initial_state: tuple[float, float, float, float, float, float] = Field(
+        description="[x, y, psi, u, v, r] at t = 0"
+    )
+    initial_thrust: tuple[float, ...] | None = Field(
+        default=None, description="F(-1) per thruster (N); zeros if omitted"
+    )
+    obstacles: tuple[ObstacleConfig, ...] = Field(default=())
+    controller: ControllerConfig = Field(default_factory=ControllerConfig)
+    seed: Annotated[int, Field(ge=0)] = Field(default=0, description="master random seed")
+    transient_s: NonNegative = Field(
+        default=20.0, description="start of the window for the steady-state metrics (s)"
+    )
+
+    @model_validator(mode="after")
+    def _whole_samples(self) -> Scenario:
+        steps = self.duration / self.controller.sample_time
+        if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+            raise ValueError(
+                f"duration {self.duration} is not a whole number of samples of "
+                f"{self.controller.sample_time} s"
+            )
+        return self
+
+
+class ResolvedScenario:
+    """A scenario plus what its names point at: the nominal model and the simulated plant."""
+
+    def __init__(self, scenario: Scenario, base_dir: Path) -> None:
+        self.scenario = scenario
+        self.base_dir = base_dir
+        vehicle = scenario.vehicle
+        if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
+            vehicle = str((base_dir / vehicle)) if not Path(vehicle).is_absolute() else vehicle
+        self.model: VehicleParams = load_vehicle(vehicle)
+        self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
+        n = self.model.n_thrusters
+        weights = scenario.controller.R
+        if len(weights) not in (1, n):
+            raise ConfigError("controller.R", list(weights), f"need 1 or {n} weights (one per thruster)")
+        initial = scenario.initial_thrust
+        if initial is not None:
+            if len(initial) != n:
+                raise ConfigError("initial_thrust", list(initial), f"need {n} values")
+            low, high = self.model.thrust_limits
+            if not all(low <= value <= high for value in initial):
+                raise ConfigError("initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]")
+
+
+def builtin_scenarios() -> dict[str, str]:
+    """Built-in scenario names and their one-line descriptions."""
+    folder = resources.files("auvmpc.presets") / "scenarios"
+    found = {}
+    for item in sorted(folder.iterdir(), key=lambda p: p.name):
+        if item.name.endswith(".yaml"):
+            data = yaml.safe_load(item.read_text()) or {}
+            found[item.name.removesuffix(".yaml")] = str(data.get("description", ""))
+    return found
+
+
+def load_scenario(source: str | Path, overrides: Sequence[str] = ()) -> ResolvedScenario:
+    """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides."""
+    text_source = str(source)
+    if text_source in builtin_scenarios():
+        text = (resources.files("auvmpc.presets") / "scenarios" / f"{text_source}.yaml").read_text()
+        base_dir = Path.cwd()
+    else:
+        path = Path(text_source)
+        if not path.is_file():
+            raise ConfigError(
+                "scenario", text_source, f"no such file or built-in; built-ins: {list(builtin_scenarios())}"
+            )
+        text, base_dir = path.read_text(), path.resolve().parent
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError("scenario", text_source, f"not valid YAML{where}") from None
+    if not isinstance(data, dict):
+        raise ConfigError("scenario", text_source, "expected a mapping of scenario fields")
+    for override in overrides:
+        apply_override(data, override)
+    return ResolvedScenario(validate_scenario(data), base_dir)
+
+
+def validate_scenario(data: dict[str, Any]) -> Scenario:
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error) from None
+
+
+def apply_override(data: dict[str, Any], override: str) -> None:
+    """Set ``a.b.0.c=value`` in a nested mapping; the value is read as YAML."""
+    path, separator, raw_value = override.partition("=")
+    if not separator or not path:
+        raise ConfigError("--set", override, "expected field=value")
+    try:
+        value = yaml.safe_load(raw_value)
+    except yaml.YAMLError:
+        raise ConfigError(path, raw_value, "value is not valid YAML") from None
+    keys = path.split(".")
+    node: Any = data
+    for depth, key in enumerate(keys):
+        last = depth == len(keys) - 1
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise ConfigError(".".join(keys[: depth + 1]), key, f"no such list index (length {len(node)})")
+            index: Any = int(key)
+        elif isinstance(node, dict):
+            index = key
+        else:
+            raise ConfigError(".".join(keys[:depth]), node, "is not a mapping or list")
+        if last:
+            node[index] = value
+        else:
+            if isinstance(node, dict) and (index not in node or node[index] is None):
+                node[index] = {}
+            node = node[index]
+
+
+def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
+    """JSON-ready, fully resolved form (defaults filled in)."""
+    return copy.deepcopy(scenario.model_dump(mode="json"))
