@@ -114,7 +114,7 @@ def test_negative_values_are_rejected_with_the_field_name(field):
 def test_unstable_gains_are_rejected():
     with pytest.raises(ValidationError, match="Routh-Hurwitz"):
         BaselineConfig(cross_kp=0.1, cross_kd=0.1, cross_ki=0.5)
-    with pytest.raises(ValidationError, match="heading_kd must be > 0"):
+    with pytest.raises(ValidationError, match="heading_kd: must be > 0"):
         BaselineConfig(heading_kd=0.0)
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "format_validation_error"]
+__all__ = ["ConfigError", "FieldError", "format_validation_error"]
 
 
 class ConfigError(ValueError):
@@ -15,6 +15,16 @@ class ConfigError(ValueError):
         super().__init__(f"{field}: {reason} (got {_short(value)})")
 
 
+class FieldError(ValueError):
+    """Raised by a model validator that checks several fields: names the one at fault."""
+
+    def __init__(self, field: str, value: object, reason: str) -> None:
+        self.field = field
+        self.value = value
+        self.reason = reason
+        super().__init__(f"{field}: {reason}")
+
+
 def _short(value: object, limit: int = 80) -> str:
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
@@ -24,9 +34,13 @@ def format_validation_error(error, prefix: str = "") -> ConfigError:
     """Turn a pydantic ValidationError into a ConfigError naming the first bad field."""
     first = error.errors()[0]
     location = ".".join(str(part) for part in first["loc"] if part != "__root__")
-    field = ".".join(part for part in (prefix, location) if part) or "<root>"
     reason = first["msg"]
+    value = first.get("input")
+    cause = first.get("ctx", {}).get("error")
+    if isinstance(cause, FieldError):
+        location = ".".join(part for part in (location, cause.field) if part)
+        reason, value = cause.reason, cause.value
+    field = ".".join(part for part in (prefix, location) if part) or "<root>"
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
-    value = first.get("input")
     return ConfigError(field, value, reason[0].lower() + reason[1:] if reason else "invalid")

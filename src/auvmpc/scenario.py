@@ -19,7 +19,7 @@ from pydantic import Field, ValidationError, model_validator
 from auvmpc.config import StrictModel
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
-from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.obstacles import ObstacleConfig
 from auvmpc.references import ReferenceConfig
 from auvmpc.vehicle import VehicleParams, load_vehicle, scaled
@@ -78,9 +78,10 @@ class Scenario(StrictModel):
     def _whole_samples(self) -> Scenario:
         steps = self.duration / self.controller.sample_time
         if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-            raise ValueError(
-                f"duration {self.duration} is not a whole number of samples of "
-                f"{self.controller.sample_time} s"
+            raise FieldError(
+                "duration",
+                self.duration,
+                f"not a whole number of samples of {self.controller.sample_time} s",
             )
         return self
 

@@ -32,7 +32,7 @@ import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from auvmpc.config import StrictModel
-from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.errors import ConfigError, FieldError, format_validation_error
 
 __all__ = [
     "STATE_NAMES",
@@ -120,8 +120,10 @@ class VehicleParams(StrictModel):
     def _controllable(self) -> VehicleParams:
         rank = np.linalg.matrix_rank(allocation_matrix(self.thrusters))
         if rank < 3:
-            raise ValueError(
-                f"thrusters: the layout spans only {rank} of surge, sway and yaw (need all 3)"
+            raise FieldError(
+                "thrusters",
+                [t.model_dump() for t in self.thrusters],
+                f"the layout spans only {rank} of surge, sway and yaw (need all 3)",
             )
         return self
 

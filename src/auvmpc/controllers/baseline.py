@@ -51,6 +51,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
+from auvmpc.errors import FieldError
 from auvmpc.controllers.base import (
     Controller,
     ControlResult,
@@ -131,13 +132,15 @@ class BaselineConfig(StrictModel):
         for axis in ("along", "cross", "heading"):
             kp, kd, ki = (getattr(self, f"{axis}_{name}") for name in ("kp", "kd", "ki"))
             if kp > 0 and kd == 0:
-                raise ValueError(
-                    f"{axis}_kd must be > 0 when {axis}_kp = {kp} > 0 (undamped position loop)"
+                raise FieldError(
+                    f"{axis}_kd", kd, f"must be > 0 when {axis}_kp = {kp} > 0 (undamped loop)"
                 )
             if ki > 0 and not kp * kd > ki:
-                raise ValueError(
-                    f"{axis}_ki = {ki} needs {axis}_kp * {axis}_kd > {axis}_ki (Routh-Hurwitz), "
-                    f"got {axis}_kp = {kp}, {axis}_kd = {kd}"
+                raise FieldError(
+                    f"{axis}_ki",
+                    ki,
+                    f"needs {axis}_kp * {axis}_kd > {axis}_ki (Routh-Hurwitz); "
+                    f"{axis}_kp = {kp}, {axis}_kd = {kd}",
                 )
         return self
 

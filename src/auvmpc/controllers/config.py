@@ -8,6 +8,7 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
+from auvmpc.errors import FieldError
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.qp import QpSolverName
 
@@ -84,17 +85,18 @@ class ControllerConfig(StrictModel):
     @model_validator(mode="after")
     def _horizons(self) -> ControllerConfig:
         if self.control_horizon > self.prediction_horizon:
-            raise ValueError(
-                f"control_horizon {self.control_horizon} exceeds prediction_horizon "
-                f"{self.prediction_horizon}"
+            raise FieldError(
+                "control_horizon",
+                self.control_horizon,
+                f"exceeds prediction_horizon {self.prediction_horizon}",
             )
         steps = self.move_steps
         if steps is not None:
             if not steps or steps[0] != 0 or any(b <= a for a, b in zip(steps, steps[1:])):
-                raise ValueError(f"move_steps must start at 0 and increase, got {list(steps)}")
+                raise FieldError("move_steps", list(steps), "must start at 0 and increase")
             if steps[-1] >= self.prediction_horizon:
-                raise ValueError(
-                    f"move_steps {list(steps)} reach past prediction_horizon {self.prediction_horizon}"
+                raise FieldError(
+                    "move_steps", list(steps), f"reach past prediction_horizon {self.prediction_horizon}"
                 )
         return self
 

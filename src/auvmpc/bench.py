@@ -1,0 +1,382 @@
+"""Benchmark: controllers x scenarios, timed on one CPU core, one row of numbers per pair.
+
+Each row holds the per-step controller solve time (median, 99th percentile, max; ms), the
+wall time of the whole closed-loop run (s), the number of control steps and every run
+metric of ``shared/spec/interfaces.md``. Timings are only as honest as the machine they ran
+on: :func:`machine_info` describes it and the process is pinned to a single CPU for the runs.
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import os
+import platform
+import statistics
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.table import Table
+
+from auvmpc.errors import ConfigError
+from auvmpc.runner import simulate
+from auvmpc.scenario import ControllerType, ResolvedScenario, builtin_scenarios, load_scenario
+
+__all__ = [
+    "BenchCase",
+    "CONTROLLER_PRESETS",
+    "resolve_controller",
+    "run_benchmark",
+    "machine_info",
+    "format_table",
+    "rows_to_json",
+    "pinned_to_one_cpu",
+]
+
+CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
+    "baseline": ("controller.type=baseline",),
+    "mpc": ("controller.type=mpc", "controller.control_horizon=2"),
+    "mpc-nc30": ("controller.type=mpc", "controller.control_horizon=30"),
+    "ltv-mpc": ("controller.type=ltv-mpc", "controller.control_horizon=2"),
+    "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
+}
+"""Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
+controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon."""
+
+# The per-step solve statistics, computed as auvmpc.metrics does (numpy's linear percentile).
+SOLVE_STATS = {"solve_ms_median": 50.0, "solve_ms_p99": 99.0}
+PACKAGES = ("numpy", "scipy", "casadi", "daqp", "osqp")
+
+
+@dataclass(frozen=True)
+class BenchCase:
+    """A labelled controller configuration, expressed as scenario overrides.
+
+    Attributes
+    ----------
+    controller : str
+        Label shown in the table and the JSON rows, e.g. ``"ltv-mpc-nc30"``.
+    overrides : tuple of str
+        ``field=value`` overrides applied to each scenario, e.g.
+        ``("controller.type=ltv-mpc", "controller.control_horizon=30")``.
+    """
+
+    controller: str
+    overrides: tuple[str, ...]
+
+
+def resolve_controller(label: str) -> BenchCase:
+    """The case for a preset label or a bare controller type name.
+
+    Parameters
+    ----------
+    label : str
+        A key of :data:`CONTROLLER_PRESETS`, or any ``controller.type`` value (the
+        scenario's other controller settings are then kept).
+
+    Returns
+    -------
+    BenchCase
+
+    Raises
+    ------
+    ConfigError
+        If ``label`` is neither, naming the ``--controllers`` option.
+    """
+    if label in CONTROLLER_PRESETS:
+        return BenchCase(label, CONTROLLER_PRESETS[label])
+    if label in {kind.value for kind in ControllerType}:
+        return BenchCase(label, (f"controller.type={label}",))
+    known = sorted(set(CONTROLLER_PRESETS) | {kind.value for kind in ControllerType})
+    raise ConfigError("--controllers", label, f"unknown controller; choose from {known}")
+
+
+def run_benchmark(
+    controllers: Sequence[str],
+    scenarios: Sequence[str],
+    repeats: int = 1,
+    on_run: Callable[[int, int, str], None] | None = None,
+    overrides: Sequence[str] = (),
+) -> list[dict[str, Any]]:
+    """Run every controller on every scenario, pinned to one CPU, and time it.
+
+    Every name is checked and every scenario loaded before the first run, so a typo fails
+    at once and no YAML parsing is timed.
+
+    Parameters
+    ----------
+    controllers : sequence of str
+        Controller labels, see :func:`resolve_controller`.
+    scenarios : sequence of str
+        Built-in scenario names or paths to scenario files.
+    repeats : int
+        Closed-loop runs per (controller, scenario) pair, at least 1.
+    on_run : callable, optional
+        ``on_run(done, total, name)`` before each run and once more with ``"done"``;
+        ``total`` counts single runs (pairs x repeats).
+    overrides : sequence of str
+        Extra ``field=value`` overrides applied to every run after the controller's,
+        e.g. ``("duration=5",)``.
+
+    Returns
+    -------
+    list of dict
+        One row per pair, scenarios in the outer loop. Keys: ``controller``, ``scenario``,
+        ``solve_ms_median``, ``solve_ms_p99``, ``solve_ms_max`` (per controller step, over
+        all steps of all repeats; ms), ``wall_s`` (wall time of one :func:`simulate` call,
+        i.e. controller construction, closed loop and metrics; median over repeats; s),
+        ``steps`` (control steps per run), ``repeats``, ``pinned_cpu`` (the CPU the runs
+        were pinned to, None if pinning was not possible), then every run metric.
+        The metrics other than the solve times are those of the first repeat: runs are
+        seeded and repeat exactly unless a solver time limit makes them timing dependent.
+
+    Raises
+    ------
+    ConfigError
+        Unknown controller (``--controllers``), unknown scenario (``--scenarios``), no
+        names at all, ``repeats`` below 1, or an invalid override.
+    """
+    if not controllers:
+        raise ConfigError("--controllers", list(controllers), "name at least one controller")
+    if not scenarios:
+        raise ConfigError("--scenarios", list(scenarios), "name at least one scenario")
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise ConfigError("--repeats", repeats, "need a whole number of at least 1")
+    cases = [resolve_controller(label) for label in controllers]
+    builtins = builtin_scenarios()
+    for name in scenarios:
+        if name not in builtins and not Path(name).is_file():
+            raise ConfigError(
+                "--scenarios", name, f"unknown scenario (not a file); built-ins: {list(builtins)}"
+            )
+    planned: list[tuple[str, BenchCase, ResolvedScenario]] = [
+        (name, case, load_scenario(name, (*case.overrides, *overrides)))
+        for name in scenarios
+        for case in cases
+    ]
+    total = len(planned) * repeats
+    rows = []
+    with pinned_to_one_cpu() as cpu:
+        for index, (name, case, resolved) in enumerate(planned):
+            solve_ms: list[np.ndarray] = []
+            wall_s: list[float] = []
+            metrics: dict[str, Any] = {}
+            steps = 0
+            for repeat in range(repeats):
+                if on_run is not None:
+                    on_run(index * repeats + repeat, total, f"{name} / {case.controller}")
+                gc.collect()  # a collection left over from the previous run is not this run's
+                started = time.perf_counter()
+                result = simulate(resolved)
+                wall_s.append(time.perf_counter() - started)
+                solve_ms.append(result.log.solve_ms.copy())
+                if repeat == 0:
+                    metrics, steps = result.metrics, result.log.steps
+            rows.append(
+                _row(case.controller, name, np.concatenate(solve_ms), wall_s, steps, cpu, metrics)
+            )
+    if on_run is not None:
+        on_run(total, total, "done")
+    return rows
+
+
+def _row(
+    controller: str,
+    scenario: str,
+    solve_ms: np.ndarray,
+    wall_s: Sequence[float],
+    steps: int,
+    cpu: int | None,
+    metrics: dict[str, Any],
+) -> dict[str, Any]:
+    head: dict[str, Any] = {"controller": controller, "scenario": scenario}
+    for key, q in SOLVE_STATS.items():
+        head[key] = float(np.percentile(solve_ms, q)) if len(solve_ms) else 0.0
+    head["solve_ms_max"] = float(solve_ms.max()) if len(solve_ms) else 0.0
+    head["wall_s"] = float(statistics.median(wall_s))
+    head["steps"] = int(steps)
+    head["repeats"] = len(wall_s)
+    head["pinned_cpu"] = cpu
+    return {**head, **{key: value for key, value in metrics.items() if key not in head}}
+
+
+@contextmanager
+def pinned_to_one_cpu() -> Iterator[int | None]:
+    """Run the body on the first CPU this process may use; restore the affinity afterwards.
+
+    On Linux an affinity belongs to a thread, so every thread of the process is pinned
+    (math libraries start worker threads at import), and threads started inside the body
+    are returned to the process's previous CPU set at exit.
+
+    Yields
+    ------
+    int or None
+        The CPU pinned to, or None where affinity cannot be set (not Linux, or refused).
+    """
+    if not hasattr(os, "sched_setaffinity"):
+        yield None
+        return
+    allowed = os.sched_getaffinity(0)
+    cpu = min(allowed)
+    previous: dict[int, set[int]] = {}
+    try:
+        os.sched_setaffinity(0, {cpu})
+    except OSError:
+        yield None
+        return
+    previous[threading.get_native_id()] = allowed
+    try:
+        for tid in _thread_ids():
+            if tid in previous:
+                continue
+            try:
+                previous[tid] = os.sched_getaffinity(tid)
+                os.sched_setaffinity(tid, {cpu})
+            except OSError:  # the thread ended meanwhile, or is not ours to move
+                previous.pop(tid, None)
+        yield cpu
+    finally:
+        for tid in _thread_ids():
+            try:
+                os.sched_setaffinity(tid, previous.get(tid, allowed))
+            except OSError:
+                pass
+
+
+def _thread_ids() -> list[int]:
+    try:
+        return [int(entry) for entry in os.listdir("/proc/self/task")]
+    except OSError:
+        return [threading.get_native_id()]
+
+
+def machine_info() -> dict[str, Any]:
+    """What the timings ran on.
+
+    Returns
+    -------
+    dict
+        ``cpu_model`` (from /proc/cpuinfo, else ``platform.processor()``, else None),
+        ``platform``, ``machine``, ``python``, ``cpu_count`` (``os.cpu_count()``),
+        ``cpus_allowed`` (CPUs this process may use, None if unknown) and ``packages``
+        (installed versions of numpy, scipy, casadi, daqp, osqp; None if missing).
+    """
+    allowed = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    return {
+        "cpu_model": _cpu_model(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "python": platform.python_version(),
+        "cpu_count": os.cpu_count(),
+        "cpus_allowed": allowed,
+        "packages": {name: _version(name) for name in PACKAGES},
+    }
+
+
+def _cpu_model() -> str | None:
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        text = ""
+    for line in text.splitlines():
+        key, separator, value = line.partition(":")
+        if separator and key.strip() in ("model name", "Model", "Hardware", "cpu model"):
+            return value.strip()
+    return platform.processor() or None
+
+
+def _version(package: str) -> str | None:
+    try:
+        return version(package)
+    except PackageNotFoundError:
+        return None
+
+
+def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None = None) -> Table:
+    """A rich table of benchmark rows, the machine (if given) in the caption.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows from :func:`run_benchmark`.
+    machine : dict, optional
+        From :func:`machine_info`.
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    table = Table(
+        title="auvmpc benchmark (solve times per controller step)",
+        caption=_caption(rows, machine),
+    )
+    columns = (
+        ("controller", "left"), ("scenario", "left"),
+        ("median ms", "right"), ("p99 ms", "right"), ("max ms", "right"), ("wall s", "right"),
+        ("RMS err m", "right"), ("final err m", "right"), ("min clear. m", "right"),
+        ("viol. F/dF", "right"), ("fails", "right"),
+    )  # fmt: skip
+    for title, justify in columns:
+        table.add_column(title, justify=justify)
+    for row in rows:
+        table.add_row(
+            row["controller"],
+            row["scenario"],
+            _number(row["solve_ms_median"], ".2f"),
+            _number(row["solve_ms_p99"], ".2f"),
+            _number(row["solve_ms_max"], ".2f"),
+            _number(row["wall_s"], ".2f"),
+            _number(row["rms_position_error_m"], ".3f"),
+            _number(row["final_position_error_m"], ".3f"),
+            _number(row["min_obstacle_clearance_m"], ".3f"),
+            f"{row['thrust_limit_violations']}/{row['thrust_rate_violations']}",
+            str(row["solver_failures"]),
+        )
+    return table
+
+
+def _caption(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None) -> str | None:
+    parts = []
+    if machine is not None:
+        packages = ", ".join(f"{name} {ver}" for name, ver in machine["packages"].items() if ver)
+        parts.append(
+            f"{machine['cpu_model'] or 'unknown CPU'}, {machine['cpu_count']} CPUs "
+            f"({machine['cpus_allowed']} allowed); {machine['platform']}; "
+            f"Python {machine['python']}; {packages}"
+        )
+    pinned = {row.get("pinned_cpu") for row in rows}
+    if pinned and None not in pinned:
+        parts.append("pinned to CPU " + ", ".join(str(cpu) for cpu in sorted(pinned)))
+    elif rows:
+        parts.append("not pinned to one CPU")
+    repeats = {row.get("repeats") for row in rows}
+    if repeats - {None, 1}:
+        parts.append(f"repeats {', '.join(str(n) for n in sorted(repeats))}: wall s is the median")
+    return "\n".join(parts) or None
+
+
+def _number(value: float | int | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def rows_to_json(rows: Sequence[dict[str, Any]]) -> str:
+    """The rows as a JSON list of objects (the ``--json FILE`` contract), keys as in the rows.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows from :func:`run_benchmark`.
+
+    Returns
+    -------
+    str
+        Indented JSON; ``null`` for missing values (e.g. clearance without obstacles).
+    """
+    return json.dumps(list(rows), indent=2, allow_nan=False) + "\n"
