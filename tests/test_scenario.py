@@ -133,3 +133,20 @@ def test_missing_file_and_bad_yaml(tmp_path):
 def test_missing_vehicle_file_is_named(tmp_path):
     with pytest.raises(ConfigError, match=r"^vehicle: vehicle file not found"):
         load_scenario(write_scenario(tmp_path, vehicle="absent.yaml"))
+
+
+def test_new_scenarios_default_to_the_better_tracker_paper_ones_keep_the_papers(tmp_path):
+    data = {
+        "name": "fresh",
+        "duration": 10.0,
+        "reference": {"type": "line", "start": [0, 0], "heading_deg": 0, "speed": 0.5},
+        "initial_state": [0, 0, 0, 0, 0, 0],
+    }
+    path = tmp_path / "fresh.yaml"
+    path.write_text(yaml.safe_dump(data))
+    fresh = load_scenario(path).scenario.controller
+    assert fresh.type == "ltv-mpc"
+    assert fresh.move_schedule() == tuple(range(fresh.prediction_horizon))
+    for name in PAPER_SCENARIOS:
+        paper = load_scenario(name).scenario.controller
+        assert paper.type == "mpc" and paper.move_schedule() == (0, 1)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from rich.table import Table
 
+from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.errors import ConfigError
 from auvmpc.runner import simulate
 from auvmpc.scenario import ControllerType, ResolvedScenario, builtin_scenarios, load_scenario
@@ -32,6 +33,8 @@ from auvmpc.scenario import ControllerType, ResolvedScenario, builtin_scenarios,
 __all__ = [
     "BenchCase",
     "CONTROLLER_PRESETS",
+    "DEFAULT_CONTROLLERS",
+    "DEFAULT_SCENARIOS",
     "resolve_controller",
     "run_benchmark",
     "machine_info",
@@ -40,15 +43,8 @@ __all__ = [
     "pinned_to_one_cpu",
 ]
 
-CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
-    "baseline": ("controller.type=baseline",),
-    "mpc": ("controller.type=mpc", "controller.control_horizon=2"),
-    "mpc-nc30": ("controller.type=mpc", "controller.control_horizon=30"),
-    "ltv-mpc": ("controller.type=ltv-mpc", "controller.control_horizon=2"),
-    "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
-}
-"""Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
-controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon."""
+DEFAULT_CONTROLLERS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline")
+DEFAULT_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 
 # The per-step solve statistics, computed as auvmpc.metrics does (numpy's linear percentile).
 SOLVE_STATS = {"solve_ms_median": 50.0, "solve_ms_p99": 99.0}

@@ -20,6 +20,8 @@ app = typer.Typer(
     help="Model-predictive trajectory tracking for AUVs: simulate, reproduce, benchmark.",
 )
 console = Console()
+if not console.is_terminal:  # piped or in CI: do not squeeze tables into 80 columns
+    console.width = 160
 errors = Console(stderr=True)
 
 USER_ERROR_EXIT = 2
@@ -100,6 +102,54 @@ def reproduce(
         run_all(out, include_sweep=sweep, figures=figures, on_run=advance)
     console.print((out / "summary.md").read_text(), highlight=False)
     console.print(f"wrote {out}")
+
+
+@app.command()
+def bench(
+    controllers: Annotated[
+        list[str] | None,
+        typer.Option("--controllers", help="controller labels, repeated or comma-separated"),
+    ] = None,
+    scenarios: Annotated[
+        list[str] | None,
+        typer.Option("--scenarios", help="scenario names or files, repeated or comma-separated"),
+    ] = None,
+    json_file: Annotated[Path | None, typer.Option("--json", help="write the rows as JSON")] = None,
+    repeats: Annotated[int, typer.Option(help="runs per pair; wall time is their median")] = 1,
+    set_: Annotated[
+        list[str] | None, typer.Option("--set", help="override a field in every run")
+    ] = None,
+) -> None:
+    """Time controllers x scenarios on one core: per-step median/p99/max, wall time, metrics."""
+    from auvmpc.bench import (
+        DEFAULT_CONTROLLERS,
+        DEFAULT_SCENARIOS,
+        format_table,
+        machine_info,
+        rows_to_json,
+        run_benchmark,
+    )
+    from auvmpc.runner import atomic_write_text
+
+    with progress_bar() as progress:
+        task = progress.add_task("bench", total=None)
+        rows = run_benchmark(
+            _split(controllers) or DEFAULT_CONTROLLERS,
+            _split(scenarios) or DEFAULT_SCENARIOS,
+            repeats,
+            on_run=lambda done, total, name: progress.update(
+                task, completed=done, total=total, description=name
+            ),
+            overrides=tuple(set_ or ()),
+        )
+    console.print(format_table(rows, machine_info()))
+    if json_file is not None:
+        atomic_write_text(json_file, rows_to_json(rows))
+        console.print(f"wrote {json_file}")
+
+
+def _split(values: list[str] | None) -> list[str]:
+    return [part for value in values or () for part in value.split(",") if part]
 
 
 @app.command()

@@ -12,40 +12,19 @@ from pathlib import Path
 
 import numpy as np
 
+from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.runner import atomic_write_text, simulate, write_run
 from auvmpc.scenario import load_scenario
 
-__all__ = ["Variant", "PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
+__all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
 
 
-@dataclass(frozen=True)
-class Variant:
-    """A controller configuration applied to a scenario through overrides."""
-
-    label: str
-    overrides: tuple[str, ...]
-    description: str
-
-
-PAPER_VARIANTS = (
-    Variant("mpc-nc2", ("controller.type=mpc",), "paper's controller and horizons (ny 30, nc 2)"),
-    Variant(
-        "mpc-nc30",
-        ("controller.type=mpc", "controller.control_horizon=30"),
-        "paper's SDC model, every move free",
-    ),
-    Variant("ltv-mpc-nc2", ("controller.type=ltv-mpc",), "linearised along the plan, nc 2"),
-    Variant(
-        "ltv-mpc-nc30",
-        ("controller.type=ltv-mpc", "controller.control_horizon=30"),
-        "linearised along the plan, every move free",
-    ),
-    Variant("baseline", ("controller.type=baseline",), "classical PID + feedback linearisation"),
-)
+# Controller labels of CONTROLLER_PRESETS run on every paper scenario.
+PAPER_VARIANTS = ("mpc", "mpc-nc30", "ltv-mpc", "ltv-mpc-nc30", "baseline")
 PAPER_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 # Uncertainty level -1..1 maps to rigid-body yaw inertia -25..+25 % and added -35..+35 %.
 SWEEP_LEVELS = tuple(float(level) for level in np.linspace(-1.0, 1.0, 7))
-SWEEP_VARIANTS = ("mpc-nc2", "ltv-mpc-nc2", "ltv-mpc-nc30", "baseline")
+SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline")
 SUMMARY_KEYS = (
     "rms_position_error_m", "max_position_error_m", "final_position_error_m",
     "rms_position_error_after_transient_m", "max_position_error_after_transient_m",
@@ -65,22 +44,25 @@ def sweep_scale(level: float) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class Job:
     scenario: str
-    variant: Variant
+    controller: str  # a CONTROLLER_PRESETS label
     extra: tuple[str, ...] = ()
     level: float | None = None
 
     @property
     def folder_name(self) -> str:
         suffix = "" if self.level is None else f"--level{self.level:+.2f}"
-        return f"{self.scenario}--{self.variant.label}{suffix}"
+        return f"{self.scenario}--{self.controller}{suffix}"
+
+    @property
+    def overrides(self) -> tuple[str, ...]:
+        return (*CONTROLLER_PRESETS[self.controller], *self.extra)
 
 
 def jobs(include_sweep: bool = True) -> list[Job]:
-    planned = [Job(s, v) for s in PAPER_SCENARIOS for v in PAPER_VARIANTS]
+    planned = [Job(s, c) for s in PAPER_SCENARIOS for c in PAPER_VARIANTS]
     if include_sweep:
-        by_label = {v.label: v for v in PAPER_VARIANTS}
         planned += [
-            Job("paper-disturbed", by_label[label], sweep_scale(level), level)
+            Job("paper-disturbed", label, sweep_scale(level), level)
             for label in SWEEP_VARIANTS
             for level in SWEEP_LEVELS
         ]
@@ -101,10 +83,10 @@ def reproduce(
     for index, job in enumerate(planned):
         if on_run is not None:
             on_run(index, len(planned), job.folder_name)
-        resolved = load_scenario(job.scenario, (*job.variant.overrides, *job.extra))
+        resolved = load_scenario(job.scenario, job.overrides)
         result = simulate(resolved)
         write_run(result, out_dir / "runs" / job.folder_name, figures=figures and job.level is None)
-        row = {"scenario": job.scenario, "variant": job.variant.label, "level": job.level}
+        row = {"scenario": job.scenario, "controller": job.controller, "level": job.level}
         row.update({key: result.metrics[key] for key in SUMMARY_KEYS})
         rows.append(row)
     if on_run is not None:
@@ -119,7 +101,7 @@ def reproduce(
 
 def summary_markdown(rows: Sequence[dict]) -> str:
     columns = (
-        ("scenario", "scenario"), ("variant", "controller"), ("level", "uncertainty"),
+        ("scenario", "scenario"), ("controller", "controller"), ("level", "uncertainty"),
         ("rms_position_error_after_transient_m", "RMS err after transient (m)"),
         ("max_position_error_after_transient_m", "max err after transient (m)"),
         ("final_position_error_m", "final err (m)"),
@@ -159,7 +141,7 @@ def _sweep_figure(rows: Sequence[dict], out_dir: Path) -> None:
     levels = sorted({row["level"] for row in sweep})
     series = {}
     for label in SWEEP_VARIANTS:
-        by_level = {row["level"]: row for row in sweep if row["variant"] == label}
+        by_level = {row["level"]: row for row in sweep if row["controller"] == label}
         series[label] = [by_level[level]["max_position_error_after_transient_m"] for level in levels]
     percent = [f"{25 * level:+.0f}/{35 * level:+.0f}" for level in levels]
     figure = figure_error_vs_parameter(

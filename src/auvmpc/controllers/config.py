@@ -12,7 +12,7 @@ from auvmpc.errors import FieldError
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.qp import QpSolverName
 
-__all__ = ["ControllerConfig", "ControllerType", "ThrustPenalty"]
+__all__ = ["CONTROLLER_PRESETS", "ControllerConfig", "ControllerType", "ThrustPenalty"]
 
 NonNegative = Annotated[float, Field(ge=0)]
 Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
@@ -36,11 +36,16 @@ class ThrustPenalty(StrEnum):
 class ControllerConfig(StrictModel):
     """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
 
-    type: ControllerType = Field(default=ControllerType.BASELINE, description="which controller")
+    type: ControllerType = Field(
+        default=ControllerType.LTV_MPC,
+        description="which controller (default: the best tracker of docs/paper-reproduction.md)",
+    )
     sample_time: Annotated[float, Field(gt=0)] = Field(default=0.5, description="Te (s)")
     prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
-    control_horizon: Annotated[int, Field(ge=1)] = Field(
-        default=2, description="nc (steps): moves after nc are held"
+    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
+        default=None,
+        description="nc (steps): moves after nc are held; omitted = prediction_horizon "
+        "(every move free, the better tracker; the paper uses 2)",
     )
     move_steps: tuple[Annotated[int, Field(ge=0)], ...] | None = Field(
         default=None,
@@ -84,7 +89,7 @@ class ControllerConfig(StrictModel):
 
     @model_validator(mode="after")
     def _horizons(self) -> ControllerConfig:
-        if self.control_horizon > self.prediction_horizon:
+        if self.control_horizon is not None and self.control_horizon > self.prediction_horizon:
             raise FieldError(
                 "control_horizon",
                 self.control_horizon,
@@ -102,8 +107,21 @@ class ControllerConfig(StrictModel):
 
     def move_schedule(self) -> tuple[int, ...]:
         """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
-        return self.move_steps if self.move_steps is not None else tuple(range(self.control_horizon))
+        if self.move_steps is not None:
+            return self.move_steps
+        return tuple(range(self.control_horizon or self.prediction_horizon))
 
     def thrust_weights(self, n_thrusters: int) -> tuple[float, ...]:
         """R expanded to one weight per thruster."""
         return self.R * n_thrusters if len(self.R) == 1 else self.R
+
+
+CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
+    "baseline": ("controller.type=baseline",),
+    "mpc": ("controller.type=mpc", "controller.control_horizon=2"),
+    "mpc-nc30": ("controller.type=mpc", "controller.control_horizon=30"),  # = ny of paper-*
+    "ltv-mpc": ("controller.type=ltv-mpc", "controller.control_horizon=2"),
+    "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
+}
+"""Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
+controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon."""
