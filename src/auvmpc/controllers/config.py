@@ -9,10 +9,17 @@ from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.errors import FieldError
+from auvmpc.estimation import ObserverConfig
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.qp import QpSolverName
 
-__all__ = ["CONTROLLER_PRESETS", "ControllerConfig", "ControllerType", "ThrustPenalty"]
+__all__ = [
+    "CONTROLLER_PRESETS",
+    "ControllerConfig",
+    "ControllerType",
+    "NmpcMode",
+    "ThrustPenalty",
+]
 
 NonNegative = Annotated[float, Field(ge=0)]
 Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
@@ -24,6 +31,15 @@ class ControllerType(StrEnum):
     BASELINE = "baseline"
     MPC = "mpc"  # the paper's: SDC model frozen at the current state (paper-model.md sec. 3-4)
     LTV_MPC = "ltv-mpc"  # linearised along the shifted previous solution, exact Jacobians
+    NMPC = "nmpc"  # nonlinear multiple shooting (CasADi): full IPOPT solve or real-time SQP
+    DO_MPC = "do-mpc"  # the same OCP solved by do-mpc (pip install auvmpc[compare]), a yardstick
+
+
+class NmpcMode(StrEnum):
+    """How ``nmpc`` solves its nonlinear program each sample."""
+
+    FULL = "full"  # IPOPT to convergence: the accuracy reference
+    REAL_TIME = "real-time"  # one SQP iteration from the shifted previous solution
 
 
 class ThrustPenalty(StrEnum):
@@ -83,6 +99,25 @@ class ControllerConfig(StrictModel):
     model_substeps: Annotated[int, Field(ge=1, le=20)] = Field(
         default=1, description="RK4 steps per sample in the controller's prediction model"
     )
+    linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
+        default=1,
+        description="linearise-and-solve passes per sample (ltv-mpc: SQP iterations; "
+        "also refreshes the obstacle half-planes around the new plan)",
+    )
+    trust_region_weight: NonNegative = Field(
+        default=10.0,
+        description="ltv-mpc: penalty on predicted heading and velocity deviations from the "
+        "trajectory the model is linearised on (keeps each step where the linearisation holds)",
+    )
+    offset_free: bool = Field(
+        default=True,
+        description="estimate the unknown current and model error online (EKF on a world-frame "
+        "force) and feed it to the prediction; MPC controllers only (the paper: false)",
+    )
+    observer: ObserverConfig = Field(
+        default_factory=ObserverConfig, description="tuning of the offset-free estimator"
+    )
+    nmpc_mode: NmpcMode = Field(default=NmpcMode.REAL_TIME, description="nmpc solution mode")
     baseline: BaselineConfig = Field(
         default_factory=BaselineConfig, description="gains of the classical baseline tracker"
     )
@@ -124,4 +159,5 @@ CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
     "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
 }
 """Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
-controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon."""
+controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon;
+other settings come from the scenario."""

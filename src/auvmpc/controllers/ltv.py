@@ -15,23 +15,29 @@ import numpy as np
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.mpc import NX, AffinePrediction, LinearMpc
 from auvmpc.integrators import rk4
-from auvmpc.vehicle import VehicleParams, dynamics
+from auvmpc.estimation import world_disturbance_dynamics
+from auvmpc.vehicle import VehicleParams
 
 __all__ = ["LtvMpc", "linearised_rollout"]
 
 
-def linearised_rollout(model: VehicleParams, sample_time: float, substeps: int, horizon: int) -> ca.Function:
-    """CasADi function (x0 (6), F (n, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
+def linearised_rollout(
+    model: VehicleParams, sample_time: float, substeps: int, horizon: int
+) -> ca.Function:
+    """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
 
-    X[:, i] is the state after step i of the rollout; A_i, B_i are the Jacobians of
-    the one-sample RK4 map at (X_{i-1}, F_i), built once and evaluated many times.
+    X[:, i] is the state after step i of the rollout under the world-frame force and
+    moment d; A_i, B_i are the Jacobians of the one-sample RK4 map at (X_{i-1}, F_i),
+    built once and evaluated many times.
     """
     state = ca.SX.sym("x", NX)
     thrust = ca.SX.sym("F", model.n_thrusters)
-    next_state = rk4(lambda x, u: dynamics(x, u, model), state, thrust, sample_time, substeps)
+    disturbance = ca.SX.sym("d", 3)
+    f = world_disturbance_dynamics(model)
+    next_state = rk4(lambda x, u: f(x, u, disturbance), state, thrust, sample_time, substeps)
     step = ca.Function(
         "step",
-        [state, thrust],
+        [state, thrust, disturbance],
         [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
     )
     return step.mapaccum("rollout", horizon)
@@ -46,9 +52,12 @@ class LtvMpc(LinearMpc):
             model, config.sample_time, config.model_substeps, config.prediction_horizon
         )
 
-    def prediction_model(self, state: np.ndarray, nominal_thrust: np.ndarray) -> AffinePrediction:
+    def prediction_model(
+        self, state: np.ndarray, nominal_thrust: np.ndarray, disturbance_world: np.ndarray
+    ) -> AffinePrediction:
         ny, n = self.horizon, self.model.n_thrusters
-        states, jac_x, jac_u = self._rollout(state, nominal_thrust.T)
+        disturbance = np.tile(np.reshape(disturbance_world, (3, 1)), (1, ny))
+        states, jac_x, jac_u = self._rollout(state, nominal_thrust.T, disturbance)
         states = np.asarray(states)  # (6, ny)
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)

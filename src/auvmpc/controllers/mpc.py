@@ -39,7 +39,8 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
-from auvmpc.vehicle import VehicleParams
+from auvmpc.estimation import DisturbanceObserver
+from auvmpc.vehicle import VehicleParams, body_from_world
 
 __all__ = ["AffinePrediction", "LinearMpc", "PaperMpc", "sdc_matrix", "rk4_discretize"]
 
@@ -51,6 +52,9 @@ _HESSIAN_REGULARISATION = 1e-9
 _SLACK_QUADRATIC_WEIGHT = 1.0
 # A slack below this (m) is solver tolerance, not a relaxed constraint.
 _SLACK_ACTIVE_M = 1e-6
+# Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
+# heading and velocities carry the nonlinearity (rotation, Coriolis), positions follow them.
+_TRUST_REGION_SCALE = (0.0, 0.0, 1.0, 1.0, 1.0, 1.0)
 # Obstacle rows are kept for predicted steps whose nominal position is within this distance
 # of the half-plane (m): 15 s at the vehicle's top speed is far more than one re-plan moves.
 _OBSTACLE_RANGE_M = 5.0
@@ -103,47 +107,67 @@ class LinearMpc(Controller):
         # F bounds where the thrust changes (it is held in between and after the last move).
         self._thrust_rows = self._move_to_thrust[move_steps].reshape(nc * n, self.n_moves)
         self._solver = make_qp_solver(config.qp_solver, config.qp_iteration_limit)
+        self._observer = (
+            DisturbanceObserver(model, config.sample_time, config.observer, config.model_substeps)
+            if config.offset_free
+            else None
+        )
         self.reset(np.zeros(NX), np.zeros(n))
 
     # -- the one thing subclasses decide ------------------------------------------------
     @abstractmethod
-    def prediction_model(self, state: np.ndarray, nominal_thrust: np.ndarray) -> AffinePrediction:
-        """Affine model over the horizon, around ``nominal_thrust`` (ny, n)."""
+    def prediction_model(
+        self, state: np.ndarray, nominal_thrust: np.ndarray, disturbance_world: np.ndarray
+    ) -> AffinePrediction:
+        """Affine model over the horizon around ``nominal_thrust`` (ny, n), with the
+        estimated world-frame force and moment ``disturbance_world`` (3,) acting throughout."""
 
     # -- Controller interface ------------------------------------------------------------
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._previous_thrust = np.array(initial_thrust, dtype=float)
         self._plan: np.ndarray | None = None  # (ny, n) thrusts of the last good solution
+        if self._observer is not None:
+            self._observer.reset(initial_state)
 
     def compute(self, observation: Observation) -> ControlResult:
         started = time.perf_counter()
         n, ny = self.model.n_thrusters, self.horizon
         previous = self._previous_thrust
         state = np.asarray(observation.state, dtype=float)
+        disturbance = np.zeros(3)
+        if self._observer is not None:
+            state, disturbance = self._observer.correct(state)
         reference = self._aligned_reference(state, observation.reference[: ny + 1])
-        warm_moves = self._shifted_moves()
-        nominal_thrust = previous + self._move_to_thrust @ warm_moves
-        prediction = self.prediction_model(state, nominal_thrust)
-        free, sensitivity = self._condense(state, previous, prediction)
-
-        nominal = prediction.nominal
-        if nominal is None:
-            nominal = free + sensitivity @ warm_moves
-        problem, n_slack = self._build_qp(
-            free, sensitivity, reference, previous, nominal, observation
-        )
-        warm = np.concatenate([warm_moves, np.zeros(n_slack)])
-        result = self._solver.solve(problem, warm)
+        moves = self._shifted_moves()
+        solve_time = 0.0
+        for _ in range(self.config.linearisation_iterations):
+            # Each pass re-linearises (model and obstacle half-planes) around the last plan.
+            nominal_thrust = previous + self._move_to_thrust @ moves
+            prediction = self.prediction_model(state, nominal_thrust, disturbance)
+            free, sensitivity = self._condense(state, previous, prediction)
+            nominal = prediction.nominal
+            if nominal is None:
+                nominal = free + sensitivity @ moves
+            problem, n_slack = self._build_qp(
+                free, sensitivity, reference, previous, nominal, observation
+            )
+            if prediction.nominal is not None:
+                self._add_trust_region(problem, free, sensitivity, prediction.nominal)
+            result = self._solver.solve(problem, np.concatenate([moves, np.zeros(n_slack)]))
+            solve_time += result.solve_time_s
+            if result.z is None:
+                break
+            moves = result.z[: self.n_moves]
         time_limit = self.config.solver_time_limit_ms
-        timed_out = time_limit is not None and 1e3 * result.solve_time_s > time_limit
+        timed_out = time_limit is not None and 1e3 * solve_time > time_limit
         if result.z is None or timed_out:
-            return self._fallback(started, result.solve_time_s)
+            return self._fallback(started, solve_time)
 
         moves = result.z[: self.n_moves]
         slack = result.z[self.n_moves :]
         thrust, clipped = project_to_limits(previous + moves[:n], previous, self.model, self.sample_time)
         self._plan = previous + self._move_to_thrust @ moves
-        self._previous_thrust = thrust
+        self._commit(thrust)
         status = ControlStatus.OK
         if n_slack and slack.max() > _SLACK_ACTIVE_M:
             status = ControlStatus.RELAXED
@@ -152,10 +176,20 @@ class LinearMpc(Controller):
         return ControlResult(
             thrust=thrust,
             status=status,
-            solve_time_s=result.solve_time_s,
+            solve_time_s=solve_time,
             predicted_states=free + sensitivity @ moves,
-            info={"qp_iterations": float(result.iterations), "max_slack_m": float(slack.max(initial=0.0))},
+            info={
+                "qp_iterations": float(result.iterations),
+                "max_slack_m": float(slack.max(initial=0.0)),
+                **dict(zip(("dist_X_hat", "dist_Y_hat", "dist_N_hat"), disturbance.tolist())),
+            },
         )
+
+    def _commit(self, thrust: np.ndarray) -> None:
+        """Remember the applied thrust (next rate limit) and propagate the estimator with it."""
+        self._previous_thrust = thrust
+        if self._observer is not None:
+            self._observer.predict(thrust)
 
     # -- pieces --------------------------------------------------------------------------
     def _aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -235,6 +269,21 @@ class LinearMpc(Controller):
         )
         return problem, n_slack
 
+    def _add_trust_region(self, problem, free, sensitivity, nominal) -> None:
+        """Penalise predicted states far from the trajectory the model was linearised on.
+
+        A linearisation is only valid near its nominal: without this term the QP may
+        exploit it (e.g. a large heading change whose cosine it sees as linear) and the
+        plan, the next nominal, jumps. The penalty vanishes when the plan agrees with
+        its nominal, so it does not bias a converged, steady solution.
+        """
+        weight = np.sqrt(self.config.trust_region_weight * np.asarray(_TRUST_REGION_SCALE))
+        n_moves = self.n_moves
+        weighted = (sensitivity[1:] * weight[None, :, None]).reshape(-1, n_moves)
+        deviation = ((free[1:] - nominal[1:]) * weight).ravel()
+        problem.H[:n_moves, :n_moves] += 2.0 * weighted.T @ weighted
+        problem.f[:n_moves] += 2.0 * weighted.T @ deviation
+
     def _obstacle_rows(self, obstacles, nominal, reference):
         """Half-planes a . p_n >= b for the predicted steps n near any obstacle.
 
@@ -288,7 +337,7 @@ class LinearMpc(Controller):
         else:
             wanted = previous
         thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
-        self._previous_thrust = thrust
+        self._commit(thrust)
         return ControlResult(thrust=thrust, status=ControlStatus.FALLBACK, solve_time_s=solve_time_s)
 
 
@@ -339,6 +388,13 @@ def input_matrix(params: VehicleParams) -> np.ndarray:
     return B
 
 
+def disturbance_matrix(params: VehicleParams) -> np.ndarray:
+    """G_c (6, 3): a body-frame force [d_u, d_v, d_r] enters the velocity rows through M^-1."""
+    G = np.zeros((NX, 3))
+    G[3:] = np.diag([1.0 / params.m11, 1.0 / params.m22, 1.0 / params.Iz])
+    return G
+
+
 def rk4_discretize(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact result of one RK4 step on x' = A x + B u with u held (Ad, Bd).
 
@@ -359,17 +415,23 @@ class PaperMpc(LinearMpc):
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
-        self._input_matrix = input_matrix(model)
+        # Thrust and body-frame disturbance enter the same velocity rows: [B_c, G_c].
+        self._input_matrix = np.hstack([input_matrix(model), disturbance_matrix(model)])
 
-    def prediction_model(self, state: np.ndarray, nominal_thrust: np.ndarray) -> AffinePrediction:
+    def prediction_model(
+        self, state: np.ndarray, nominal_thrust: np.ndarray, disturbance_world: np.ndarray
+    ) -> AffinePrediction:
         h = self.sample_time / self.config.model_substeps
         step_A, step_B = rk4_discretize(sdc_matrix(state, self.model), self._input_matrix, h)
         Ad, Bd = step_A, step_B
-        for _ in range(self.config.model_substeps - 1):  # compose the sub-steps, u held
+        for _ in range(self.config.model_substeps - 1):  # compose the sub-steps, inputs held
             Ad, Bd = step_A @ Ad, step_A @ Bd + step_B
-        ny = self.horizon
+        n, ny = self.model.n_thrusters, self.horizon
+        # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
+        d_u, d_v = body_from_world(disturbance_world, state[2])
+        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance_world[2]])
         return AffinePrediction(
             A=np.broadcast_to(Ad, (ny, NX, NX)),
-            B=np.broadcast_to(Bd, (ny, NX, self.model.n_thrusters)),
-            c=np.zeros((ny, NX)),
+            B=np.broadcast_to(Bd[:, :n], (ny, NX, n)),
+            c=np.broadcast_to(offset, (ny, NX)),
         )
