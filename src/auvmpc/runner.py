@@ -64,6 +64,14 @@ def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
         from auvmpc.controllers.ltv import LtvMpc
 
         return LtvMpc(model, config)
+    if config.type is ControllerType.NMPC:
+        from auvmpc.controllers.nmpc import NonlinearMpc
+
+        return NonlinearMpc(model, config)
+    if config.type is ControllerType.DO_MPC:
+        from auvmpc.controllers.dompc import DoMpcController
+
+        return DoMpcController(model, config)
     raise NotImplementedError(config.type)  # unreachable: the enum lists only built controllers
 
 

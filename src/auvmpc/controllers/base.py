@@ -11,12 +11,14 @@ import numpy as np
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
+    "ActuatorLimits",
     "ControlResult",
     "ControlStatus",
     "Controller",
     "Observation",
     "ObstacleState",
     "feasible_thrust_box",
+    "horizontal_limits",
     "project_to_limits",
 ]
 
@@ -86,31 +88,53 @@ class Controller(ABC):
         """The thrust to apply over the next sample."""
 
 
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """Hard limits of a set of actuators: force box and rate, per actuator."""
+
+    lower: float | np.ndarray  # N
+    upper: float | np.ndarray  # N
+    rate: float | np.ndarray  # N/s
+
+    def box(self, previous: np.ndarray, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per-actuator [lower, upper] reachable in one sample under both hard limits."""
+        max_step = self.rate * sample_time
+        lower = np.maximum(self.lower, previous - max_step)
+        upper = np.minimum(self.upper, previous + max_step)
+        # A previous command outside the force limits (never ours) leaves an empty box:
+        # the rate limit wins, moving towards the force box as fast as it allows.
+        empty = lower > upper
+        if np.any(empty):
+            towards = np.clip(
+                np.clip(previous, self.lower, self.upper), previous - max_step, previous + max_step
+            )
+            lower = np.where(empty, towards, lower)
+            upper = np.where(empty, towards, upper)
+        return lower, upper
+
+    def project(
+        self, command: np.ndarray, previous: np.ndarray, sample_time: float
+    ) -> tuple[np.ndarray, bool]:
+        """Clip a command into the hard-limit box; also say whether it had to move."""
+        lower, upper = self.box(previous, sample_time)
+        clipped = np.clip(command, lower, upper)
+        return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
+
+
+def horizontal_limits(params: VehicleParams) -> ActuatorLimits:
+    """The horizontal thrusters' hard limits."""
+    return ActuatorLimits(params.thrust_min, params.thrust_max, params.thrust_rate_limit)
+
+
 def feasible_thrust_box(
     previous_thrust: np.ndarray, params: VehicleParams, sample_time: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-thruster [lower, upper] reachable in one sample under both hard limits."""
-    max_step = params.thrust_rate_limit * sample_time
-    lower = np.maximum(params.thrust_min, previous_thrust - max_step)
-    upper = np.minimum(params.thrust_max, previous_thrust + max_step)
-    # A previous thrust outside the force limits (never ours) leaves an empty box:
-    # the rate limit wins, moving towards the force box as fast as it allows.
-    empty = lower > upper
-    if np.any(empty):
-        towards = np.clip(
-            np.clip(previous_thrust, params.thrust_min, params.thrust_max),
-            previous_thrust - max_step,
-            previous_thrust + max_step,
-        )
-        lower = np.where(empty, towards, lower)
-        upper = np.where(empty, towards, upper)
-    return lower, upper
+    return horizontal_limits(params).box(previous_thrust, sample_time)
 
 
 def project_to_limits(
     thrust: np.ndarray, previous_thrust: np.ndarray, params: VehicleParams, sample_time: float
 ) -> tuple[np.ndarray, bool]:
     """Clip a command into the hard-limit box; also say whether it had to move."""
-    lower, upper = feasible_thrust_box(previous_thrust, params, sample_time)
-    clipped = np.clip(thrust, lower, upper)
-    return clipped, bool(np.any(np.abs(clipped - thrust) > 1e-9))
+    return horizontal_limits(params).project(thrust, previous_thrust, sample_time)

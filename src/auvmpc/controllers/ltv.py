@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.config import ControllerConfig
-from auvmpc.controllers.mpc import NX, AffinePrediction, LinearMpc
+from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.integrators import rk4
 from auvmpc.estimation import world_disturbance_dynamics
 from auvmpc.vehicle import VehicleParams
@@ -48,20 +48,21 @@ class LtvMpc(LinearMpc):
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
+        self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
         self._rollout = linearised_rollout(
             model, config.sample_time, config.model_substeps, config.prediction_horizon
         )
 
     def prediction_model(
-        self, state: np.ndarray, nominal_thrust: np.ndarray, disturbance_world: np.ndarray
+        self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
         ny, n = self.horizon, self.model.n_thrusters
-        disturbance = np.tile(np.reshape(disturbance_world, (3, 1)), (1, ny))
-        states, jac_x, jac_u = self._rollout(state, nominal_thrust.T, disturbance)
+        forces = np.tile(np.reshape(disturbance, (3, 1)), (1, ny))
+        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
         states = np.asarray(states)  # (6, ny)
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
         nominal = np.vstack([state, states.T])  # (ny + 1, 6)
         # Offsets so that the affine model reproduces the rollout exactly at the nominal point.
-        c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1]) - np.einsum("nij,nj->ni", B, nominal_thrust)
+        c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1]) - np.einsum("nij,nj->ni", B, nominal_input)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)

@@ -1,0 +1,331 @@
+"""The incremental linear MPC, condensed to a small dense QP, for any plant.
+
+The paper augments the state with the previous input, ``X(k) = [x(k); u(k-1)]``,
+and optimises the moves ``du``. We keep exactly that problem but eliminate the
+states (condensing): with ``u(k-1)`` known, the input over the horizon is
+``u_n = u(k-1) + E_n z`` where ``z`` stacks the moves made at the move steps (the
+input is held in between and after the last one), and each predicted state is
+affine in ``z``: ``x_n = x_free_n + S_n z``. The cost
+
+    sum_{n=1}^{ny-1} |x_n - r_n|_Q^2 + |x_ny - r_ny|_S^2 + sum_{n=0}^{ny-1} |u_n|_R^2
+
+(or R on the moves) becomes ``0.5 z'Hz + f'z``; every move is bounded by rate*Te,
+every input by its force limits, and soft state constraints get one exact-penalty
+slack each. :class:`IncrementalMpc` runs this every sample for a plant that
+supplies its prediction model; the horizontal controllers (mpc.py, ltv.py) and the
+depth controller (depth_mpc.py) are such plants.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from auvmpc.controllers.base import (
+    ActuatorLimits,
+    ControlResult,
+    ControlStatus,
+    Controller,
+    Observation,
+)
+from auvmpc.controllers.config import ThrustPenalty
+from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
+
+__all__ = ["AffinePrediction", "CondensedQp", "IncrementalMpc", "SoftRows"]
+
+# Keeps H positive definite when R = 0 (DAQP needs it); far below every real weight.
+_HESSIAN_REGULARISATION = 1e-9
+# Quadratic part of the slack penalty: makes H definite in the slack; the linear
+# part (the configured penalty) is what makes the penalty exact.
+_SLACK_QUADRATIC_WEIGHT = 1.0
+# A slack below this is solver tolerance, not a relaxed constraint.
+_SLACK_ACTIVE = 1e-6
+
+
+@dataclass
+class AffinePrediction:
+    """x_{n+1} = A_n x_n + B_n u_n + c_n for n = 0..ny-1."""
+
+    A: np.ndarray  # (ny, nx, nx)
+    B: np.ndarray  # (ny, nx, nu)
+    c: np.ndarray  # (ny, nx)
+    nominal: np.ndarray | None = None  # (ny + 1, nx) trajectory the model was linearised on
+
+
+@dataclass
+class SoftRows:
+    """Soft state constraints ``a_r . x_{n_r} >= b_r``, one exact-penalty slack each."""
+
+    steps: np.ndarray  # (r,) predicted step n_r in 1..ny
+    coefficients: np.ndarray  # (r, nx)
+    lower: np.ndarray  # (r,)
+
+    @classmethod
+    def empty(cls, nx: int) -> SoftRows:
+        return cls(np.zeros(0, dtype=int), np.zeros((0, nx)), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.steps)
+
+
+class CondensedQp:
+    """The condensed QP of one incremental MPC: built once, filled every sample."""
+
+    def __init__(
+        self,
+        *,
+        horizon: int,
+        move_steps: tuple[int, ...],
+        stage_weight: np.ndarray,
+        terminal_weight: np.ndarray,
+        input_weight: np.ndarray,
+        penalty: ThrustPenalty,
+        limits: ActuatorLimits,
+        sample_time: float,
+        slack_penalty: float,
+        qp_solver: QpSolverName,
+        iteration_limit: int | None = None,
+    ) -> None:
+        nu = len(input_weight)
+        ny = horizon
+        self.horizon = ny
+        self.nu = nu
+        self.move_steps = np.array(move_steps)
+        nc = len(self.move_steps)
+        self.n_moves = nu * nc
+        # E[i] maps the moves to u_i - u(k-1): the sum of the moves made at or before sample i.
+        self.move_to_input = np.zeros((ny, nu, self.n_moves))
+        for i in range(ny):
+            for j in np.flatnonzero(self.move_steps <= i):
+                self.move_to_input[i, :, j * nu : (j + 1) * nu] = np.eye(nu)
+        weights = np.vstack([np.tile(stage_weight, (ny - 1, 1)), terminal_weight])  # n = 1..ny
+        self.sqrt_state_weights = np.sqrt(weights)
+        input_weight = np.asarray(input_weight, dtype=float)
+        if penalty is ThrustPenalty.ABSOLUTE:
+            stacked = self.move_to_input.reshape(ny * nu, self.n_moves)
+            weighted = stacked * np.tile(input_weight, ny)[:, None]
+            self._input_hessian = 2.0 * stacked.T @ weighted
+            self._input_gradient_map = 2.0 * weighted.T.reshape(self.n_moves, ny, nu).sum(axis=1)
+        else:
+            self._input_hessian = 2.0 * np.diag(np.tile(input_weight, nc))
+            self._input_gradient_map = np.zeros((self.n_moves, nu))
+        self.limits = limits
+        self.max_move = np.broadcast_to(limits.rate * sample_time, (nu,)).astype(float)
+        # Force bounds where the input changes (it is held in between and after the last move).
+        self._input_rows = self.move_to_input[self.move_steps].reshape(nc * nu, self.n_moves)
+        self._input_lower = np.broadcast_to(limits.lower, (nu,)).astype(float)
+        self._input_upper = np.broadcast_to(limits.upper, (nu,)).astype(float)
+        self.slack_penalty = slack_penalty
+        self.solver = make_qp_solver(qp_solver, iteration_limit)
+
+    def condense(
+        self, state: np.ndarray, previous: np.ndarray, prediction: AffinePrediction
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Free response (ny+1, nx) and sensitivity to the moves (ny+1, nx, n_moves)."""
+        ny, nx = self.horizon, len(state)
+        free = np.empty((ny + 1, nx))
+        sensitivity = np.zeros((ny + 1, nx, self.n_moves))
+        free[0] = state
+        for i in range(ny):
+            A, B = prediction.A[i], prediction.B[i]
+            free[i + 1] = A @ free[i] + B @ previous + prediction.c[i]
+            sensitivity[i + 1] = A @ sensitivity[i] + B @ self.move_to_input[i]
+        return free, sensitivity
+
+    def problem(
+        self,
+        free: np.ndarray,
+        sensitivity: np.ndarray,
+        reference: np.ndarray,
+        previous: np.ndarray,
+        soft: SoftRows,
+    ) -> QpProblem:
+        """The QP in z = [moves, slacks]."""
+        n_moves, n_slack = self.n_moves, len(soft)
+        nz = n_moves + n_slack
+        weighted = (sensitivity[1:] * self.sqrt_state_weights[:, :, None]).reshape(-1, n_moves)
+        error = ((free[1:] - reference[1:]) * self.sqrt_state_weights).ravel()
+        H = np.zeros((nz, nz))
+        f = np.zeros(nz)
+        H[:n_moves, :n_moves] = 2.0 * weighted.T @ weighted + self._input_hessian
+        H[:n_moves, :n_moves] += _HESSIAN_REGULARISATION * np.eye(n_moves)
+        f[:n_moves] = 2.0 * weighted.T @ error + self._input_gradient_map @ previous
+        bound_lower = np.concatenate([np.tile(-self.max_move, len(self.move_steps)), np.zeros(n_slack)])
+        bound_upper = np.concatenate(
+            [np.tile(self.max_move, len(self.move_steps)), np.full(n_slack, np.inf)]
+        )
+        nc = len(self.move_steps)
+        input_rows = np.zeros((self._input_rows.shape[0], nz))
+        input_rows[:, :n_moves] = self._input_rows
+        rows = [input_rows]
+        lower = [np.tile(self._input_lower - previous, nc)]
+        upper = [np.tile(self._input_upper - previous, nc)]
+        if n_slack:
+            # One slack per row: an exact L1 penalty relaxes only the rows that must be.
+            slack = np.arange(n_moves, nz)
+            H[slack, slack] = 2.0 * _SLACK_QUADRATIC_WEIGHT
+            f[slack] = self.slack_penalty
+            block = np.zeros((n_slack, nz))
+            block[:, :n_moves] = np.einsum("rk,rkj->rj", soft.coefficients, sensitivity[soft.steps])
+            block[:, slack] = np.eye(n_slack)
+            rows.append(block)
+            lower.append(soft.lower - np.einsum("rk,rk->r", soft.coefficients, free[soft.steps]))
+            upper.append(np.full(n_slack, np.inf))
+        return QpProblem(
+            H=H,
+            f=f,
+            A=np.vstack(rows),
+            lower=np.concatenate(lower),
+            upper=np.concatenate(upper),
+            bound_lower=bound_lower,
+            bound_upper=bound_upper,
+        )
+
+    def add_trust_region(
+        self,
+        problem: QpProblem,
+        free: np.ndarray,
+        sensitivity: np.ndarray,
+        nominal: np.ndarray,
+        weights: np.ndarray,
+    ) -> None:
+        """Penalise predicted states far from the trajectory the model was linearised on.
+
+        A linearisation is only valid near its nominal: without this term the QP may
+        exploit it (e.g. a large heading change whose cosine it sees as linear) and the
+        plan, the next nominal, jumps. The penalty vanishes when the plan agrees with
+        its nominal, so it does not bias a converged, steady solution.
+        """
+        root = np.sqrt(weights)
+        n_moves = self.n_moves
+        weighted = (sensitivity[1:] * root[None, :, None]).reshape(-1, n_moves)
+        deviation = ((free[1:] - nominal[1:]) * root).ravel()
+        problem.H[:n_moves, :n_moves] += 2.0 * weighted.T @ weighted
+        problem.f[:n_moves] += 2.0 * weighted.T @ deviation
+
+    def plan(self, moves: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        """(ny, nu) inputs of a move vector."""
+        return previous + self.move_to_input @ moves
+
+    def shifted_moves(self, plan: np.ndarray | None, previous: np.ndarray) -> np.ndarray:
+        """Moves that best reproduce ``plan`` one sample on (zeros without a plan).
+
+        Without blocking this is the plan's moves shifted by one; with blocking the
+        shifted plan is sampled at the move steps, and each move is clipped to the
+        rate limit so that the warm start is feasible.
+        """
+        if plan is None:
+            return np.zeros(self.n_moves)
+        shifted = np.vstack([plan[1:], plan[-1:]])[self.move_steps]  # (nc, nu)
+        moves = np.diff(np.vstack([previous, shifted]), axis=0)
+        return np.clip(moves, -self.max_move, self.max_move).ravel()
+
+
+class IncrementalMpc(Controller):
+    """One sample of an incremental condensed MPC, for any plant.
+
+    Subclasses supply the plant-specific parts: the estimator, the reference
+    alignment, the prediction model and the soft state constraints. This class
+    owns the solve loop, the hard limits, the fallback and the plan.
+    """
+
+    qp: CondensedQp
+    limits: ActuatorLimits
+    linearisation_iterations: int = 1
+    solver_time_limit_ms: float | None = None
+    trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
+
+    # -- plant-specific hooks --------------------------------------------------------
+    @abstractmethod
+    def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(state the prediction starts from, disturbance estimate) from a measurement."""
+
+    @abstractmethod
+    def prediction_model(
+        self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
+    ) -> AffinePrediction:
+        """Affine model over the horizon around ``nominal_input`` (ny, nu)."""
+
+    def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        return np.asarray(reference, dtype=float)
+
+    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
+        return SoftRows.empty(nominal.shape[1])
+
+    def after_command(self, command: np.ndarray) -> None:
+        """Called with every applied command (estimators propagate here)."""
+
+    # -- the loop ----------------------------------------------------------------------
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._previous_input = np.array(initial_thrust, dtype=float)
+        self._plan: np.ndarray | None = None  # (ny, nu) inputs of the last good solution
+
+    def compute(self, observation: Observation) -> ControlResult:
+        qp = self.qp
+        previous = self._previous_input
+        state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
+        reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
+        moves = qp.shifted_moves(self._plan, previous)
+        solve_time = 0.0
+        for _ in range(self.linearisation_iterations):
+            # Each pass re-linearises (model and soft rows) around the last plan.
+            prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
+            free, sensitivity = qp.condense(state, previous, prediction)
+            nominal = prediction.nominal
+            if nominal is None:
+                nominal = free + sensitivity @ moves
+            soft = self.soft_rows(nominal, reference, observation)
+            problem = qp.problem(free, sensitivity, reference, previous, soft)
+            if prediction.nominal is not None and self.trust_region_weights is not None:
+                qp.add_trust_region(
+                    problem, free, sensitivity, prediction.nominal, self.trust_region_weights
+                )
+            result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
+            solve_time += result.solve_time_s
+            if result.z is None:
+                break
+            moves = result.z[: qp.n_moves]
+        limit = self.solver_time_limit_ms
+        if result.z is None or (limit is not None and 1e3 * solve_time > limit):
+            return self._fallback(solve_time)
+
+        slack = result.z[qp.n_moves :]
+        wanted = previous + moves[: qp.nu]
+        command, _ = self.limits.project(wanted, previous, self.sample_time)
+        self._plan = qp.plan(moves, previous)
+        self._commit(command)
+        status = ControlStatus.OK
+        if len(slack) and slack.max() > _SLACK_ACTIVE:
+            status = ControlStatus.RELAXED
+        elif np.max(np.abs(command - wanted)) > 1e-6:
+            status = ControlStatus.SATURATED
+        return ControlResult(
+            thrust=command,
+            status=status,
+            solve_time_s=solve_time,
+            predicted_states=free + sensitivity @ moves,
+            info={
+                "qp_iterations": float(result.iterations),
+                "max_slack": float(slack.max(initial=0.0)),
+                **{f"disturbance_{i}": float(v) for i, v in enumerate(np.ravel(disturbance))},
+            },
+        )
+
+    def _commit(self, command: np.ndarray) -> None:
+        self._previous_input = command
+        self.after_command(command)
+
+    def _fallback(self, solve_time_s: float) -> ControlResult:
+        """Solver failed or was too slow: apply the previous plan's next move, clipped."""
+        previous = self._previous_input
+        if self._plan is not None and len(self._plan) > 1:
+            wanted = self._plan[1]
+            self._plan = np.vstack([self._plan[1:], self._plan[-1:]])
+        else:
+            wanted = previous
+        command, _ = self.limits.project(wanted, previous, self.sample_time)
+        self._commit(command)
+        return ControlResult(thrust=command, status=ControlStatus.FALLBACK, solve_time_s=solve_time_s)
