@@ -73,12 +73,13 @@ def run(
         overrides.append(f"controller.type={controller}")
     resolved = load_scenario(scenario, overrides)
     name = resolved.scenario.name
-    out_dir = out if out is not None else Path("runs") / f"{name}-{resolved.scenario.controller.type}"
+    label = f"{name}-{resolved.scenario.controller.type}"
+    out_dir = out if out is not None else Path("runs") / label
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
         result = simulate(resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n))
     write_run(result, out_dir, figures=figures)
-    print_metrics(result.metrics, title=f"{name} ({resolved.scenario.controller.type})")
+    print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
 
 
@@ -101,6 +102,7 @@ def reproduce(
 
         run_all(out, include_sweep=sweep, figures=figures, on_run=advance)
     console.print((out / "summary.md").read_text(), highlight=False)
+    console.print((out / "depth.md").read_text(), highlight=False)
     console.print(f"wrote {out}")
 
 
@@ -175,14 +177,11 @@ def plot(
     run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
-    from auvmpc.runner import draw_figures, read_run
-    from auvmpc.scenario import Scenario
-    from auvmpc.vehicle import VehicleParams
+    from auvmpc.runner import redraw
 
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    info, log = read_run(run_dir)
-    draw_figures(log, Scenario.model_validate(info["scenario"]), VehicleParams.model_validate(info["model"]), run_dir)
+    redraw(run_dir)
     console.print(f"redrew figures in {run_dir}")
 
 

@@ -23,7 +23,12 @@ from auvmpc.config import StrictModel
 from auvmpc.integrators import rk4
 from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
-__all__ = ["ObserverConfig", "DisturbanceObserver", "world_disturbance_dynamics"]
+__all__ = [
+    "AugmentedEkf",
+    "DisturbanceObserver",
+    "ObserverConfig",
+    "world_disturbance_dynamics",
+]
 
 NX, ND = 6, 3
 Positive = Annotated[float, Field(gt=0)]
@@ -60,14 +65,68 @@ def world_disturbance_dynamics(model: VehicleParams):
     return f
 
 
+class AugmentedEkf:
+    """Extended Kalman filter for a state augmented with a random-walk disturbance.
+
+    ``step`` is a CasADi function (z, u) -> (z_next, dz_next/dz) over one sample; the
+    first ``measured`` entries of z are measured directly (H = [I 0]).
+    """
+
+    def __init__(
+        self,
+        step: ca.Function,
+        measured: int,
+        process_covariance: np.ndarray,
+        measurement_covariance: np.ndarray,
+        prior_covariance: np.ndarray,
+        angle_index: int | None = None,
+    ) -> None:
+        self._step = step
+        self._measured = measured
+        self._process = process_covariance
+        self._measurement = measurement_covariance
+        self._prior = prior_covariance
+        self._angle_index = angle_index
+        self.reset(np.zeros(prior_covariance.shape[0]))
+
+    def reset(self, initial_estimate: np.ndarray) -> None:
+        self.estimate = np.array(initial_estimate, dtype=float)
+        self.covariance = self._prior.copy()
+        self._initialised = False
+
+    def correct(self, measurement: np.ndarray) -> np.ndarray:
+        """Fuse a measurement of the first ``measured`` states; returns the estimate."""
+        m = self._measured
+        measured = np.asarray(measurement, dtype=float)
+        if not self._initialised:
+            # First sample: the measured part is what we measure; the rest keeps its prior.
+            self.estimate[:m] = measured
+            self._initialised = True
+        innovation = measured - self.estimate[:m]
+        if self._angle_index is not None:
+            i = self._angle_index
+            innovation[i] = math.remainder(innovation[i], 2.0 * math.pi)
+        P = self.covariance
+        S = P[:m, :m] + self._measurement
+        gain = np.linalg.solve(S, P[:m, :]).T  # P H' S^-1 with H = [I 0]
+        self.estimate = self.estimate + gain @ innovation
+        self.covariance = P - gain @ P[:m, :]
+        return self.estimate.copy()
+
+    def predict(self, applied_input: np.ndarray) -> None:
+        """Propagate over one sample with the input actually applied."""
+        next_estimate, jacobian = self._step(self.estimate, applied_input)
+        A = np.asarray(jacobian)
+        self.estimate = np.asarray(next_estimate).ravel()
+        self.covariance = A @ self.covariance @ A.T + self._process
+
+
 class DisturbanceObserver:
-    """EKF on [x; d_world]; exact Jacobians of the RK4 model from CasADi."""
+    """EKF on [x; d_world] for the horizontal model; exact Jacobians from CasADi."""
 
     def __init__(
         self, model: VehicleParams, sample_time: float, config: ObserverConfig, substeps: int = 1
     ) -> None:
-        self.config = config
-        self.sample_time = sample_time
         augmented = ca.SX.sym("z", NX + ND)
         thrust = ca.SX.sym("F", model.n_thrusters)
         f = world_disturbance_dynamics(model)
@@ -75,46 +134,35 @@ class DisturbanceObserver:
             lambda x, u: f(x, u, augmented[NX:]), augmented[:NX], thrust, sample_time, substeps
         )
         next_augmented = ca.vertcat(next_state, augmented[NX:])
-        self._step = ca.Function(
+        step = ca.Function(
             "observer_step",
             [augmented, thrust],
             [next_augmented, ca.jacobian(next_augmented, augmented)],
         )
         rate = np.array(config.disturbance_rate_std) ** 2 * sample_time
-        self._process = np.diag(np.concatenate([np.square(config.state_process_std), rate]))
-        self._measurement = np.diag(np.square(config.measurement_std))
-        self.reset(np.zeros(NX))
+        measurement = np.square(config.measurement_std)
+        self._filter = AugmentedEkf(
+            step,
+            NX,
+            np.diag(np.concatenate([np.square(config.state_process_std), rate])),
+            np.diag(measurement),
+            np.diag(np.concatenate([measurement, np.square(config.initial_disturbance_std)])),
+            angle_index=2,
+        )
 
     def reset(self, initial_state: np.ndarray) -> None:
-        self._estimate = np.concatenate([np.asarray(initial_state, float), np.zeros(ND)])
-        prior = np.concatenate([np.square(self.config.measurement_std), np.square(self.config.initial_disturbance_std)])
-        self._covariance = np.diag(prior)
-        self._initialised = False
+        self._filter.reset(np.concatenate([np.asarray(initial_state, float), np.zeros(ND)]))
 
     @property
     def disturbance_world(self) -> np.ndarray:
         """Current estimate of the world force [X, Y, N]."""
-        return self._estimate[NX:].copy()
+        return self._filter.estimate[NX:].copy()
 
     def correct(self, measured_state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fuse a measurement; returns (state estimate (6,), disturbance estimate (3,))."""
-        measured = np.asarray(measured_state, dtype=float)
-        if not self._initialised:
-            # First sample: the state is what we measure; nothing is known of the force yet.
-            self._estimate[:NX] = measured
-            self._initialised = True
-        innovation = measured - self._estimate[:NX]
-        innovation[2] = math.remainder(innovation[2], 2.0 * math.pi)
-        P = self._covariance
-        S = P[:NX, :NX] + self._measurement
-        gain = np.linalg.solve(S, P[:NX, :]).T  # P H' S^-1 with H = [I 0]
-        self._estimate = self._estimate + gain @ innovation
-        self._covariance = P - gain @ P[:NX, :]
-        return self._estimate[:NX].copy(), self._estimate[NX:].copy()
+        estimate = self._filter.correct(measured_state)
+        return estimate[:NX], estimate[NX:]
 
     def predict(self, applied_thrust: np.ndarray) -> None:
         """Propagate the estimate over one sample with the thrust actually applied."""
-        next_estimate, jacobian = self._step(self._estimate, applied_thrust)
-        A = np.asarray(jacobian)
-        self._estimate = np.asarray(next_estimate).ravel()
-        self._covariance = A @ self._covariance @ A.T + self._process
+        self._filter.predict(applied_thrust)

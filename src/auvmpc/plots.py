@@ -31,6 +31,7 @@ from auvmpc.obstacles import ObstacleConfig
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
+    "figure_depth",
     "ACTUAL_STYLE",
     "REFERENCE_STYLE",
     "figure_error_vs_parameter",
@@ -449,6 +450,36 @@ def figure_error_vs_parameter(
     ax.grid(True, alpha=0.4)
     if any(series):
         ax.legend(loc="best", fontsize="small")
+    return figure
+
+
+def figure_depth(log, limits, title: str = "") -> Figure:
+    """Depth step in the spirit of the paper's Figure 8: depth and reference, thrusts.
+
+    Parameters
+    ----------
+    log : auvmpc.depth.DepthLog
+    limits : HeaveParams
+        Vertical thrust limits to draw.
+    """
+    figure, axes = _time_panels(2, title)
+    depth_ax, thrust_ax = axes
+    depth_ax.plot(log.t, log.z_measured, color="0.6", lw=0.8, label="measured (sensor)")
+    depth_ax.step(log.t, log.z_ref, where="post", color="0.3", ls="--", label="reference")
+    depth_ax.plot(log.t, log.state[:, 0], color="tab:blue", label="depth z (true)")
+    depth_ax.set_ylabel("z (m, up)")
+    steps = len(log.thrust)
+    for i in range(log.thrust.shape[1]):
+        thrust_ax.step(log.t[:steps], log.thrust[:, i], where="post", label=f"Fz{i + 1}")
+    for bound in limits.thrust_limits:
+        thrust_ax.axhline(bound, color="tab:red", ls=":", lw=1.0)
+    thrust_ax.plot([], [], color="tab:red", ls=":", label=f"limits {list(limits.thrust_limits)} N")
+    thrust_ax.set_ylabel("vertical thrust (N)")
+    for ax in axes:
+        ax.grid(True, alpha=0.4)
+    axes[-1].set_xlim(log.t[0], log.t[-1])
+    axes[-1].set_xlabel(TIME_LABEL)
+    _figure_legend(figure, axes)
     return figure
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
+from auvmpc.depth import STEP_METRIC_KEYS
 from auvmpc.log import SimLog
 from auvmpc.runner import atomic_write_text, simulate, write_run
 from auvmpc.scenario import load_scenario
@@ -23,6 +24,7 @@ __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sw
 # Controller labels of CONTROLLER_PRESETS run on every paper scenario.
 PAPER_VARIANTS = ("mpc", "mpc-nc30", "ltv-mpc", "ltv-mpc-nc30", "baseline")
 PAPER_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
+DEPTH_SCENARIOS = ("paper-depth-calm", "paper-depth-waves")  # section 4.3, the tank step
 # Uncertainty level -1..1 maps to rigid-body yaw inertia -25..+25 % and added -35..+35 %.
 SWEEP_LEVELS = tuple(float(level) for level in np.linspace(-1.0, 1.0, 7))
 SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline")
@@ -91,8 +93,17 @@ def reproduce(
         row.update({key: result.metrics[key] for key in SUMMARY_KEYS})
         row.update(velocity_settling(result.log))
         rows.append(row)
+    depth_rows = []
+    for name in DEPTH_SCENARIOS:
+        if on_run is not None:
+            on_run(len(planned), len(planned), name)
+        result = simulate(load_scenario(name))
+        write_run(result, out_dir / "runs" / name, figures=figures)
+        depth_rows.append({"scenario": name, **result.metrics})
     if on_run is not None:
         on_run(len(planned), len(planned), "done")
+    atomic_write_text(out_dir / "depth.json", json.dumps(depth_rows, indent=2))
+    atomic_write_text(out_dir / "depth.md", depth_markdown(depth_rows))
     atomic_write_text(out_dir / "summary.json", json.dumps(rows, indent=2))
     atomic_write_text(out_dir / "summary.csv", _csv(rows))
     atomic_write_text(out_dir / "summary.md", summary_markdown(rows))
@@ -140,6 +151,14 @@ def summary_markdown(rows: Sequence[dict]) -> str:
     ]
     for row in rows:
         lines.append("| " + " | ".join(_cell(row[key]) for key, _ in columns) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def depth_markdown(rows: Sequence[dict]) -> str:
+    keys = ("scenario", *STEP_METRIC_KEYS, "max_z_m", "thrust_limit_violations",
+            "thrust_rate_violations", "solve_ms_median")  # fmt: skip
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(_cell(row[key]) for key in keys) + " |" for row in rows]
     return "\n".join(lines) + "\n"
 
 

@@ -20,11 +20,27 @@ from auvmpc.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.log import SimLog
 from auvmpc.metrics import compute_metrics
 from auvmpc.references import make_reference
-from auvmpc.scenario import ControllerType, ResolvedScenario, Scenario, scenario_to_dict
+from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
+from auvmpc.scenario import (
+    ControllerType,
+    ResolvedDepthScenario,
+    ResolvedScenario,
+    Scenario,
+    scenario_to_dict,
+)
 from auvmpc.sim import closed_loop
 from auvmpc.vehicle import VehicleParams
 
-__all__ = ["RunResult", "make_controller", "simulate", "write_run", "read_run", "atomic_write_text"]
+__all__ = [
+    "DepthRunResult",
+    "RunResult",
+    "atomic_write_text",
+    "make_controller",
+    "read_run",
+    "redraw",
+    "simulate",
+    "write_run",
+]
 
 
 @dataclass
@@ -47,6 +63,41 @@ class RunResult:
             "model": self.resolved.model.model_dump(mode="json"),
             "metrics": self.metrics,
         }
+
+    def csv_text(self) -> str:
+        return self.log.to_csv_text()
+
+    def draw(self, folder: Path) -> None:
+        draw_figures(self.log, self.scenario, self.resolved.model, folder)
+
+
+@dataclass
+class DepthRunResult:
+    """A finished depth experiment."""
+
+    resolved: ResolvedDepthScenario
+    log: DepthLog
+    metrics: dict[str, Any]
+
+    @property
+    def scenario(self) -> DepthScenario:
+        return self.resolved.scenario
+
+    def run_json(self) -> dict[str, Any]:
+        plant = self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
+        return {
+            "version": __version__,
+            "scenario": self.scenario.model_dump(mode="json"),
+            "plant": plant.model_dump(mode="json"),
+            "model": self.resolved.model.model_dump(mode="json"),
+            "metrics": self.metrics,
+        }
+
+    def csv_text(self) -> str:
+        return self.log.to_csv_text()
+
+    def draw(self, folder: Path) -> None:
+        draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder)
 
 
 def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
@@ -76,9 +127,14 @@ def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
 
 
 def simulate(
-    resolved: ResolvedScenario, on_step: Callable[[int, int], None] | None = None
-) -> RunResult:
+    resolved: ResolvedScenario | ResolvedDepthScenario,
+    on_step: Callable[[int, int], None] | None = None,
+) -> RunResult | DepthRunResult:
     """Run the scenario once. Randomness comes from children of the scenario seed."""
+    if isinstance(resolved, ResolvedDepthScenario):
+        with threadpool_limits(limits=1, user_api="blas"):
+            log, heave = simulate_depth(resolved.scenario, resolved.model, on_step)
+        return DepthRunResult(resolved, log, depth_metrics(log, resolved.scenario, heave))
     scenario = resolved.scenario
     disturbance_seed, sensor_seed = np.random.SeedSequence(scenario.seed).spawn(2)
     sample_time = scenario.controller.sample_time
@@ -107,7 +163,7 @@ def simulate(
     return RunResult(resolved, log, metrics)
 
 
-def write_run(result: RunResult, out_dir: Path, figures: bool = True) -> Path:
+def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool = True) -> Path:
     """Write log.csv, run.json and figures into ``out_dir``, all or nothing.
 
     Everything goes to a hidden sibling folder first, which is renamed into place
@@ -119,10 +175,10 @@ def write_run(result: RunResult, out_dir: Path, figures: bool = True) -> Path:
     staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".partial", dir=out_dir.parent))
     try:
         staging.chmod(0o755)  # mkdtemp makes it private; a run folder is for everyone
-        (staging / "log.csv").write_text(result.log.to_csv_text())
+        (staging / "log.csv").write_text(result.csv_text())
         (staging / "run.json").write_text(json.dumps(result.run_json(), indent=2, allow_nan=False))
         if figures:
-            draw_figures(result.log, result.scenario, result.resolved.model, staging)
+            result.draw(staging)
         _replace_dir(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -137,6 +193,31 @@ def draw_figures(log: SimLog, scenario: Scenario, limits: VehicleParams, folder:
         log, scenario.obstacles, scenario.controller.vehicle_radius, limits, title=scenario.name
     )
     save_figures(figures, folder)
+
+
+def draw_depth_figures(log: DepthLog, scenario: DepthScenario, heave, folder: Path) -> None:
+    from auvmpc.plots import figure_depth, save_figures
+
+    save_figures({"depth": figure_depth(log, heave, title=scenario.name)}, folder)
+
+
+def redraw(run_dir: Path) -> None:
+    """Re-draw the figures of a saved run folder (horizontal or depth)."""
+    run_dir = Path(run_dir)
+    info = json.loads((run_dir / "run.json").read_text())
+    if info["scenario"].get("kind") == "depth":
+        scenario = DepthScenario.model_validate(info["scenario"])
+        log = DepthLog.read_csv(run_dir / "log.csv", scenario.controller.sample_time)
+        heave = VehicleParams.model_validate(info["plant"]).heave
+        draw_depth_figures(log, scenario, heave, run_dir)
+        return
+    info, log = read_run(run_dir)
+    draw_figures(
+        log,
+        Scenario.model_validate(info["scenario"]),
+        VehicleParams.model_validate(info["model"]),
+        run_dir,
+    )
 
 
 def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:

@@ -11,13 +11,14 @@ import copy
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.controllers.config import ControllerConfig, ControllerType
+from auvmpc.depth import DepthScenario, resolve_heave
 from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.obstacles import ObstacleConfig
@@ -51,6 +52,9 @@ class PlantConfig(StrictModel):
 class Scenario(StrictModel):
     """One closed-loop experiment, fully specified."""
 
+    kind: Literal["horizontal"] = Field(
+        default="horizontal", description="horizontal-plane tracking ('depth': auvmpc.depth)"
+    )
     name: str = Field(description="identifier")
     description: str = Field(default="", description="one line for humans")
     duration: Annotated[float, Field(gt=0)] = Field(description="simulated time (s)")
@@ -121,8 +125,30 @@ def builtin_scenarios() -> dict[str, str]:
     return found
 
 
-def load_scenario(source: str | Path, overrides: Sequence[str] = ()) -> ResolvedScenario:
-    """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides."""
+class ResolvedDepthScenario:
+    """A depth scenario (``kind: depth``) and its vehicle."""
+
+    def __init__(self, scenario: DepthScenario, base_dir: Path) -> None:
+        self.scenario = scenario
+        self.base_dir = base_dir
+        vehicle = scenario.vehicle
+        if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
+            vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
+        self.model: VehicleParams = load_vehicle(vehicle)
+        try:
+            self.heave_model = resolve_heave(self.model, {})
+            self.heave_plant = resolve_heave(self.model, scenario.plant.scale)
+        except FieldError as error:
+            raise ConfigError(error.field, error.value, error.reason) from None
+
+
+def load_scenario(
+    source: str | Path, overrides: Sequence[str] = ()
+) -> ResolvedScenario | ResolvedDepthScenario:
+    """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides.
+
+    A file with ``kind: depth`` is a depth experiment (auvmpc.depth); any other is a
+    horizontal-plane scenario."""
     text_source = str(source)
     if text_source in builtin_scenarios():
         text = (resources.files("auvmpc.presets") / "scenarios" / f"{text_source}.yaml").read_text()
@@ -144,6 +170,11 @@ def load_scenario(source: str | Path, overrides: Sequence[str] = ()) -> Resolved
         raise ConfigError("scenario", text_source, "expected a mapping of scenario fields")
     for override in overrides:
         apply_override(data, override)
+    if data.get("kind") == "depth":
+        try:
+            return ResolvedDepthScenario(DepthScenario.model_validate(data), base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
     return ResolvedScenario(validate_scenario(data), base_dir)
 
 

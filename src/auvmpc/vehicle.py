@@ -41,6 +41,8 @@ __all__ = [
     "allocation_matrix",
     "body_from_world",
     "dynamics",
+    "heave_dynamics",
+    "HeaveParams",
     "load_vehicle",
     "preset_names",
     "scaled",
@@ -61,7 +63,10 @@ class Thruster(StrictModel):
 
 
 class HeaveParams(StrictModel):
-    """1-DOF heave model (paper-model.md section 8); z up, negative below the surface."""
+    """1-DOF heave model (paper-model.md section 8); z up, negative below the surface.
+
+        m_heave w' = Zw w + Zww |w| w + sum(F_z) + net_buoyancy_N + d_z,   z' = w
+    """
 
     m_heave: PositiveFloat = Field(description="heave mass incl. added mass, m - Z_wdot (kg)")
     Zw: Damping = Field(description="linear heave damping (N s/m)")
@@ -79,6 +84,22 @@ class HeaveParams(StrictModel):
         if not limits[0] < limits[1]:
             raise ValueError(f"need min < max, got {list(limits)}")
         return limits
+
+
+def heave_dynamics(state, thrust, heave: HeaveParams, disturbance=0.0):
+    """Derivative of [z, w] (m, m/s, z up) under vertical thrusts (N) and a force d_z (N).
+
+    NumPy in, NumPy out; CasADi in, CasADi out (like :func:`dynamics`).
+    """
+    symbolic = isinstance(state, ca.SX | ca.MX) or isinstance(thrust, ca.SX | ca.MX)
+    w = state[1]
+    if symbolic:
+        total, absolute = ca.sum1(thrust), ca.fabs
+    else:
+        total, absolute = float(np.sum(thrust)), abs
+    force = heave.Zw * w + heave.Zww * absolute(w) * w + total + heave.net_buoyancy_N + disturbance
+    derivative = (w, force / heave.m_heave)
+    return ca.vertcat(*derivative) if symbolic else np.array(derivative, dtype=float)
 
 
 class VehicleParams(StrictModel):

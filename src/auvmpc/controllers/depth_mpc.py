@@ -1,0 +1,126 @@
+"""Depth MPC: the condensed incremental MPC of condensed.py on the 1-DOF heave model.
+
+Same principles as the horizontal controllers (paper-model.md section 8): hard
+vertical-thrust and thrust-rate limits, incremental form, the model linearised
+along the shifted previous plan with exact CasADi Jacobians. The surface and the
+tank bottom are soft state constraints (exact penalty). An EKF on
+``[z, w, d_z]`` estimates the heave velocity from depth alone and, with
+``offset_free``, the unknown net buoyancy (and slow wave-induced mean force) as d_z.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.controllers.base import ActuatorLimits
+from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
+from auvmpc.estimation import AugmentedEkf
+from auvmpc.integrators import rk4
+from auvmpc.vehicle import HeaveParams, heave_dynamics
+
+__all__ = ["DepthMpc"]
+
+NX = 2  # [z, w]
+
+
+class DepthMpc(IncrementalMpc):
+    """Depth controller; ``config`` is a depth.DepthControllerConfig."""
+
+    def __init__(self, heave: HeaveParams, config, water_depth: float) -> None:
+        self.config = config
+        self.sample_time = config.sample_time
+        self.horizon = config.prediction_horizon
+        self.preview_steps = self.horizon
+        if not config.known_net_buoyancy:
+            heave = heave.model_copy(update={"net_buoyancy_N": 0.0})
+        self.heave = heave
+        self.water_depth = water_depth
+        self.limits = ActuatorLimits(
+            heave.thrust_limits[0], heave.thrust_limits[1], heave.thrust_rate_limit
+        )
+        weights = np.broadcast_to(np.asarray(config.R, dtype=float), (heave.thruster_count,))
+        self.qp = CondensedQp(
+            horizon=config.prediction_horizon,
+            move_steps=config.move_schedule(),
+            stage_weight=np.array(config.Q, dtype=float),
+            terminal_weight=np.array(config.S, dtype=float),
+            input_weight=np.array(weights),
+            penalty=config.thrust_penalty,
+            limits=self.limits,
+            sample_time=config.sample_time,
+            slack_penalty=config.depth_slack_penalty,
+            qp_solver=config.qp_solver,
+            iteration_limit=config.qp_iteration_limit,
+        )
+        self.solver_time_limit_ms = config.solver_time_limit_ms
+        self.trust_region_weights = None  # the heave model is nearly linear
+        state = ca.SX.sym("x", NX)
+        thrust = ca.SX.sym("F", heave.thruster_count)
+        force = ca.SX.sym("d")
+        next_state = rk4(
+            lambda x, u: heave_dynamics(x, u, heave, force), state, thrust, config.sample_time
+        )
+        step = ca.Function(
+            "heave_step",
+            [state, thrust, force],
+            [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
+        )
+        self._rollout = step.mapaccum("heave_rollout", config.prediction_horizon)
+        augmented = ca.SX.sym("z", NX + 1)
+        next_augmented = ca.vertcat(step(augmented[:NX], thrust, augmented[NX])[0], augmented[NX])
+        observer = config.observer
+        rate = observer.disturbance_rate_std if config.offset_free else 0.0
+        prior = observer.initial_disturbance_std if config.offset_free else 0.0
+        self._observer = AugmentedEkf(
+            ca.Function(
+                "heave_observer",
+                [augmented, thrust],
+                [next_augmented, ca.jacobian(next_augmented, augmented)],
+            ),
+            measured=1,
+            process_covariance=np.diag(
+                [observer.depth_process_std**2, observer.velocity_process_std**2,
+                 rate**2 * config.sample_time]
+            ),  # fmt: skip
+            measurement_covariance=np.array([[observer.measurement_std**2]]),
+            prior_covariance=np.diag([observer.measurement_std**2, 0.1**2, prior**2]),
+        )
+        self.reset(np.zeros(NX), np.zeros(heave.thruster_count))
+
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        super().reset(initial_state, initial_thrust)
+        self._observer.reset(np.array([initial_state[0], 0.0, 0.0]))
+
+    def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        estimate = self._observer.correct(measured[:1])
+        return estimate[:NX], estimate[NX:]
+
+    def after_command(self, command: np.ndarray) -> None:
+        self._observer.predict(command)
+
+    def prediction_model(
+        self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
+    ) -> AffinePrediction:
+        ny, n = self.horizon, self.heave.thruster_count
+        forces = np.full((1, ny), float(disturbance[0]))
+        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
+        A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
+        B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
+        nominal = np.vstack([state, np.asarray(states).T])
+        c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1])
+        c -= np.einsum("nij,nj->ni", B, nominal_input)
+        return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
+
+    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
+        """Below the surface and above the bottom by the margins, at every predicted step."""
+        ny = self.horizon
+        steps = np.concatenate([np.arange(1, ny + 1)] * 2)
+        coefficients = np.vstack([np.tile([-1.0, 0.0], (ny, 1)), np.tile([1.0, 0.0], (ny, 1))])
+        lower = np.concatenate(
+            [
+                np.full(ny, self.config.surface_margin_m),  # -z >= margin
+                np.full(ny, -self.water_depth + self.config.bottom_margin_m),  # z >= bottom
+            ]
+        )
+        return SoftRows(steps, coefficients, lower)
