@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import json
 import os
@@ -13,6 +14,8 @@ from rich.console import Console
 import auvmpc.bench as bench
 from auvmpc.bench import (
     CONTROLLER_PRESETS,
+    DEFAULT_CONTROLLERS,
+    add_speedups,
     format_table,
     machine_info,
     pinned_to_one_cpu,
@@ -30,7 +33,9 @@ INTERFACE_METRICS = (
     "thrust_limit_violations", "thrust_rate_violations", "min_obstacle_clearance_m",
     "solve_ms_median", "solve_ms_p99", "solve_ms_max", "thrust_effort_N2s", "solver_failures",
 )  # fmt: skip
-REQUIRED_KEYS = ("controller", "scenario", "wall_s", "steps", *INTERFACE_METRICS)
+REQUIRED_KEYS = (
+    "controller", "scenario", "wall_s", "steps", "speedup_vs_do_mpc", *INTERFACE_METRICS,
+)  # fmt: skip
 TIMING_KEYS = ("solve_ms_median", "solve_ms_p99", "solve_ms_max", "wall_s")
 SHORT = ("duration=5",)  # 10 samples of 0.5 s: enough to exercise every column
 CONTROLLERS = ("baseline", "mpc")
@@ -95,15 +100,79 @@ def test_json_round_trip_is_a_list_of_rows(rows):
     assert loaded == rows
 
 
+def _printed(table) -> str:
+    stream = io.StringIO()
+    Console(file=stream, width=250).print(table)
+    return stream.getvalue()
+
+
 def test_table_has_a_line_per_row(rows):
     table = format_table(rows, machine_info())
     assert table.row_count == len(rows)
-    stream = io.StringIO()
-    Console(file=stream, width=200).print(table)
-    text = stream.getvalue()
+    text = _printed(table)
     for row in rows:
         assert row["controller"] in text
     assert "CPU" in text
+    assert "RMS>tr" in text
+
+
+def test_without_do_mpc_the_ratio_is_null_and_not_shown(rows):
+    assert all(row["speedup_vs_do_mpc"] is None for row in rows)
+    assert "vs do-mpc" not in _printed(format_table(rows))
+
+
+def _fake_row(controller: str, scenario: str, median_ms: float) -> dict:
+    return {"controller": controller, "scenario": scenario, "solve_ms_median": median_ms,
+            "speedup_vs_do_mpc": None, "rms_position_error_m": 0.1}  # fmt: skip
+
+
+def test_speedup_is_do_mpc_median_over_own_median_per_scenario():
+    rows = [
+        _fake_row("mpc", "a", 0.5),
+        _fake_row("do-mpc", "a", 40.0),
+        _fake_row("ltv-mpc", "a", 2.0),
+        _fake_row("mpc", "b", 0.5),  # no do-mpc row for scenario b
+        _fake_row("do-mpc", "c", 10.0),
+        _fake_row("baseline", "c", 0.0),  # a zero median has no finite ratio
+    ]
+    speedups = [row["speedup_vs_do_mpc"] for row in add_speedups(rows)]
+    assert speedups == [80.0, 1.0, 20.0, None, 1.0, None]
+    assert [row["speedup_vs_do_mpc"] for row in rows] == [None] * len(rows)  # inputs untouched
+    # the key keeps its place, so table columns and JSON keys keep their order
+    assert list(add_speedups(rows)[0]) == list(rows[0])
+
+
+def test_table_shows_the_ratio_when_a_do_mpc_row_exists():
+    rows = add_speedups([_fake_row("mpc", "a", 0.5), _fake_row("do-mpc", "a", 40.0)])
+    full = {key: 0 for key in INTERFACE_METRICS} | {"wall_s": 1.0, "min_obstacle_clearance_m": None}
+    text = _printed(format_table([full | row for row in rows]))
+    assert "vs do-mpc" in text
+    assert "80.0x" in text
+    assert "1.0x" in text
+
+
+def test_do_mpc_label_poses_the_ocp_with_every_move_free():
+    case = resolve_controller("do-mpc")
+    config = load_scenario("paper-obstacles", case.overrides).scenario.controller
+    assert config.type == ControllerType.DO_MPC
+    assert config.control_horizon == config.prediction_horizon == 30
+    assert not config.offset_free  # as the paper scenarios state it, and do-mpc requires
+
+
+def test_do_mpc_is_a_default_exactly_when_installed():
+    installed = importlib.util.find_spec("do_mpc") is not None
+    assert ("do-mpc" in DEFAULT_CONTROLLERS) == installed
+
+
+def test_one_run_with_do_mpc_gives_every_row_its_ratio():
+    pytest.importorskip("do_mpc")
+    rows = run_benchmark(["mpc", "do-mpc"], ["paper-ideal"], overrides=SHORT)
+    mpc, do_mpc = rows
+    assert do_mpc["controller"] == "do-mpc"
+    assert do_mpc["speedup_vs_do_mpc"] == 1.0
+    assert mpc["speedup_vs_do_mpc"] == do_mpc["solve_ms_median"] / mpc["solve_ms_median"]
+    assert do_mpc["solver_failures"] == 0
+    assert json.loads(rows_to_json(rows)) == rows
 
 
 def test_solve_statistics_pool_all_steps_of_all_repeats(monkeypatch):
@@ -183,6 +252,6 @@ def test_machine_info_names_the_solver_stack():
     info = machine_info()
     assert info["cpu_count"] == os.cpu_count()
     assert info["packages"]["numpy"] == np.__version__
-    assert set(info["packages"]) == {"numpy", "scipy", "casadi", "daqp", "osqp"}
+    assert set(info["packages"]) == {"numpy", "scipy", "casadi", "daqp", "osqp", "do-mpc"}
     assert info["python"]
     json.dumps(info)  # serialisable as it is

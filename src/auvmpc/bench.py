@@ -4,6 +4,11 @@ Each row holds the per-step controller solve time (median, 99th percentile, max;
 wall time of the whole closed-loop run (s), the number of control steps and every run
 metric of ``shared/spec/interfaces.md``. Timings are only as honest as the machine they ran
 on: :func:`machine_info` describes it and the process is pinned to a single CPU for the runs.
+
+The yardstick is do-mpc (``pip install 'auvmpc[compare]'``): the ``do-mpc`` label solves the
+same optimal control problem with do-mpc and IPOPT in the same process, and every row of a
+scenario that has a ``do-mpc`` row gets ``speedup_vs_do_mpc``, the do-mpc median step time
+over its own.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +41,8 @@ __all__ = [
     "CONTROLLER_PRESETS",
     "DEFAULT_CONTROLLERS",
     "DEFAULT_SCENARIOS",
+    "DO_MPC_LABEL",
+    "add_speedups",
     "resolve_controller",
     "run_benchmark",
     "machine_info",
@@ -43,12 +51,21 @@ __all__ = [
     "pinned_to_one_cpu",
 ]
 
-DEFAULT_CONTROLLERS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline")
+DO_MPC_LABEL = "do-mpc"
+# do-mpc joins the defaults where the ``compare`` extra is installed.
+DEFAULT_CONTROLLERS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline") + (
+    (DO_MPC_LABEL,) if find_spec("do_mpc") is not None else ()
+)
 DEFAULT_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 
 # The per-step solve statistics, computed as auvmpc.metrics does (numpy's linear percentile).
 SOLVE_STATS = {"solve_ms_median": 50.0, "solve_ms_p99": 99.0}
-PACKAGES = ("numpy", "scipy", "casadi", "daqp", "osqp")
+PACKAGES = ("numpy", "scipy", "casadi", "daqp", "osqp", "do-mpc")
+# Labels the benchmark knows beyond CONTROLLER_PRESETS (which wins where both name one):
+# do-mpc poses the OCP our controllers are compared on, every move of the horizon free.
+_BENCH_PRESETS: dict[str, tuple[str, ...]] = {
+    DO_MPC_LABEL: ("controller.type=do-mpc", "controller.control_horizon=30"),
+}
 
 
 @dataclass(frozen=True)
@@ -74,8 +91,9 @@ def resolve_controller(label: str) -> BenchCase:
     Parameters
     ----------
     label : str
-        A key of :data:`CONTROLLER_PRESETS`, or any ``controller.type`` value (the
-        scenario's other controller settings are then kept).
+        A key of :data:`CONTROLLER_PRESETS`, ``do-mpc`` (type do-mpc, control horizon 30),
+        or any ``controller.type`` value (the scenario's other controller settings are
+        then kept).
 
     Returns
     -------
@@ -86,11 +104,12 @@ def resolve_controller(label: str) -> BenchCase:
     ConfigError
         If ``label`` is neither, naming the ``--controllers`` option.
     """
-    if label in CONTROLLER_PRESETS:
-        return BenchCase(label, CONTROLLER_PRESETS[label])
+    presets = {**_BENCH_PRESETS, **CONTROLLER_PRESETS}
+    if label in presets:
+        return BenchCase(label, presets[label])
     if label in {kind.value for kind in ControllerType}:
         return BenchCase(label, (f"controller.type={label}",))
-    known = sorted(set(CONTROLLER_PRESETS) | {kind.value for kind in ControllerType})
+    known = sorted(set(presets) | {kind.value for kind in ControllerType})
     raise ConfigError("--controllers", label, f"unknown controller; choose from {known}")
 
 
@@ -129,7 +148,8 @@ def run_benchmark(
         all steps of all repeats; ms), ``wall_s`` (wall time of one :func:`simulate` call,
         i.e. controller construction, closed loop and metrics; median over repeats; s),
         ``steps`` (control steps per run), ``repeats``, ``pinned_cpu`` (the CPU the runs
-        were pinned to, None if pinning was not possible), then every run metric.
+        were pinned to, None if pinning was not possible), ``speedup_vs_do_mpc`` (see
+        :func:`add_speedups`), then every run metric.
         The metrics other than the solve times are those of the first repeat: runs are
         seeded and repeat exactly unless a solver time limit makes them timing dependent.
 
@@ -180,7 +200,35 @@ def run_benchmark(
             )
     if on_run is not None:
         on_run(total, total, "done")
-    return rows
+    return add_speedups(rows)
+
+
+def add_speedups(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Rows with ``speedup_vs_do_mpc`` set: do-mpc's median step time over the row's own.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Benchmark rows (``controller``, ``scenario``, ``solve_ms_median`` at least).
+
+    Returns
+    -------
+    list of dict
+        New rows, in order. The ratio is taken against the ``do-mpc`` row of the same
+        scenario (1.0 on that row itself); it is None where the scenario has no do-mpc
+        row or a median is zero.
+    """
+    reference = {
+        row["scenario"]: row["solve_ms_median"]
+        for row in rows
+        if row["controller"] == DO_MPC_LABEL
+    }
+    result = []
+    for row in rows:
+        do_mpc_ms, own_ms = reference.get(row["scenario"]), row["solve_ms_median"]
+        speedup = do_mpc_ms / own_ms if do_mpc_ms and own_ms > 0 else None
+        result.append({**row, "speedup_vs_do_mpc": speedup})  # keeps the key's place
+    return result
 
 
 def _row(
@@ -200,6 +248,7 @@ def _row(
     head["steps"] = int(steps)
     head["repeats"] = len(wall_s)
     head["pinned_cpu"] = cpu
+    head["speedup_vs_do_mpc"] = None  # set by add_speedups once every row is known
     return {**head, **{key: value for key, value in metrics.items() if key not in head}}
 
 
@@ -262,7 +311,7 @@ def machine_info() -> dict[str, Any]:
         ``cpu_model`` (from /proc/cpuinfo, else ``platform.processor()``, else None),
         ``platform``, ``machine``, ``python``, ``cpu_count`` (``os.cpu_count()``),
         ``cpus_allowed`` (CPUs this process may use, None if unknown) and ``packages``
-        (installed versions of numpy, scipy, casadi, daqp, osqp; None if missing).
+        (installed versions of numpy, scipy, casadi, daqp, osqp, do-mpc; None if missing).
     """
     allowed = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
     return {
@@ -298,6 +347,9 @@ def _version(package: str) -> str | None:
 def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None = None) -> Table:
     """A rich table of benchmark rows, the machine (if given) in the caption.
 
+    The ``vs do-mpc`` column (do-mpc's median step time over the row's) is shown when at
+    least one row has a do-mpc row to compare with.
+
     Parameters
     ----------
     rows : sequence of dict
@@ -313,15 +365,18 @@ def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None 
         title="auvmpc benchmark (solve times per controller step)",
         caption=_caption(rows, machine),
     )
+    with_speedup = any(row.get("speedup_vs_do_mpc") is not None for row in rows)
     columns = (
         ("controller", "left"), ("scenario", "left"),
         ("median ms", "right"), ("p99 ms", "right"), ("max ms", "right"), ("wall s", "right"),
-        ("RMS err m", "right"), ("final err m", "right"), ("min clear. m", "right"),
-        ("viol. F/dF", "right"), ("fails", "right"),
+        *((("vs do-mpc", "right"),) if with_speedup else ()),
+        ("RMS err m", "right"), ("RMS>tr m", "right"), ("final err m", "right"),
+        ("min clear. m", "right"), ("viol. F/dF", "right"), ("fails", "right"),
     )  # fmt: skip
     for title, justify in columns:
         table.add_column(title, justify=justify)
     for row in rows:
+        speedup = row.get("speedup_vs_do_mpc")
         table.add_row(
             row["controller"],
             row["scenario"],
@@ -329,7 +384,9 @@ def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None 
             _number(row["solve_ms_p99"], ".2f"),
             _number(row["solve_ms_max"], ".2f"),
             _number(row["wall_s"], ".2f"),
+            *((("-" if speedup is None else f"{speedup:.1f}x"),) if with_speedup else ()),
             _number(row["rms_position_error_m"], ".3f"),
+            _number(row.get("rms_position_error_after_transient_m"), ".4f"),
             _number(row["final_position_error_m"], ".3f"),
             _number(row["min_obstacle_clearance_m"], ".3f"),
             f"{row['thrust_limit_violations']}/{row['thrust_rate_violations']}",
@@ -355,6 +412,12 @@ def _caption(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None) -> 
     repeats = {row.get("repeats") for row in rows}
     if repeats - {None, 1}:
         parts.append(f"repeats {', '.join(str(n) for n in sorted(repeats))}: wall s is the median")
+    transients = {row.get("transient_s") for row in rows} - {None}
+    if transients:
+        listed = ", ".join(f"{value:g}" for value in sorted(transients))
+        parts.append(f"RMS>tr: RMS position error after the scenario's transient ({listed} s)")
+    if any(row.get("speedup_vs_do_mpc") is not None for row in rows):
+        parts.append("vs do-mpc: do-mpc median ms / this median ms, same scenario")
     return "\n".join(parts) or None
 
 

@@ -32,7 +32,7 @@ def main() -> None:
     try:
         app()
     except ConfigError as error:
-        errors.print(f"error: {error}", highlight=False, soft_wrap=True)
+        errors.print(f"error: {error}", highlight=False, soft_wrap=True, markup=False)
         sys.exit(USER_ERROR_EXIT)
     except KeyboardInterrupt:
         errors.print("interrupted: nothing half-written was left behind", highlight=False)

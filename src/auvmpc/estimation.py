@@ -46,7 +46,7 @@ class ObserverConfig(StrictModel):
         description="model error per sample on [x, y, psi, u, v, r]",
     )
     disturbance_rate_std: tuple[Positive, Positive, Positive] = Field(
-        default=(1.0, 1.0, 0.2),
+        default=(1.0, 1.0, 0.05),
         description="random-walk intensity of the world force X, Y (N/sqrt(s)) and moment "
         "N (N m/sqrt(s)): larger tracks faster, smaller is smoother",
     )

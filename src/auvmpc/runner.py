@@ -102,7 +102,7 @@ class DepthRunResult:
 
 def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
     """The scenario's controller, built on the nominal (controller-side) vehicle model."""
-    config = scenario.controller
+    config = scenario.controller.with_model_substeps(model)
     if config.type is ControllerType.BASELINE:
         from auvmpc.controllers.baseline import BaselineController
 
@@ -122,7 +122,7 @@ def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
     if config.type is ControllerType.DO_MPC:
         from auvmpc.controllers.dompc import DoMpcController
 
-        return DoMpcController(model, config)
+        return DoMpcController(model, config, obstacle_slots=len(scenario.obstacles))
     raise NotImplementedError(config.type)  # unreachable: the enum lists only built controllers
 
 

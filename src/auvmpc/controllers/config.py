@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 from typing import Annotated
 
@@ -10,6 +11,7 @@ from pydantic import Field, model_validator
 from auvmpc.config import StrictModel
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
+from auvmpc.vehicle import VehicleParams
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.qp import QpSolverName
 
@@ -89,20 +91,25 @@ class ControllerConfig(StrictModel):
     )
     qp_solver: QpSolverName = Field(default=QpSolverName.DAQP, description="QP backend")
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
-        default=None, description="cap on QP iterations; hitting it counts as a solver failure"
+        default=None,
+        description="cap on QP iterations (IPOPT iterations for nmpc full: below ~20 every "
+        "step falls back); hitting it counts as a solver failure",
     )
     solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
         description="a step whose optimisation takes longer is treated as a failure "
         "(the previous plan's next move is applied), as on a real-time computer",
     )
-    model_substeps: Annotated[int, Field(ge=1, le=20)] = Field(
-        default=1, description="RK4 steps per sample in the controller's prediction model"
+    model_substeps: Annotated[int, Field(ge=1, le=50)] | None = Field(
+        default=None,
+        description="RK4 steps per sample in the controllers' prediction models and estimator; "
+        "omitted = the fewest that keep RK4 stable for the vehicle's damping (see "
+        "stable_model_substeps)",
     )
     linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
         default=1,
-        description="linearise-and-solve passes per sample (ltv-mpc: SQP iterations; "
-        "also refreshes the obstacle half-planes around the new plan)",
+        description="linearise-and-solve passes per sample (ltv-mpc and nmpc real-time: SQP "
+        "iterations; also refreshes the obstacle half-planes around the new plan)",
     )
     trust_region_weight: NonNegative = Field(
         default=10.0,
@@ -140,6 +147,14 @@ class ControllerConfig(StrictModel):
                 )
         return self
 
+    def with_model_substeps(self, model: VehicleParams) -> ControllerConfig:
+        """This config with ``model_substeps`` filled in for ``model`` if it was omitted."""
+        if self.model_substeps is not None:
+            return self
+        return self.model_copy(
+            update={"model_substeps": stable_model_substeps(model, self.sample_time)}
+        )
+
     def move_schedule(self) -> tuple[int, ...]:
         """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
         if self.move_steps is not None:
@@ -151,12 +166,44 @@ class ControllerConfig(StrictModel):
         return self.R * n_thrusters if len(self.R) == 1 else self.R
 
 
+# Speeds up to which an automatically chosen model step keeps RK4 stable (m/s, rad/s):
+# above the operating range of the presets, below their extremes.
+_STABILITY_SPEED = 1.5
+_STABILITY_YAW_RATE = 1.0
+# RK4 is stable for h*lambda up to 2.785 on the negative real axis; keep a margin.
+_RK4_STABLE_STEP = 2.5
+
+
+def stable_model_substeps(model: VehicleParams, sample_time: float) -> int:
+    """Fewest RK4 steps per sample that stay stable for the model's damping.
+
+    The damping rate of each axis at speed s is |D + 2 D_q s| / M (the linearised
+    quadratic damping); one RK4 step of length h is stable while h * rate < 2.785.
+    One 0.5 s step suits the paper vehicle (rate 3.8 /s); the BlueROV2's strong
+    quadratic damping (rate 32 /s in sway at 1.5 m/s) needs seven.
+    """
+    rates = (
+        abs(model.Xu + 2.0 * model.Xuu * _STABILITY_SPEED) / model.m11,
+        abs(model.Yv + 2.0 * model.Yvv * _STABILITY_SPEED) / model.m22,
+        abs(model.Nr + 2.0 * model.Nrr * _STABILITY_YAW_RATE) / model.Iz,
+    )
+    return max(1, math.ceil(sample_time * max(rates) / _RK4_STABLE_STEP))
+
+
+BLOCKED_MOVES = (0, 1, 2, 3, 5, 7, 10, 14, 19, 25)
+
 CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
     "baseline": ("controller.type=baseline",),
     "mpc": ("controller.type=mpc", "controller.control_horizon=2"),
     "mpc-nc30": ("controller.type=mpc", "controller.control_horizon=30"),  # = ny of paper-*
     "ltv-mpc": ("controller.type=ltv-mpc", "controller.control_horizon=2"),
     "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
+    # Move blocking: 10 moves spread over the 30-step horizon (finer early, where they act).
+    "ltv-mpc-blocked": ("controller.type=ltv-mpc", f"controller.move_steps={list(BLOCKED_MOVES)}"),
+    "nmpc": ("controller.type=nmpc", "controller.nmpc_mode=real-time", "controller.control_horizon=30"),
+    "nmpc-full": ("controller.type=nmpc", "controller.nmpc_mode=full", "controller.control_horizon=30"),
+    "do-mpc": ("controller.type=do-mpc", "controller.control_horizon=30"),
+    "do-mpc-blocked": ("controller.type=do-mpc", f"controller.move_steps={list(BLOCKED_MOVES)}"),
 }
 """Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
 controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon;

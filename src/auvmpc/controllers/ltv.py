@@ -50,7 +50,7 @@ class LtvMpc(LinearMpc):
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
         self._rollout = linearised_rollout(
-            model, config.sample_time, config.model_substeps, config.prediction_horizon
+            model, config.sample_time, self.config.model_substeps, config.prediction_horizon
         )
 
     def prediction_model(

@@ -1,0 +1,304 @@
+"""The paper's optimal control problem solved by do-mpc: a yardstick, not a controller to fly.
+
+do-mpc (https://www.do-mpc.com) is the Python MPC toolkit many users already know. This
+module poses the same problem as our MPCs (paper-model.md sections 3-4 and 7) in do-mpc's
+own terms and lets it solve the full nonlinear program with IPOPT every sample, so that
+``auvmpc bench`` can time both in one process on one machine. Install with
+``pip install 'auvmpc[compare]'``.
+
+The problem, stage by stage (k = 0 .. ny-1, ``X_k = [x_k; F_{k-1}]``, input ``dF_k``):
+
+    F_k     = F_{k-1} + g_k dF_k             g_k = 1 at the free moves, 0 after (nc, blocking)
+    x_{k+1} = RK4(vehicle.dynamics)(x_k, F_k) over Te, ``model_substeps`` steps
+    cost    = sum_k (x_k - r_k)' Q (x_k - r_k) + F_k' R F_k  (or dF_k' R dF_k)
+              + (x_ny - r_ny)' S (x_ny - r_ny)
+    s.t.    |dF_k| <= rate * Te,  F_min <= F_k <= F_max
+            reach_m - |p_k - c_m,k| <= eps_m,k,  eps >= 0,  penalty * eps in the cost
+
+This is :class:`~auvmpc.controllers.mpc.LinearMpc`'s cost term for term: the k = 0 state
+term is a constant (x_0 is measured) and changes no minimiser. Differences, all deliberate:
+
+* the dynamics are the nonlinear RK4 map itself, not a linearisation (the point of the
+  comparison: the same OCP solved to convergence by a general NLP solver);
+* obstacles are the exact distance constraint (``reach = radius + vehicle_radius +
+  obstacle_margin``), where ``LinearMpc`` uses a tangent half-plane, and do-mpc imposes them
+  on the stage states x_0 .. x_{ny-1} where ``LinearMpc`` constrains x_1 .. x_ny: x_0 is
+  fixed (its slack only absorbs an unavoidable violation and is ignored for the status)
+  and x_ny, 15 s ahead in the paper's setting, is not constrained;
+* the slack penalty is do-mpc's, linear only (``LinearMpc`` adds a small quadratic part);
+* there is no offset-free estimator (do-mpc has none): ``offset_free=true`` is rejected;
+* do-mpc warm-starts IPOPT from the previous solution as it stands (not shifted).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.controllers.base import (
+    Controller,
+    ControlResult,
+    ControlStatus,
+    Observation,
+    project_to_limits,
+)
+from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.errors import ConfigError
+from auvmpc.integrators import rk4
+from auvmpc.vehicle import VehicleParams, dynamics
+
+__all__ = ["DoMpcController"]
+
+NX = 6
+# A slack below this (m) is IPOPT's tolerance, not a relaxed constraint (as in mpc.py).
+_SLACK_ACTIVE_M = 1e-6
+# Unused obstacle slots sit this far away (m) with zero reach: never active.
+_PARKED_OBSTACLE_M = 1e6
+# Keeps the distance differentiable if a predicted position ever hits a centre exactly (m^2).
+_DISTANCE_REGULARISATION_M2 = 1e-12
+# Weight pinning the moves after the control horizon to zero (they act on nothing there).
+_HELD_MOVE_WEIGHT = 1.0
+
+
+class DoMpcController(Controller):
+    """The paper's OCP (incremental form, nonlinear RK4 model) built and solved by do-mpc.
+
+    Parameters
+    ----------
+    model : VehicleParams
+        The controller's (nominal) vehicle.
+    config : ControllerConfig
+        Horizons, weights, limits and obstacle settings, as for ``mpc`` / ``ltv-mpc``.
+    obstacle_slots : int
+        Obstacles the problem has room for (give the scenario's count). A sample that sees
+        more rebuilds the problem with enough slots (its time includes the rebuild, and
+        ``info["rebuilt"]`` is 1); unused slots are parked far away, which costs IPOPT
+        iterations, hence the default of none.
+
+    Raises
+    ------
+    ConfigError
+        If do-mpc is not installed (``controller.type``), or ``controller.offset_free`` is
+        set (do-mpc has no disturbance estimator).
+    """
+
+    def __init__(
+        self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = 0
+    ) -> None:
+        config = config.with_model_substeps(model)
+        try:
+            with warnings.catch_warnings():
+                # do-mpc warns at import about optional features (ONNX, OPC UA, torch).
+                warnings.simplefilter("ignore")
+                import do_mpc
+        except ImportError:
+            raise ConfigError(
+                "controller.type",
+                "do-mpc",
+                "needs the optional extra: pip install 'auvmpc[compare]'",
+            ) from None
+        if config.offset_free:
+            raise ConfigError(
+                "controller.offset_free",
+                True,
+                "do-mpc has no disturbance estimator; set controller.offset_free=false",
+            )
+        if obstacle_slots < 0:
+            raise ValueError(f"obstacle_slots must be >= 0, got {obstacle_slots}")
+        self._do_mpc = do_mpc
+        self.model = model
+        self.config = config
+        self.sample_time = config.sample_time
+        self.horizon = config.prediction_horizon
+        self.preview_steps = self.horizon
+        # g_k: 1 where a move is free (0..nc-1, or the blocking steps), 0 where F is held.
+        self._gates = np.zeros(self.horizon + 1)
+        self._gates[list(config.move_schedule())] = 1.0
+        self._max_move = model.thrust_rate_limit * config.sample_time
+        self._reach_extra = config.vehicle_radius + config.obstacle_margin
+        self._build(obstacle_slots)
+        self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
+
+    # -- the do-mpc problem --------------------------------------------------------------
+    def _build(self, slots: int) -> None:
+        """Model, objective, bounds and constraints in do-mpc's terms; IPOPT set up once."""
+        do_mpc, p, cfg = self._do_mpc, self.model, self.config
+        n = p.n_thrusters
+        model = do_mpc.model.Model("discrete", "SX")
+        state = model.set_variable("_x", "state", (NX, 1))
+        previous = model.set_variable("_x", "F_prev", (n, 1))
+        move = model.set_variable("_u", "dF", (n, 1))
+        model.set_variable("_tvp", "reference", (NX, 1))
+        gate = model.set_variable("_tvp", "gate")
+        if slots:  # per slot: centre x, centre y, reach (m)
+            model.set_variable("_tvp", "obstacles", (3 * slots, 1))
+        thrust = previous + gate * move
+        model.set_rhs(
+            "state",
+            rk4(lambda x, f: dynamics(x, f, p), state, thrust, cfg.sample_time, cfg.model_substeps),
+        )
+        model.set_rhs("F_prev", thrust)
+        model.setup()
+
+        mpc = do_mpc.controller.MPC(model)
+        mpc.set_param(
+            n_horizon=self.horizon,
+            t_step=cfg.sample_time,
+            n_robust=0,
+            use_terminal_bounds=True,  # the F_prev bounds hold at the last stage too (F_{ny-1})
+            store_full_solution=False,
+            store_lagr_multiplier=False,
+            store_solver_stats=[],
+            nlpsol_opts={"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0},
+        )
+        error = model.x["state"] - model.tvp["reference"]
+        thrust_weights = np.array(cfg.thrust_weights(n), dtype=float)
+        dF, F = model.u["dF"], model.x["F_prev"] + model.tvp["gate"] * model.u["dF"]
+        penalised = F if cfg.thrust_penalty is ThrustPenalty.ABSOLUTE else dF
+        lterm = (
+            ca.mtimes([error.T, ca.diag(ca.DM(cfg.Q)), error])
+            + ca.mtimes([penalised.T, ca.diag(ca.DM(thrust_weights)), penalised])
+            + _HELD_MOVE_WEIGHT * (1 - model.tvp["gate"]) * ca.sumsqr(dF)
+        )
+        mterm = ca.mtimes([error.T, ca.diag(ca.DM(cfg.S)), error])
+        mpc.set_objective(lterm=lterm, mterm=mterm)
+        mpc.set_rterm(dF=0.0)  # R weights F (or dF) in lterm already; do-mpc's move term stays 0
+        mpc.bounds["lower", "_u", "dF"] = -self._max_move
+        mpc.bounds["upper", "_u", "dF"] = self._max_move
+        mpc.bounds["lower", "_x", "F_prev"] = p.thrust_min
+        mpc.bounds["upper", "_x", "F_prev"] = p.thrust_max
+        position = model.x["state"][:2]
+        for slot in range(slots):
+            cx, cy, reach = (model.tvp["obstacles"][3 * slot + i] for i in range(3))
+            distance = ca.sqrt(
+                (position[0] - cx) ** 2 + (position[1] - cy) ** 2 + _DISTANCE_REGULARISATION_M2
+            )
+            mpc.set_nl_cons(
+                f"obstacle_{slot}",
+                reach - distance,
+                ub=0.0,
+                soft_constraint=True,
+                penalty_term_cons=cfg.obstacle_slack_penalty,
+            )
+        tvp = mpc.get_tvp_template()
+        mpc.set_tvp_fun(lambda t_now: tvp)  # filled in place before every make_step
+        with warnings.catch_warnings():
+            # casadi 3.8 warns about a numpy call inside do-mpc's own checks.
+            warnings.filterwarnings("ignore", category=FutureWarning, module="casadi")
+            mpc.setup()
+
+        self._mpc, self._tvp, self._slots = mpc, tvp, slots
+        self.dompc_model, self.dompc_mpc = model, mpc  # do-mpc objects, for tests and inspection
+        # Flat indices into do-mpc's parameter and solution vectors, found once.
+        stages = range(self.horizon + 1)
+        self._tvp_index = {
+            name: np.array([tvp.f["_tvp", k, name] for k in stages]).reshape(len(stages), -1)
+            for name in ("reference", "gate", *(("obstacles",) if slots else ()))
+        }
+        opt_x = mpc.opt_x
+        self._state_index = np.array([opt_x.f["_x", k, 0, -1, "state"] for k in stages])
+        self._move_index = np.array([opt_x.f["_u", k, 0, "dF"] for k in stages[:-1]])
+        slacks = [[f"obstacle_{s}" for s in range(slots)] for _ in stages[:-1]]
+        self._slack_index = np.array(
+            [[opt_x.f["_eps", k, 0, name][0] for name in row] for k, row in enumerate(slacks)],
+            dtype=int,
+        ).reshape(self.horizon, slots)
+        self._needs_guess = True
+
+    # -- Controller interface ------------------------------------------------------------
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._previous_thrust = np.array(initial_thrust, dtype=float)
+        self._plan: np.ndarray | None = None  # (ny, n) thrusts of the last good solution
+        self._needs_guess = True
+        self._mpc.reset_history()
+
+    def compute(self, observation: Observation) -> ControlResult:
+        n, ny = self.model.n_thrusters, self.horizon
+        previous = self._previous_thrust
+        state = np.asarray(observation.state, dtype=float)
+        rebuilt = 0.0
+        if len(observation.obstacles) > self._slots:
+            self._build(len(observation.obstacles))
+            rebuilt = 1.0
+        self._set_parameters(state, observation)
+        x0 = np.concatenate([state, previous])
+        mpc = self._mpc
+        if self._needs_guess:
+            # Every stage at the measured state and thrust, no moves: do-mpc's own start.
+            mpc.x0 = x0
+            mpc.u0 = np.zeros(n)
+            mpc.set_initial_guess()
+            self._needs_guess = False
+        started = time.perf_counter()
+        mpc.make_step(x0)
+        solve_time = time.perf_counter() - started
+        solved = bool(mpc.solver_stats["success"])  # CasADi's verdict on IPOPT's return status
+        time_limit = self.config.solver_time_limit_ms
+        timed_out = time_limit is not None and 1e3 * solve_time > time_limit
+        if not solved or timed_out:
+            return self._fallback(solve_time, rebuilt)
+
+        solution = np.asarray(mpc.opt_x_num.cat).ravel()
+        moves = solution[self._move_index] * self._gates[:ny, None]  # (ny, n)
+        slack = solution[self._slack_index]  # (ny, slots)
+        self._plan = previous + np.cumsum(moves, axis=0)
+        thrust, clipped = project_to_limits(self._plan[0], previous, self.model, self.sample_time)
+        self._previous_thrust = thrust
+        # Stage 0 is the measured state: its slack is an unavoidable violation, not a choice.
+        max_slack = float(slack[1:].max(initial=0.0))
+        status = ControlStatus.OK
+        if max_slack > _SLACK_ACTIVE_M:
+            status = ControlStatus.RELAXED
+        elif clipped and np.max(np.abs(thrust - self._plan[0])) > 1e-6:
+            status = ControlStatus.SATURATED
+        return ControlResult(
+            thrust=thrust,
+            status=status,
+            solve_time_s=solve_time,
+            predicted_states=solution[self._state_index],
+            info={
+                "ipopt_iterations": float(mpc.solver_stats.get("iter_count", 0)),
+                "max_slack_m": max_slack,
+                "rebuilt": rebuilt,
+            },
+        )
+
+    # -- pieces --------------------------------------------------------------------------
+    def _set_parameters(self, state: np.ndarray, observation: Observation) -> None:
+        """Reference (heading aligned by 2 pi k to the measured one), gates and obstacles."""
+        ny = self.horizon
+        reference = np.array(observation.reference[: ny + 1], dtype=float)
+        turns = np.round((state[2] - reference[0, 2]) / (2.0 * math.pi))
+        reference[:, 2] += 2.0 * math.pi * turns
+        values = np.zeros(self._tvp.cat.shape[0])
+        values[self._tvp_index["reference"]] = reference
+        values[self._tvp_index["gate"][:, 0]] = self._gates
+        if self._slots:
+            slots = np.tile([_PARKED_OBSTACLE_M, _PARKED_OBSTACLE_M, 0.0], (ny + 1, self._slots, 1))
+            times = np.arange(ny + 1) * self.sample_time
+            for slot, obstacle in enumerate(observation.obstacles):
+                slots[:, slot, :2] = obstacle.center + np.outer(times, obstacle.velocity)
+                slots[:, slot, 2] = obstacle.radius + self._reach_extra
+            values[self._tvp_index["obstacles"]] = slots.reshape(ny + 1, -1)
+        self._tvp.master = ca.DM(values)
+
+    def _fallback(self, solve_time_s: float, rebuilt: float) -> ControlResult:
+        """IPOPT failed or was too slow: apply the previous plan's next move, clipped."""
+        previous = self._previous_thrust
+        if self._plan is not None and len(self._plan) > 1:
+            wanted = self._plan[1]
+            self._plan = np.vstack([self._plan[1:], self._plan[-1:]])
+        else:
+            wanted = previous
+        thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
+        self._previous_thrust = thrust
+        return ControlResult(
+            thrust=thrust,
+            status=ControlStatus.FALLBACK,
+            solve_time_s=solve_time_s,
+            info={"rebuilt": rebuilt},
+        )
