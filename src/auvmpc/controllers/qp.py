@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import sys
 import threading
 import time
@@ -31,7 +30,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TextIO
 
 import numpy as np
 
@@ -245,8 +244,14 @@ def _data_defect(problem: QpProblem) -> str | None:
     return None
 
 
+_DAQP_INFINITY = 1e30  # DAQP_INF in daqp's constants.h
+
+
 class DaqpSolver(QpSolver):
     """DAQP: dual active-set, dense; warm-started by keeping the last active set.
+
+    After a shape change the new workspace starts from the active set of the
+    caller's warm start.
 
     ``tolerance`` is DAQP's ``primal_tol`` (accepted constraint violation). Exact
     active-set: the solution is optimal to round-off once the active set is right.
@@ -278,7 +283,11 @@ class DaqpSolver(QpSolver):
         # Settings are a property returning a copy: assign the dict, item assignment is lost.
         self._model.settings = {"primal_tol": self.tolerance, "iter_limit": self.iteration_limit}
         upper, lower = self._bounds(problem)
-        flag, _ = self._model.setup(problem.H, problem.f, problem.A, upper, lower)
+        # After a shape change the caller's guess seeds the active set (the constraints
+        # nearly active at it): ~3 iterations instead of ~20 on the MPC's QPs.
+        flag, _ = self._model.setup(
+            problem.H, problem.f, problem.A, upper, lower, primal_start=warm_start
+        )
         return None if flag >= 0 else f"setup: {self._describe(flag)}"
 
     def _update(self, problem: QpProblem) -> str | None:
@@ -291,7 +300,9 @@ class DaqpSolver(QpSolver):
         # DAQP reads the first nz entries of the bound vectors as simple bounds on z.
         upper = np.concatenate([problem.bound_upper, problem.upper])
         lower = np.concatenate([problem.bound_lower, problem.lower])
-        return upper, lower
+        # +-inf is fine in setup but turns the whole solution into NaN after an update
+        # (daqp 0.11, still with exitflag 1); DAQP's own infinity is 1e30.
+        return np.minimum(upper, _DAQP_INFINITY), np.maximum(lower, -_DAQP_INFINITY)
 
     def _solve(self, warm_start: np.ndarray | None) -> tuple[np.ndarray | None, bool, str, int]:
         z, _, flag, info = self._model.solve()
@@ -305,16 +316,20 @@ class DaqpSolver(QpSolver):
 class OsqpSolver(QpSolver):
     """OSQP: ADMM, sparse; the dense matrices are stored with a fixed full pattern.
 
-    ``tolerance`` is both ``eps_abs`` and ``eps_rel``; solutions are polished. ADMM
-    converges slowly on the MPC's ill-conditioned Hessians (condition up to 1e10), so
-    tighter tolerances mostly buy iteration-limit failures. Accepted status:
-    ``OSQP_SOLVED`` only; ``SOLVED_INACCURATE`` (residuals within 10x the tolerance
-    when the limit is hit) is rejected, because even "solved" points can be far off
-    in the Hessian's flat directions (see the benchmark).
+    ``tolerance`` is both ``eps_abs`` and ``eps_rel``; solutions are polished, rho is
+    adaptive and the data Ruiz-scaled (10 passes). ADMM converges slowly on the MPC's
+    ill-conditioned Hessians (condition up to 1e10): 1e-6 or 1e-7 mostly buy more
+    iteration-limit failures. Accepted status: ``OSQP_SOLVED`` only;
+    ``SOLVED_INACCURATE`` (residuals within 10x the tolerance when the limit is hit)
+    is rejected, because even "solved" points can be a few newtons off along the
+    Hessian's nearly flat directions when polishing finds no active set (see the
+    benchmark). The caller's warm start sets the primal iterate before each solve.
     """
 
     default_tolerance = 1e-5
-    default_iteration_limit = 4000  # OSQP's default; ~20 ms on the paper QPs
+    # OSQP's own 4000 fails 1 paper-obstacles QP in 3 and the vehicle hits an obstacle;
+    # 20000 halves the failures, none hits, at <= 200 ms per solve (control horizon 2).
+    default_iteration_limit = 20_000
 
     def __init__(self, iteration_limit: int | None = None, tolerance: float | None = None) -> None:
         super().__init__(iteration_limit, tolerance)
@@ -371,7 +386,7 @@ class OsqpSolver(QpSolver):
     def _solve(self, warm_start: np.ndarray | None) -> tuple[np.ndarray | None, bool, str, int]:
         if warm_start is not None:
             self._model.warm_start(x=warm_start)
-        with _c_stdout_silenced():
+        with _osqp_polish_note_dropped():
             result = self._model.solve(raise_error=False)
         info = result.info
         solved = info.status_val == self._osqp.SolverStatus.OSQP_SOLVED
@@ -379,45 +394,63 @@ class OsqpSolver(QpSolver):
         return z, solved, str(info.status), int(info.iter)
 
 
+_OSQP_POLISH_NOTE = "Polishing not needed - no active set detected at optimal point"
 _STDOUT_LOCK = threading.Lock()
 
 
-@contextlib.contextmanager
-def _c_stdout_silenced() -> Iterator[None]:
-    """Send file descriptor 1 to /dev/null for the duration (a few microseconds).
+class _WithoutPolishNote:
+    """A text stream that forwards everything to ``stream`` except OSQP's polishing note."""
 
-    OSQP 1.1 prints "Polishing not needed - no active set detected" from C on every
-    polished solve without active constraints, whatever ``verbose`` says; through
-    ``sys.stdout`` it cannot be caught. The lock keeps concurrent solves in threads
-    from restoring each other's redirection.
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        if text.strip() == _OSQP_POLISH_NOTE:
+            return len(text)
+        return self._stream.write(text)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _osqp_polish_note_dropped() -> Iterator[None]:
+    """Drop OSQP's "Polishing not needed" note from stdout for the duration.
+
+    OSQP 1.1 prints it (through ``sys.stdout``) on every polished solve that ends with
+    no active constraint, whatever ``verbose`` says. Anything else written meanwhile,
+    by any thread, passes through; the lock keeps concurrent solves from restoring
+    each other's stream.
     """
     with _STDOUT_LOCK:
-        try:
-            sys.stdout.flush()
-            saved = os.dup(1)
-        except (AttributeError, OSError, ValueError):  # no usable descriptor 1
+        original = sys.stdout
+        if original is None:
             yield
             return
-        devnull = os.open(os.devnull, os.O_WRONLY)
+        sys.stdout = _WithoutPolishNote(original)  # type: ignore[assignment]
         try:
-            os.dup2(devnull, 1)
             yield
         finally:
-            os.dup2(saved, 1)
-            os.close(saved)
-            os.close(devnull)
+            sys.stdout = original
 
 
 class ProxsuiteSolver(QpSolver):
     """ProxQP (proxsuite), dense backend with box constraints; warm-started from the last result.
 
-    ``tolerance`` is ``eps_abs`` on the primal and dual residuals (``eps_rel`` = 0:
-    relative to the MPC's gradients of 1e5 a relative test stops up to 5 N away
-    from the optimum along the Hessian's flat directions). Infinite bounds are passed
-    as they are (ProxQP accepts them). Accepted status: ``PROXQP_SOLVED``.
+    ``tolerance`` is ``eps_abs`` on the primal and dual residuals and on the duality
+    gap; ``eps_rel`` is 0 because the MPC's gradients reach 1e5, so a relative test
+    stops up to 5 N away from the optimum along the Hessian's nearly flat directions
+    (eigenvalue ~0.01, set by the thrust weight R alone). With the default 1e-6, z is
+    within 1e-4 of the optimum on the paper MPC's QPs; on the LTV-MPC's (condition
+    up to 1e10) it can still be ~1 N off along those directions at a relative cost
+    gap < 1e-5, while 1e-8 roughly doubles the iterations. Infinite bounds are passed
+    as they are (ProxQP accepts them). Each solve after the first starts from the
+    previous primal and dual solution; the caller's (primal-only) warm start is not
+    used: with it the MPC QPs took ~6x the iterations. Accepted status:
+    ``PROXQP_SOLVED``.
     """
 
-    default_tolerance = 1e-7
+    default_tolerance = 1e-6
     default_iteration_limit = 10_000  # ProxQP's default
 
     def __init__(self, iteration_limit: int | None = None, tolerance: float | None = None) -> None:
@@ -434,9 +467,16 @@ class ProxsuiteSolver(QpSolver):
         settings.eps_rel = 0.0
         settings.verbose = False
         settings.max_iter = self.iteration_limit
-        # The initial-guess mode must be chosen before init: proxsuite 0.8.0 segfaults in
-        # the first solve when it is switched to WARM_START_WITH_PREVIOUS_RESULT after init.
-        settings.initial_guess = self._proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        # Without the duality-gap test ProxQP can stop at a feasible, stationary but
+        # non-complementary point (up to 0.1 away from the optimum on random QPs).
+        settings.check_duality_gap = True
+        settings.eps_duality_gap_abs = self.tolerance
+        settings.eps_duality_gap_rel = 0.0
+        # First solve from the equality-constrained guess; WARM_START_WITH_PREVIOUS_RESULT
+        # is switched on only after it (see _solve). Selected before the first solve it
+        # either segfaults (proxsuite 0.8.0, when set after init) or starts from zeros
+        # and can report a feasible problem primal infeasible (when set before init).
+        settings.initial_guess = self._proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
         self._qp.init(*self._data(problem))
         return None
 
@@ -455,6 +495,9 @@ class ProxsuiteSolver(QpSolver):
         info = self._qp.results.info
         solved = info.status == self._proxqp.QPSolverOutput.PROXQP_SOLVED
         z = np.array(self._qp.results.x, dtype=float) if solved else None
+        if solved:  # from now on each solve starts at the last primal and dual solution
+            guess = self._proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            self._qp.settings.initial_guess = guess
         return z, solved, str(info.status), int(info.iter)
 
 
