@@ -52,20 +52,16 @@ __all__ = [
 ]
 
 DO_MPC_LABEL = "do-mpc"
-# do-mpc joins the defaults where the ``compare`` extra is installed.
-DEFAULT_CONTROLLERS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline") + (
-    (DO_MPC_LABEL,) if find_spec("do_mpc") is not None else ()
-)
+# do-mpc joins the defaults where the ``compare`` extra is installed, on the same OCPs as
+# the full-horizon and the move-blocked controllers.
+DEFAULT_CONTROLLERS = (
+    "mpc", "ltv-mpc", "ltv-mpc-nc30", "ltv-mpc-blocked", "nmpc", "nmpc-full", "baseline",
+) + (("do-mpc", "do-mpc-blocked") if find_spec("do_mpc") is not None else ())  # fmt: skip
 DEFAULT_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 
 # The per-step solve statistics, computed as auvmpc.metrics does (numpy's linear percentile).
 SOLVE_STATS = {"solve_ms_median": 50.0, "solve_ms_p99": 99.0}
 PACKAGES = ("numpy", "scipy", "casadi", "daqp", "osqp", "do-mpc")
-# Labels the benchmark knows beyond CONTROLLER_PRESETS (which wins where both name one):
-# do-mpc poses the OCP our controllers are compared on, every move of the horizon free.
-_BENCH_PRESETS: dict[str, tuple[str, ...]] = {
-    DO_MPC_LABEL: ("controller.type=do-mpc", "controller.control_horizon=30"),
-}
 
 
 @dataclass(frozen=True)
@@ -104,7 +100,7 @@ def resolve_controller(label: str) -> BenchCase:
     ConfigError
         If ``label`` is neither, naming the ``--controllers`` option.
     """
-    presets = {**_BENCH_PRESETS, **CONTROLLER_PRESETS}
+    presets = CONTROLLER_PRESETS
     if label in presets:
         return BenchCase(label, presets[label])
     if label in {kind.value for kind in ControllerType}:
@@ -195,9 +191,11 @@ def run_benchmark(
                 solve_ms.append(result.log.solve_ms.copy())
                 if repeat == 0:
                     metrics, steps = result.metrics, result.log.steps
-            rows.append(
-                _row(case.controller, name, np.concatenate(solve_ms), wall_s, steps, cpu, metrics)
-            )
+            row = _row(case.controller, name, np.concatenate(solve_ms), wall_s, steps, cpu, metrics)
+            controller = resolved.scenario.controller
+            row["controller_type"] = str(controller.type)
+            row["move_steps"] = list(getattr(controller, "move_schedule", tuple)())
+            rows.append(row)
     if on_run is not None:
         on_run(total, total, "done")
     return add_speedups(rows)
@@ -214,18 +212,22 @@ def add_speedups(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     Returns
     -------
     list of dict
-        New rows, in order. The ratio is taken against the ``do-mpc`` row of the same
-        scenario (1.0 on that row itself); it is None where the scenario has no do-mpc
-        row or a median is zero.
+        New rows, in order. The ratio is taken against the do-mpc row that solves the same
+        OCP: same scenario and same move schedule (1.0 on that row itself); it is None
+        where there is no such row or a median is zero.
     """
+
+    def problem(row: dict[str, Any]) -> tuple:
+        return row["scenario"], tuple(row.get("move_steps") or ())
+
     reference = {
-        row["scenario"]: row["solve_ms_median"]
+        problem(row): row["solve_ms_median"]
         for row in rows
-        if row["controller"] == DO_MPC_LABEL
+        if row.get("controller_type", row["controller"]) == DO_MPC_LABEL
     }
     result = []
     for row in rows:
-        do_mpc_ms, own_ms = reference.get(row["scenario"]), row["solve_ms_median"]
+        do_mpc_ms, own_ms = reference.get(problem(row)), row["solve_ms_median"]
         speedup = do_mpc_ms / own_ms if do_mpc_ms and own_ms > 0 else None
         result.append({**row, "speedup_vs_do_mpc": speedup})  # keeps the key's place
     return result

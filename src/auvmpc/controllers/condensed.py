@@ -124,16 +124,22 @@ class CondensedQp:
     def condense(
         self, state: np.ndarray, previous: np.ndarray, prediction: AffinePrediction
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Free response (ny+1, nx) and sensitivity to the moves (ny+1, nx, n_moves)."""
-        ny, nx = self.horizon, len(state)
-        free = np.empty((ny + 1, nx))
-        sensitivity = np.zeros((ny + 1, nx, self.n_moves))
-        free[0] = state
+        """Free response (ny+1, nx) and sensitivity to the moves (ny+1, nx, n_moves).
+
+        Both propagate through the same A_n, so they are stacked as the columns of one
+        matrix [S_n | x_free_n] and advanced with one product per step (the loop over
+        the horizon is the hot path of every MPC step).
+        """
+        ny, nx, nm = self.horizon, len(state), self.n_moves
+        forcing = np.empty((ny, nx, nm + 1))
+        forcing[:, :, :nm] = np.einsum("nij,njk->nik", prediction.B, self.move_to_input)
+        forcing[:, :, nm] = np.einsum("nij,j->ni", prediction.B, previous) + prediction.c
+        stacked = np.zeros((ny + 1, nx, nm + 1))
+        stacked[0, :, nm] = state
+        A = prediction.A
         for i in range(ny):
-            A, B = prediction.A[i], prediction.B[i]
-            free[i + 1] = A @ free[i] + B @ previous + prediction.c[i]
-            sensitivity[i + 1] = A @ sensitivity[i] + B @ self.move_to_input[i]
-        return free, sensitivity
+            stacked[i + 1] = A[i] @ stacked[i] + forcing[i]
+        return stacked[:, :, nm], stacked[:, :, :nm]
 
     def problem(
         self,

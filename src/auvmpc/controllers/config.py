@@ -106,6 +106,11 @@ class ControllerConfig(StrictModel):
         "omitted = the fewest that keep RK4 stable for the vehicle's damping (see "
         "stable_model_substeps)",
     )
+    jit: bool = Field(
+        default=True,
+        description="compile the CasADi model functions with the system C compiler "
+        "(ltv-mpc); falls back to interpreted evaluation when there is none",
+    )
     linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
         default=1,
         description="linearise-and-solve passes per sample (ltv-mpc and nmpc real-time: SQP "

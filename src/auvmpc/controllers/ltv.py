@@ -9,6 +9,11 @@ CasADi Jacobians, so the prediction follows the turn.
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import io
+import shutil
+
 import casadi as ca
 import numpy as np
 
@@ -22,7 +27,7 @@ __all__ = ["LtvMpc", "linearised_rollout"]
 
 
 def linearised_rollout(
-    model: VehicleParams, sample_time: float, substeps: int, horizon: int
+    model: VehicleParams, sample_time: float, substeps: int, horizon: int, jit: bool = False
 ) -> ca.Function:
     """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
 
@@ -35,12 +40,34 @@ def linearised_rollout(
     disturbance = ca.SX.sym("d", 3)
     f = world_disturbance_dynamics(model)
     next_state = rk4(lambda x, u: f(x, u, disturbance), state, thrust, sample_time, substeps)
-    step = ca.Function(
-        "step",
-        [state, thrust, disturbance],
-        [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
-    )
+    outputs = [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)]
+    step = ca.Function("step", [state, thrust, disturbance], outputs)
+    if jit:
+        step = compiled(step)
     return step.mapaccum("rollout", horizon)
+
+
+@functools.cache
+def _jit_available() -> bool:
+    return shutil.which("gcc") is not None or shutil.which("cc") is not None
+
+
+def compiled(function: ca.Function) -> ca.Function:
+    """The same function compiled to machine code by the system C compiler (CasADi JIT).
+
+    Evaluating the RK4 step and its Jacobians interpreted costs ~0.3 ms per horizon;
+    compiled, ~0.07 ms (benchmarks). Falls back to the interpreted function when no C
+    compiler is present, so nothing depends on one.
+    """
+    if not _jit_available():
+        return function
+    options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):
+            jitted = ca.Function(function.name() + "_jit", function.sx_in(), function(*function.sx_in()), options)
+    except RuntimeError:
+        return function
+    return jitted
 
 
 class LtvMpc(LinearMpc):
@@ -49,8 +76,12 @@ class LtvMpc(LinearMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
-        self._rollout = linearised_rollout(
-            model, config.sample_time, self.config.model_substeps, config.prediction_horizon
+        self._rollout = _cached_rollout(
+            model.model_dump_json(),
+            config.sample_time,
+            self.config.model_substeps,
+            config.prediction_horizon,
+            config.jit,
         )
 
     def prediction_model(
@@ -66,3 +97,13 @@ class LtvMpc(LinearMpc):
         # Offsets so that the affine model reproduces the rollout exactly at the nominal point.
         c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1]) - np.einsum("nij,nj->ni", B, nominal_input)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_rollout(
+    model_json: str, sample_time: float, substeps: int, horizon: int, jit: bool
+) -> ca.Function:
+    """One compiled rollout per distinct model and horizon in a process (compiling takes
+    ~0.3 s; campaigns and tests build many controllers of the same vehicle)."""
+    model = VehicleParams.model_validate_json(model_json)
+    return linearised_rollout(model, sample_time, substeps, horizon, jit)
