@@ -22,12 +22,14 @@ __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sw
 
 
 # Controller labels of CONTROLLER_PRESETS run on every paper scenario.
-PAPER_VARIANTS = ("mpc", "mpc-nc30", "ltv-mpc", "ltv-mpc-nc30", "baseline")
+PAPER_VARIANTS = (
+    "mpc", "mpc-nc30", "ltv-mpc", "ltv-mpc-nc30", "ltv-mpc-offset-free", "baseline",
+)  # fmt: skip
 PAPER_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 DEPTH_SCENARIOS = ("paper-depth-calm", "paper-depth-waves")  # section 4.3, the tank step
 # Uncertainty level -1..1 maps to rigid-body yaw inertia -25..+25 % and added -35..+35 %.
 SWEEP_LEVELS = tuple(float(level) for level in np.linspace(-1.0, 1.0, 7))
-SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "baseline")
+SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "ltv-mpc-offset-free", "baseline")
 SUMMARY_KEYS = (
     "rms_position_error_m", "max_position_error_m", "final_position_error_m",
     "rms_position_error_after_transient_m", "max_position_error_after_transient_m",

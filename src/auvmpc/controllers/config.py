@@ -203,6 +203,11 @@ CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
     "mpc-nc30": ("controller.type=mpc", "controller.control_horizon=30"),  # = ny of paper-*
     "ltv-mpc": ("controller.type=ltv-mpc", "controller.control_horizon=2"),
     "ltv-mpc-nc30": ("controller.type=ltv-mpc", "controller.control_horizon=30"),
+    "ltv-mpc-offset-free": (
+        "controller.type=ltv-mpc",
+        "controller.control_horizon=30",
+        "controller.offset_free=true",
+    ),
     # Move blocking: 10 moves spread over the 30-step horizon (finer early, where they act).
     "ltv-mpc-blocked": ("controller.type=ltv-mpc", f"controller.move_steps={list(BLOCKED_MOVES)}"),
     "nmpc": ("controller.type=nmpc", "controller.nmpc_mode=real-time", "controller.control_horizon=30"),
