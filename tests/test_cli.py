@@ -8,7 +8,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -74,7 +73,9 @@ def spec_rhs(plant: dict, thrust: np.ndarray, current: tuple[float, float]):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["paper-ideal", "paper-disturbed"])
-def test_run_folder_replays_against_independent_integration(tmp_path, monkeypatch, capsys, scenario):
+def test_run_folder_replays_against_independent_integration(
+    tmp_path, monkeypatch, capsys, scenario
+):
     out = tmp_path / "run"
     code, stdout, _ = run_cli(
         monkeypatch, capsys, "run", scenario, "--controller", "baseline", "--out", str(out)
@@ -101,7 +102,12 @@ def test_run_folder_replays_against_independent_integration(tmp_path, monkeypatc
         thrust = np.array([float(rows[k][f"F{i}"]) for i in range(1, 5)])
         t0, t1 = float(rows[k]["t"]), float(rows[k + 1]["t"])
         solution = solve_ivp(
-            spec_rhs(plant, thrust, current), (t0, t1), state, method="DOP853", rtol=1e-11, atol=1e-12
+            spec_rhs(plant, thrust, current),
+            (t0, t1),
+            state,
+            method="DOP853",
+            rtol=1e-11,
+            atol=1e-12,
         )
         logged_next = np.array([float(rows[k + 1][n]) for n in names])
         worst = np.maximum(worst, np.abs(solution.y[:, -1] - logged_next))
@@ -155,8 +161,10 @@ def test_bad_input_is_one_line_exit_2(monkeypatch, capsys, args, expected):
 def test_installed_entry_point_gives_no_traceback(tmp_path):
     # The real process: what a user sees in a terminal.
     bad = tmp_path / "bad.yaml"
-    bad.write_text("name: bad\nduration: 10\nreference: {type: circle, radius: -3}\n"
-                   "initial_state: [0, 0, 0, 0, 0, 0]\n")
+    bad.write_text(
+        "name: bad\nduration: 10\nreference: {type: circle, radius: -3}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
     process = subprocess.run(
         [sys.executable, "-m", "auvmpc.cli", "run", str(bad)], capture_output=True, text=True
     )

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 from auvmpc.errors import ConfigError
 from auvmpc.runner import simulate, write_run
 from auvmpc.scenario import load_scenario
-from auvmpc.vehicle import load_vehicle, heave_dynamics
+from auvmpc.vehicle import heave_dynamics, load_vehicle
 from auvmpc.waves import GRAVITY, WaveConfig, WaveField, wave_number
 
 # Issue 5: replaying the logged thrust reproduces the logged depth in calm water to 1 mm.
@@ -63,7 +63,9 @@ def test_heave_model_hand_values_and_terminal_sink_speed():
     np.testing.assert_allclose(derivative, [-0.1, expected], atol=1e-12)
     # No thrust: it sinks at the speed where drag balances -0.98 N.
     w = -(-33.0 + math.sqrt(33.0**2 + 4 * 190.0 * 0.98)) / (2 * 190.0)
-    assert heave_dynamics(np.array([-1.0, w]), np.zeros(4), heave)[1] == pytest.approx(0.0, abs=1e-12)
+    assert heave_dynamics(np.array([-1.0, w]), np.zeros(4), heave)[1] == pytest.approx(
+        0.0, abs=1e-12
+    )
     assert w < 0
 
 

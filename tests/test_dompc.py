@@ -101,12 +101,12 @@ def _rollout(model, state, plan, substeps=1):
 
 def _paper_cost(config, model, state, plan, reference):
     """paper-model.md section 4 as LinearMpc stages it, for a thrust plan F_0..F_{ny-1}."""
-    error = _rollout(model, state, plan, config.with_model_substeps(model).model_substeps) - reference
+    error = (
+        _rollout(model, state, plan, config.with_model_substeps(model).model_substeps) - reference
+    )
     Q, S = np.array(config.Q), np.array(config.S)
     R = np.array(config.thrust_weights(model.n_thrusters))
-    return float(
-        np.sum(error[1:-1] ** 2 * Q) + np.sum(error[-1] ** 2 * S) + np.sum(plan**2 * R)
-    )
+    return float(np.sum(error[1:-1] ** 2 * Q) + np.sum(error[-1] ** 2 * S) + np.sum(plan**2 * R))
 
 
 # -- the model ----------------------------------------------------------------------------

@@ -29,7 +29,9 @@ def test_rk4_matches_matrix_exponential():
 def test_rk4_is_fourth_order():
     x0 = np.array([1.0, -0.5])
     exact = expm(A * 2.0) @ x0
-    errors = [np.linalg.norm(rk4(linear, x0, 0.0, 2.0, substeps=n) - exact) for n in (10, 20, 40, 80)]
+    errors = [
+        np.linalg.norm(rk4(linear, x0, 0.0, 2.0, substeps=n) - exact) for n in (10, 20, 40, 80)
+    ]
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     # The observed order tends to 4 as the step shrinks.
     np.testing.assert_allclose(orders, 4.0, atol=0.15)
@@ -53,7 +55,9 @@ def test_time_varying_rk4_is_fourth_order():
     assert orders[-1] == pytest.approx(4.0, abs=0.1)
 
 
-@pytest.mark.parametrize("waves", [None, WaveForceConfig(amplitude_N=4.0, period_s=3.0, direction_deg=30)])
+@pytest.mark.parametrize(
+    "waves", [None, WaveForceConfig(amplitude_N=4.0, period_s=3.0, direction_deg=30)]
+)
 def test_plant_step_matches_solve_ivp(jmse, waves):
     rng = np.random.default_rng(0)
     config = DisturbanceConfig(current_force_world=(10.0, 5.0), moment_N_m=0.3, waves=waves)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from auvmpc.controllers.base import ControlResult, Controller, Observation
+from auvmpc.controllers.base import Controller, ControlResult, Observation
 from auvmpc.disturbances import (
     DisturbanceConfig,
     GaussMarkovConfig,
@@ -60,7 +60,9 @@ def test_gauss_markov_current_has_its_stationary_statistics():
 
 
 def test_wave_force_is_a_sinusoid_along_its_direction():
-    config = DisturbanceConfig(waves=WaveForceConfig(amplitude_N=3.0, period_s=4.0, direction_deg=90))
+    config = DisturbanceConfig(
+        waves=WaveForceConfig(amplitude_N=3.0, period_s=4.0, direction_deg=90)
+    )
     disturbance = WorldDisturbance(config, 0.5, np.random.default_rng(0))
     forces = np.array([disturbance.force_world(t) for t in np.linspace(0, 4, 401)])
     np.testing.assert_allclose(forces[:, 0], 0.0, atol=1e-12)

@@ -115,7 +115,9 @@ def test_current_rotation_into_body_frame():
         d_u, d_v = body_from_world(force, psi)
         assert math.hypot(d_u, d_v) == pytest.approx(math.hypot(*force))
         # Rotating the body force back by psi gives the world force.
-        back = np.array([d_u * math.cos(psi) - d_v * math.sin(psi), d_u * math.sin(psi) + d_v * math.cos(psi)])
+        back = np.array(
+            [d_u * math.cos(psi) - d_v * math.sin(psi), d_u * math.sin(psi) + d_v * math.cos(psi)]
+        )
         np.testing.assert_allclose(back, force, atol=1e-12)
 
 

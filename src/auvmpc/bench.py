@@ -419,7 +419,9 @@ def _caption(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None) -> 
         listed = ", ".join(f"{value:g}" for value in sorted(transients))
         parts.append(f"RMS>tr: RMS position error after the scenario's transient ({listed} s)")
     if any(row.get("speedup_vs_do_mpc") is not None for row in rows):
-        parts.append("vs do-mpc: do-mpc median ms / this median ms, same OCP (scenario and move schedule)")
+        parts.append(
+            "vs do-mpc: do-mpc median ms / this median ms, same OCP (scenario and move schedule)"
+        )
     return "\n".join(parts) or None
 
 

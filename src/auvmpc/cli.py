@@ -77,7 +77,9 @@ def run(
     out_dir = out if out is not None else Path("runs") / label
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
-        result = simulate(resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n))
+        result = simulate(
+            resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n)
+        )
     write_run(result, out_dir, figures=figures)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
@@ -190,7 +192,9 @@ def print_metrics(metrics: dict, title: str) -> None:
     table.add_column("metric")
     table.add_column("value", justify="right")
     for key, value in metrics.items():
-        text = "-" if value is None else (f"{value:.4g}" if isinstance(value, float) else str(value))
+        text = (
+            "-" if value is None else (f"{value:.4g}" if isinstance(value, float) else str(value))
+        )
         table.add_row(key, text)
     console.print(table)
 

@@ -69,9 +69,7 @@ class DepthObserverConfig(StrictModel):
 
     measurement_std: Positive = Field(default=0.02, description="assumed depth noise (m)")
     depth_process_std: Positive = Field(default=1e-3, description="model error per sample (m)")
-    velocity_process_std: Positive = Field(
-        default=5e-3, description="model error per sample (m/s)"
-    )
+    velocity_process_std: Positive = Field(default=5e-3, description="model error per sample (m/s)")
     disturbance_rate_std: Positive = Field(
         default=0.1, description="random walk of the unknown vertical force (N/sqrt(s))"
     )
@@ -90,7 +88,9 @@ class DepthControllerConfig(StrictModel):
     Q: tuple[NonNegative, NonNegative] = Field(default=(200.0, 1.0), description="on [z, w]")
     S: tuple[NonNegative, NonNegative] = Field(default=(400.0, 2.0), description="terminal")
     R: NonNegative = Field(default=0.01, description="weight per vertical thruster")
-    thrust_penalty: ThrustPenalty = Field(default=ThrustPenalty.INCREMENT, description="R on F or dF")
+    thrust_penalty: ThrustPenalty = Field(
+        default=ThrustPenalty.INCREMENT, description="R on F or dF"
+    )
     offset_free: bool = Field(default=True, description="estimate the unknown vertical force")
     preview: bool = Field(
         default=False,
@@ -309,11 +309,15 @@ def simulate_depth(
         log.wave_force[k] = wave_force(state[0], t[k])
         if t[k] >= next_sensor_time - 1e-9:  # a new pressure sample; held until the next
             measured = state[0] + scenario.sensor.noise_std_m * sensor_rng.standard_normal()
-            next_sensor_time += sensor_period * max(1, math.floor((t[k] - next_sensor_time) / sensor_period) + 1)
+            next_sensor_time += sensor_period * max(
+                1, math.floor((t[k] - next_sensor_time) / sensor_period) + 1
+            )
         log.z_measured[k] = measured
         if k == steps:
             break
-        z_ref = scenario.reference.depth(t[k] + preview if config.preview else np.full_like(preview, t[k]))
+        z_ref = scenario.reference.depth(
+            t[k] + preview if config.preview else np.full_like(preview, t[k])
+        )
         observation = Observation(
             k=k,
             t=t[k],
@@ -326,16 +330,22 @@ def simulate_depth(
         thrust = np.asarray(result.thrust, dtype=float)
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
-
-        def rhs(time_s: float, x: np.ndarray) -> np.ndarray:
-            return heave_dynamics(x, thrust, plant, wave_force(x[0], time_s))
-
-        h = sample_time / substeps
-        for i in range(substeps):
-            state = rk4_step_time_varying(rhs, t[k] + i * h, state, h)
+        state = _heave_plant_step(plant, state, thrust, t[k], sample_time, substeps, wave_force)
         if on_step is not None:
             on_step(k + 1, steps)
     return log, plant
+
+
+def _heave_plant_step(plant, state, thrust, t0, duration, substeps, wave_force) -> np.ndarray:
+    """Integrate the heave plant over one held-thrust sample with RK4 sub-steps."""
+
+    def rhs(time_s: float, x: np.ndarray) -> np.ndarray:
+        return heave_dynamics(x, thrust, plant, wave_force(x[0], time_s))
+
+    h = duration / substeps
+    for i in range(substeps):
+        state = rk4_step_time_varying(rhs, t0 + i * h, state, h)
+    return state
 
 
 STEP_METRIC_KEYS = (

@@ -108,7 +108,9 @@ class WorldDisturbance:
         waves = self.config.waves
         if waves is not None and waves.amplitude_N > 0:
             angle = math.radians(waves.direction_deg)
-            magnitude = waves.amplitude_N * math.sin(2.0 * math.pi * t / waves.period_s + self._wave_phase)
+            magnitude = waves.amplitude_N * math.sin(
+                2.0 * math.pi * t / waves.period_s + self._wave_phase
+            )
             force = force + magnitude * np.array([math.cos(angle), math.sin(angle), 0.0])
         return force
 

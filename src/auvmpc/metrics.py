@@ -49,7 +49,9 @@ def compute_metrics(
     increments = thrust_increments(log)
     max_step = limits.thrust_rate_limit * log.sample_time
     lower, upper = limits.thrust_limits
-    force_violations = (log.thrust < lower - LIMIT_TOLERANCE_N) | (log.thrust > upper + LIMIT_TOLERANCE_N)
+    force_violations = (log.thrust < lower - LIMIT_TOLERANCE_N) | (
+        log.thrust > upper + LIMIT_TOLERANCE_N
+    )
     rate_violations = np.abs(increments) > max_step + LIMIT_TOLERANCE_N
     solve = log.solve_ms
     steady = log.t >= transient_s - 1e-9
@@ -65,7 +67,9 @@ def compute_metrics(
         else 0.0,
         "thrust_limit_violations": int(force_violations.sum()),
         "thrust_rate_violations": int(rate_violations.sum()),
-        "min_obstacle_clearance_m": float(clearance.min()) if np.isfinite(clearance).any() else None,
+        "min_obstacle_clearance_m": float(clearance.min())
+        if np.isfinite(clearance).any()
+        else None,
         "solve_ms_median": _percentile(solve, 50),
         "solve_ms_p99": _percentile(solve, 99),
         "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
@@ -73,7 +77,9 @@ def compute_metrics(
         "solver_failures": sum(status == ControlStatus.FALLBACK for status in log.status),
         "transient_s": float(transient_s),
         "rms_position_error_after_transient_m": _rms(error[steady]),
-        "max_position_error_after_transient_m": float(error[steady].max()) if steady.any() else None,
+        "max_position_error_after_transient_m": float(error[steady].max())
+        if steady.any()
+        else None,
         "rms_heading_error_after_transient_rad": _rms(heading[steady]),
     }
 

@@ -10,8 +10,8 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
-from auvmpc.errors import FieldError
 from auvmpc.controllers.base import ObstacleState
+from auvmpc.errors import FieldError
 
 __all__ = ["ObstacleConfig", "visible_obstacles", "clearance"]
 
@@ -30,7 +30,9 @@ class ObstacleConfig(StrictModel):
     @model_validator(mode="after")
     def _ordered_times(self) -> ObstacleConfig:
         if self.vanish_time is not None and not self.vanish_time > self.appear_time:
-            raise FieldError("vanish_time", self.vanish_time, f"must be after appear_time {self.appear_time}")
+            raise FieldError(
+                "vanish_time", self.vanish_time, f"must be after appear_time {self.appear_time}"
+            )
         return self
 
     def exists_at(self, t: float) -> bool:

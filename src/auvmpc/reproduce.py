@@ -145,7 +145,8 @@ def summary_markdown(rows: Sequence[dict]) -> str:
         ("min_obstacle_clearance_m", "min clearance (m)"),
         ("thrust_limit_violations", "F viol."), ("thrust_rate_violations", "dF viol."),
         ("solver_failures", "fails"), ("solve_ms_median", "median ms"), ("solve_ms_p99", "p99 ms"),
-        ("settle_r_s", "r settles (s)"), ("settle_u_s", "u settles (s)"), ("settle_v_s", "v settles (s)"),
+        ("settle_r_s", "r settles (s)"), ("settle_u_s", "u settles (s)"),
+        ("settle_v_s", "v settles (s)"),
     )  # fmt: skip
     lines = [
         "| " + " | ".join(title for _, title in columns) + " |",
@@ -188,14 +189,18 @@ def _sweep_figure(rows: Sequence[dict], out_dir: Path) -> None:
     series = {}
     for label in SWEEP_VARIANTS:
         by_level = {row["level"]: row for row in sweep if row["controller"] == label}
-        series[label] = [by_level[level]["max_position_error_after_transient_m"] for level in levels]
+        series[label] = [
+            by_level[level]["max_position_error_after_transient_m"] for level in levels
+        ]
     percent = [f"{25 * level:+.0f}/{35 * level:+.0f}" for level in levels]
     figure = figure_error_vs_parameter(
         levels,
         series,
         xlabel="uncertainty level (-1: Iz_rb -25 %, Iz_added -35 %; +1: +25 %, +35 %)",
         ylabel="max position error, t >= 30 s (m)",
-        title="paper-disturbed: error against yaw-inertia uncertainty (" + ", ".join(percent[::3]) + ")",
+        title="paper-disturbed: error against yaw-inertia uncertainty ("
+        + ", ".join(percent[::3])
+        + ")",
     )
     figure.axes[0].set_yscale("log")  # the controllers differ by four orders of magnitude
     save_figures({"error_vs_uncertainty": figure}, out_dir)

@@ -16,11 +16,11 @@ from threadpoolctl import threadpool_limits
 
 from auvmpc import __version__
 from auvmpc.controllers.base import Controller
+from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.log import SimLog
 from auvmpc.metrics import compute_metrics
 from auvmpc.references import make_reference
-from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.scenario import (
     ControllerType,
     ResolvedDepthScenario,
@@ -172,7 +172,9 @@ def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool =
     """
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".partial", dir=out_dir.parent))
+    staging = Path(
+        tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".partial", dir=out_dir.parent)
+    )
     try:
         staging.chmod(0o755)  # mkdtemp makes it private; a run folder is for everyone
         (staging / "log.csv").write_text(result.csv_text())

@@ -98,20 +98,24 @@ class ResolvedScenario:
         self.base_dir = base_dir
         vehicle = scenario.vehicle
         if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
-            vehicle = str((base_dir / vehicle)) if not Path(vehicle).is_absolute() else vehicle
+            vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
         self.model: VehicleParams = load_vehicle(vehicle)
         self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
         n = self.model.n_thrusters
         weights = scenario.controller.R
         if len(weights) not in (1, n):
-            raise ConfigError("controller.R", list(weights), f"need 1 or {n} weights (one per thruster)")
+            raise ConfigError(
+                "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
+            )
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:
                 raise ConfigError("initial_thrust", list(initial), f"need {n} values")
             low, high = self.model.thrust_limits
             if not all(low <= value <= high for value in initial):
-                raise ConfigError("initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]")
+                raise ConfigError(
+                    "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
+                )
 
 
 def builtin_scenarios() -> dict[str, str]:
@@ -157,7 +161,9 @@ def load_scenario(
         path = Path(text_source)
         if not path.is_file():
             raise ConfigError(
-                "scenario", text_source, f"no such file or built-in; built-ins: {list(builtin_scenarios())}"
+                "scenario",
+                text_source,
+                f"no such file or built-in; built-ins: {list(builtin_scenarios())}",
             )
         text, base_dir = path.read_text(), path.resolve().parent
     try:
@@ -200,7 +206,9 @@ def apply_override(data: dict[str, Any], override: str) -> None:
         last = depth == len(keys) - 1
         if isinstance(node, list):
             if not key.isdigit() or int(key) >= len(node):
-                raise ConfigError(".".join(keys[: depth + 1]), key, f"no such list index (length {len(node)})")
+                raise ConfigError(
+                    ".".join(keys[: depth + 1]), key, f"no such list index (length {len(node)})"
+                )
             index: Any = int(key)
         elif isinstance(node, dict):
             index = key

@@ -68,7 +68,9 @@ def closed_loop(
     substeps = max(1, math.ceil(sample_time / max_plant_step - 1e-9))
     n_thrusters = plant.n_thrusters
     log = SimLog.allocate(steps, n_thrusters, sample_time)
-    previous = np.zeros(n_thrusters) if initial_thrust is None else np.asarray(initial_thrust, float)
+    previous = (
+        np.zeros(n_thrusters) if initial_thrust is None else np.asarray(initial_thrust, float)
+    )
     log.initial_thrust = previous.copy()
 
     state = np.asarray(initial_state, dtype=float).copy()

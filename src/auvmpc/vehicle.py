@@ -52,7 +52,9 @@ STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
 NX = 6
 
 PositiveFloat = Annotated[float, Field(gt=0)]
-Damping = Annotated[float, Field(le=0, description="damping coefficient (Fossen: negative or zero)")]
+Damping = Annotated[
+    float, Field(le=0, description="damping coefficient (Fossen: negative or zero)")
+]
 
 
 class Thruster(StrictModel):
@@ -65,7 +67,7 @@ class Thruster(StrictModel):
 class HeaveParams(StrictModel):
     """1-DOF heave model (paper-model.md section 8); z up, negative below the surface.
 
-        m_heave w' = Zw w + Zww |w| w + sum(F_z) + net_buoyancy_N + d_z,   z' = w
+    m_heave w' = Zw w + Zww |w| w + sum(F_z) + net_buoyancy_N + d_z,   z' = w
     """
 
     m_heave: PositiveFloat = Field(description="heave mass incl. added mass, m - Z_wdot (kg)")
@@ -118,7 +120,9 @@ class VehicleParams(StrictModel):
     m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
     m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")
     Iz_rb: PositiveFloat = Field(description="rigid-body yaw inertia (kg m2)")
-    Iz_added: Annotated[float, Field(ge=0)] = Field(description="added yaw inertia, -N_rdot (kg m2)")
+    Iz_added: Annotated[float, Field(ge=0)] = Field(
+        description="added yaw inertia, -N_rdot (kg m2)"
+    )
     Xu: Damping = Field(description="linear surge damping (N s/m)")
     Xuu: Damping = Field(description="quadratic surge damping (N s2/m2)")
     Yv: Damping = Field(description="linear sway damping (N s/m)")
@@ -186,7 +190,9 @@ def allocation_matrix(thrusters: tuple[Thruster, ...] | list[Thruster]) -> np.nd
     for thruster in thrusters:
         angle = math.radians(thruster.angle_deg)
         px, py = thruster.position
-        columns.append([math.cos(angle), math.sin(angle), px * math.sin(angle) - py * math.cos(angle)])
+        columns.append(
+            [math.cos(angle), math.sin(angle), px * math.sin(angle) - py * math.cos(angle)]
+        )
     return np.array(columns, dtype=float).T
 
 
@@ -262,12 +268,16 @@ def scaled(params: VehicleParams, scale: Mapping[str, float]) -> VehicleParams:
     for field, factor in scale.items():
         if field not in SCALABLE_FIELDS:
             raise ConfigError(
-                f"plant.scale.{field}", factor, f"not a scalable field; one of {list(SCALABLE_FIELDS)}"
+                f"plant.scale.{field}",
+                factor,
+                f"not a scalable field; one of {list(SCALABLE_FIELDS)}",
             )
         if not (math.isfinite(factor) and factor > 0):
             raise ConfigError(f"plant.scale.{field}", factor, "factor must be finite and > 0")
         value = getattr(params, field)
-        changes[field] = tuple(v * factor for v in value) if isinstance(value, tuple) else value * factor
+        changes[field] = (
+            tuple(v * factor for v in value) if isinstance(value, tuple) else value * factor
+        )
     if not changes:
         return params
     data = params.model_dump()
@@ -281,7 +291,9 @@ def scaled(params: VehicleParams, scale: Mapping[str, float]) -> VehicleParams:
 def preset_names() -> list[str]:
     """Names of the vehicle presets shipped with the package."""
     folder = resources.files("auvmpc.presets") / "vehicles"
-    return sorted(p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml"))
+    return sorted(
+        p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml")
+    )
 
 
 def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:

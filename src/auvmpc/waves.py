@@ -78,8 +78,10 @@ def jonswap_spectrum(omega: np.ndarray, hs: float, tp: float, gamma: float) -> n
     shape = shape * gamma ** np.exp(-((omega - peak) ** 2) / (2.0 * sigma**2 * peak**2))
     dense = np.linspace(0.3 * peak, 6.0 * peak, 4000)
     dense_sigma = np.where(dense <= peak, 0.07, 0.09)
-    dense_shape = dense**-5.0 * np.exp(-1.25 * (peak / dense) ** 4) * gamma ** np.exp(
-        -((dense - peak) ** 2) / (2.0 * dense_sigma**2 * peak**2)
+    dense_shape = (
+        dense**-5.0
+        * np.exp(-1.25 * (peak / dense) ** 4)
+        * gamma ** np.exp(-((dense - peak) ** 2) / (2.0 * dense_sigma**2 * peak**2))
     )
     m0 = np.trapezoid(dense_shape, dense)
     return shape * (hs / 4.0) ** 2 / m0
@@ -119,7 +121,9 @@ class WaveField:
         z = min(max(z, -depth), 0.0)
         decay = np.sinh(self.wavenumbers * (z + depth)) / np.sinh(self.wavenumbers * depth)
         return float(
-            np.sum(-self.amplitudes * self.omegas**2 * decay * np.cos(self.phases - self.omegas * t))
+            np.sum(
+                -self.amplitudes * self.omegas**2 * decay * np.cos(self.phases - self.omegas * t)
+            )
         )
 
     def steepness(self) -> float:

@@ -51,7 +51,6 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
-from auvmpc.errors import FieldError
 from auvmpc.controllers.base import (
     Controller,
     ControlResult,
@@ -59,6 +58,7 @@ from auvmpc.controllers.base import (
     Observation,
     project_to_limits,
 )
+from auvmpc.errors import FieldError
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]

@@ -18,7 +18,6 @@ depth controller (depth_mpc.py) are such plants.
 
 from __future__ import annotations
 
-import time
 from abc import abstractmethod
 from dataclasses import dataclass
 
@@ -26,9 +25,9 @@ import numpy as np
 
 from auvmpc.controllers.base import (
     ActuatorLimits,
+    Controller,
     ControlResult,
     ControlStatus,
-    Controller,
     Observation,
 )
 from auvmpc.controllers.config import ThrustPenalty
@@ -159,7 +158,9 @@ class CondensedQp:
         H[:n_moves, :n_moves] = 2.0 * weighted.T @ weighted + self._input_hessian
         H[:n_moves, :n_moves] += _HESSIAN_REGULARISATION * np.eye(n_moves)
         f[:n_moves] = 2.0 * weighted.T @ error + self._input_gradient_map @ previous
-        bound_lower = np.concatenate([np.tile(-self.max_move, len(self.move_steps)), np.zeros(n_slack)])
+        bound_lower = np.concatenate(
+            [np.tile(-self.max_move, len(self.move_steps)), np.zeros(n_slack)]
+        )
         bound_upper = np.concatenate(
             [np.tile(self.max_move, len(self.move_steps)), np.full(n_slack, np.inf)]
         )
@@ -334,4 +335,6 @@ class IncrementalMpc(Controller):
             wanted = previous
         command, _ = self.limits.project(wanted, previous, self.sample_time)
         self._commit(command)
-        return ControlResult(thrust=command, status=ControlStatus.FALLBACK, solve_time_s=solve_time_s)
+        return ControlResult(
+            thrust=command, status=ControlStatus.FALLBACK, solve_time_s=solve_time_s
+        )

@@ -9,11 +9,11 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
+from auvmpc.controllers.baseline import BaselineConfig
+from auvmpc.controllers.qp import QpSolverName
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.vehicle import VehicleParams
-from auvmpc.controllers.baseline import BaselineConfig
-from auvmpc.controllers.qp import QpSolverName
 
 __all__ = [
     "CONTROLLER_PRESETS",
@@ -144,11 +144,17 @@ class ControllerConfig(StrictModel):
             )
         steps = self.move_steps
         if steps is not None:
-            if not steps or steps[0] != 0 or any(b <= a for a, b in zip(steps, steps[1:])):
+            if (
+                not steps
+                or steps[0] != 0
+                or any(b <= a for a, b in zip(steps, steps[1:], strict=False))
+            ):
                 raise FieldError("move_steps", list(steps), "must start at 0 and increase")
             if steps[-1] >= self.prediction_horizon:
                 raise FieldError(
-                    "move_steps", list(steps), f"reach past prediction_horizon {self.prediction_horizon}"
+                    "move_steps",
+                    list(steps),
+                    f"reach past prediction_horizon {self.prediction_horizon}",
                 )
         return self
 
@@ -210,8 +216,16 @@ CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
     ),
     # Move blocking: 10 moves spread over the 30-step horizon (finer early, where they act).
     "ltv-mpc-blocked": ("controller.type=ltv-mpc", f"controller.move_steps={list(BLOCKED_MOVES)}"),
-    "nmpc": ("controller.type=nmpc", "controller.nmpc_mode=real-time", "controller.control_horizon=30"),
-    "nmpc-full": ("controller.type=nmpc", "controller.nmpc_mode=full", "controller.control_horizon=30"),
+    "nmpc": (
+        "controller.type=nmpc",
+        "controller.nmpc_mode=real-time",
+        "controller.control_horizon=30",
+    ),
+    "nmpc-full": (
+        "controller.type=nmpc",
+        "controller.nmpc_mode=full",
+        "controller.control_horizon=30",
+    ),
     "do-mpc": ("controller.type=do-mpc", "controller.control_horizon=30"),
     "do-mpc-blocked": ("controller.type=do-mpc", f"controller.move_steps={list(BLOCKED_MOVES)}"),
 }

@@ -80,8 +80,11 @@ class DepthMpc(IncrementalMpc):
             ),
             measured=1,
             process_covariance=np.diag(
-                [observer.depth_process_std**2, observer.velocity_process_std**2,
-                 rate**2 * config.sample_time]
+                [
+                    observer.depth_process_std**2,
+                    observer.velocity_process_std**2,
+                    rate**2 * config.sample_time,
+                ]
             ),  # fmt: skip
             measurement_covariance=np.array([[observer.measurement_std**2]]),
             prior_covariance=np.diag([observer.measurement_std**2, 0.1**2, prior**2]),

@@ -19,8 +19,8 @@ import numpy as np
 
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
-from auvmpc.integrators import rk4
 from auvmpc.estimation import world_disturbance_dynamics
+from auvmpc.integrators import rk4
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["LtvMpc", "linearised_rollout"]
@@ -61,10 +61,16 @@ def compiled(function: ca.Function) -> ca.Function:
     """
     if not _jit_available():
         return function
-    options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+    options = {
+        "jit": True,
+        "compiler": "shell",
+        "jit_options": {"flags": ["-O2"], "verbose": False},
+    }
     try:
         with contextlib.redirect_stderr(io.StringIO()):
-            jitted = ca.Function(function.name() + "_jit", function.sx_in(), function(*function.sx_in()), options)
+            jitted = ca.Function(
+                function.name() + "_jit", function.sx_in(), function(*function.sx_in()), options
+            )
     except RuntimeError:
         return function
     return jitted
@@ -95,7 +101,11 @@ class LtvMpc(LinearMpc):
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
         nominal = np.vstack([state, states.T])  # (ny + 1, 6)
         # Offsets so that the affine model reproduces the rollout exactly at the nominal point.
-        c = nominal[1:] - np.einsum("nij,nj->ni", A, nominal[:-1]) - np.einsum("nij,nj->ni", B, nominal_input)
+        c = (
+            nominal[1:]
+            - np.einsum("nij,nj->ni", A, nominal[:-1])
+            - np.einsum("nij,nj->ni", B, nominal_input)
+        )
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
 
 
