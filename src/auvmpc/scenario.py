@@ -96,10 +96,7 @@ class ResolvedScenario:
     def __init__(self, scenario: Scenario, base_dir: Path) -> None:
         self.scenario = scenario
         self.base_dir = base_dir
-        vehicle = scenario.vehicle
-        if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
-            vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
-        self.model: VehicleParams = load_vehicle(vehicle)
+        self.model: VehicleParams = _load_vehicle_relative(scenario.vehicle, base_dir)
         self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
         n = self.model.n_thrusters
         weights = scenario.controller.R
@@ -116,6 +113,13 @@ class ResolvedScenario:
                 raise ConfigError(
                     "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
                 )
+
+
+def _load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> VehicleParams:
+    """A vehicle named by a scenario; a file path is relative to the scenario's folder."""
+    if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
+        vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
+    return load_vehicle(vehicle)
 
 
 def builtin_scenarios() -> dict[str, str]:
@@ -135,10 +139,7 @@ class ResolvedDepthScenario:
     def __init__(self, scenario: DepthScenario, base_dir: Path) -> None:
         self.scenario = scenario
         self.base_dir = base_dir
-        vehicle = scenario.vehicle
-        if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
-            vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
-        self.model: VehicleParams = load_vehicle(vehicle)
+        self.model: VehicleParams = _load_vehicle_relative(scenario.vehicle, base_dir)
         try:
             self.heave_model = resolve_heave(self.model, {})
             self.heave_plant = resolve_heave(self.model, scenario.plant.scale)

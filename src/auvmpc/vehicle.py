@@ -29,7 +29,7 @@ from typing import Annotated, Any
 import casadi as ca
 import numpy as np
 import yaml
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
@@ -64,6 +64,15 @@ class Thruster(StrictModel):
     angle_deg: float = Field(description="thrust direction, deg from +x towards +y")
 
 
+def _ordered_limits(limits: tuple[float, float]) -> tuple[float, float]:
+    if not limits[0] < limits[1]:
+        raise ValueError(f"need min < max, got {list(limits)}")
+    return limits
+
+
+ThrustLimits = Annotated[tuple[float, float], AfterValidator(_ordered_limits)]
+
+
 class HeaveParams(StrictModel):
     """1-DOF heave model (paper-model.md section 8); z up, negative below the surface.
 
@@ -77,15 +86,8 @@ class HeaveParams(StrictModel):
         description="buoyancy minus weight (N): positive floats up, negative sinks"
     )
     thruster_count: int = Field(ge=1, description="number of vertical thrusters")
-    thrust_limits: tuple[float, float] = Field(description="per vertical thruster [min, max] (N)")
+    thrust_limits: ThrustLimits = Field(description="per vertical thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per vertical thruster (N/s)")
-
-    @field_validator("thrust_limits")
-    @classmethod
-    def _ordered(cls, limits: tuple[float, float]) -> tuple[float, float]:
-        if not limits[0] < limits[1]:
-            raise ValueError(f"need min < max, got {list(limits)}")
-        return limits
 
 
 def heave_dynamics(state, thrust, heave: HeaveParams, disturbance=0.0):
@@ -130,16 +132,9 @@ class VehicleParams(StrictModel):
     Nr: Damping = Field(description="linear yaw damping (N m s)")
     Nrr: Damping = Field(description="quadratic yaw damping (N m s2)")
     thrusters: tuple[Thruster, ...] = Field(min_length=3, description="horizontal thrusters")
-    thrust_limits: tuple[float, float] = Field(description="per thruster [min, max] (N)")
+    thrust_limits: ThrustLimits = Field(description="per thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per thruster |dF/dt| bound (N/s)")
     heave: HeaveParams | None = Field(default=None, description="depth model, if any")
-
-    @field_validator("thrust_limits")
-    @classmethod
-    def _ordered(cls, limits: tuple[float, float]) -> tuple[float, float]:
-        if not limits[0] < limits[1]:
-            raise ValueError(f"need min < max, got {list(limits)}")
-        return limits
 
     @model_validator(mode="after")
     def _controllable(self) -> VehicleParams:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -12,6 +13,8 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "ActuatorLimits",
+    "align_heading",
+    "next_planned_move",
     "ControlResult",
     "ControlStatus",
     "Controller",
@@ -119,6 +122,25 @@ class ActuatorLimits:
         lower, upper = self.box(previous, sample_time)
         clipped = np.clip(command, lower, upper)
         return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
+
+
+def align_heading(state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """The reference preview with its (continuous) heading shifted by 2 pi k to the turn
+    the vehicle is on, so that heading errors stay within (-pi, pi] of the truth."""
+    aligned = np.array(reference, dtype=float)
+    turns = np.round((state[2] - aligned[0, 2]) / (2.0 * math.pi))
+    aligned[:, 2] += 2.0 * math.pi * turns
+    return aligned
+
+
+def next_planned_move(plan: np.ndarray | None, previous: np.ndarray):
+    """What a fallback applies: the previous plan's next move, and the plan shifted on.
+
+    Returns ``(wanted command, shifted plan)``; without a plan the previous command is held.
+    """
+    if plan is None or len(plan) < 2:
+        return previous, plan
+    return plan[1], np.vstack([plan[1:], plan[-1:]])
 
 
 def horizontal_limits(params: VehicleParams) -> ActuatorLimits:

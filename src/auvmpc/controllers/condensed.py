@@ -29,6 +29,7 @@ from auvmpc.controllers.base import (
     ControlResult,
     ControlStatus,
     Observation,
+    next_planned_move,
 )
 from auvmpc.controllers.config import ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
@@ -328,11 +329,7 @@ class IncrementalMpc(Controller):
     def _fallback(self, solve_time_s: float) -> ControlResult:
         """Solver failed or was too slow: apply the previous plan's next move, clipped."""
         previous = self._previous_input
-        if self._plan is not None and len(self._plan) > 1:
-            wanted = self._plan[1]
-            self._plan = np.vstack([self._plan[1:], self._plan[-1:]])
-        else:
-            wanted = previous
+        wanted, self._plan = next_planned_move(self._plan, previous)
         command, _ = self.limits.project(wanted, previous, self.sample_time)
         self._commit(command)
         return ControlResult(

@@ -32,7 +32,6 @@ term is a constant (x_0 is measured) and changes no minimiser. Differences, all 
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 
@@ -44,6 +43,8 @@ from auvmpc.controllers.base import (
     ControlResult,
     ControlStatus,
     Observation,
+    align_heading,
+    next_planned_move,
     project_to_limits,
 )
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
@@ -271,9 +272,7 @@ class DoMpcController(Controller):
     def _set_parameters(self, state: np.ndarray, observation: Observation) -> None:
         """Reference (heading aligned by 2 pi k to the measured one), gates and obstacles."""
         ny = self.horizon
-        reference = np.array(observation.reference[: ny + 1], dtype=float)
-        turns = np.round((state[2] - reference[0, 2]) / (2.0 * math.pi))
-        reference[:, 2] += 2.0 * math.pi * turns
+        reference = align_heading(state, observation.reference[: ny + 1])
         values = np.zeros(self._tvp.cat.shape[0])
         values[self._tvp_index["reference"]] = reference
         values[self._tvp_index["gate"][:, 0]] = self._gates
@@ -289,11 +288,7 @@ class DoMpcController(Controller):
     def _fallback(self, solve_time_s: float, rebuilt: float) -> ControlResult:
         """IPOPT failed or was too slow: apply the previous plan's next move, clipped."""
         previous = self._previous_thrust
-        if self._plan is not None and len(self._plan) > 1:
-            wanted = self._plan[1]
-            self._plan = np.vstack([self._plan[1:], self._plan[-1:]])
-        else:
-            wanted = previous
+        wanted, self._plan = next_planned_move(self._plan, previous)
         thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
         self._previous_thrust = thrust
         return ControlResult(

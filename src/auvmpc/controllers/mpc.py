@@ -21,7 +21,12 @@ from abc import abstractmethod
 
 import numpy as np
 
-from auvmpc.controllers.base import Observation, ObstacleState, horizontal_limits
+from auvmpc.controllers.base import (
+    Observation,
+    ObstacleState,
+    align_heading,
+    horizontal_limits,
+)
 from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.estimation import DisturbanceObserver
@@ -104,11 +109,7 @@ class LinearMpc(IncrementalMpc):
             self._observer.predict(command)
 
     def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
-        """Shift the (continuous) reference heading by 2 pi k to the turn the vehicle is on."""
-        aligned = np.array(reference, dtype=float)
-        turns = np.round((state[2] - aligned[0, 2]) / (2.0 * math.pi))
-        aligned[:, 2] += 2.0 * math.pi * turns
-        return aligned
+        return align_heading(state, reference)
 
     def soft_rows(
         self, nominal: np.ndarray, reference: np.ndarray, observation: Observation

@@ -67,6 +67,8 @@ from auvmpc.controllers.base import (
     ControlStatus,
     Observation,
     ObstacleState,
+    align_heading,
+    next_planned_move,
     project_to_limits,
 )
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
@@ -637,7 +639,7 @@ class NonlinearMpc(Controller):
         disturbance = np.zeros(ND)
         if self._observer is not None:
             state, disturbance = self._observer.correct(state)
-        reference = _aligned_reference(state, observation.reference[: self.horizon + 1])
+        reference = align_heading(state, observation.reference[: self.horizon + 1])
         if not all(np.all(np.isfinite(a)) for a in (state, disturbance, reference)):
             # Never hand NaN to a solver (IPOPT raises on it): a failed step, not an error.
             return self._fallback(
@@ -703,11 +705,7 @@ class NonlinearMpc(Controller):
         starts cold: its starting point may be what made it fail.
         """
         previous = self._previous_thrust
-        if self._plan is not None and len(self._plan) > 1:
-            wanted = self._plan[1]
-            self._plan = np.vstack([self._plan[1:], self._plan[-1:]])
-        else:
-            wanted = previous
+        wanted, self._plan = next_planned_move(self._plan, previous)
         resume = solution.iterate if solution.iterate is not None else solution.resume
         self._guess = None if resume is None else self.program.shifted(resume, disturbance)
         thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
@@ -723,14 +721,6 @@ class NonlinearMpc(Controller):
 def _regularisation(H: np.ndarray) -> float:
     """The Levenberg-Marquardt weight for a condensed Hessian (module constants)."""
     return max(_HESSIAN_REGULARISATION, _RELATIVE_REGULARISATION * float(np.abs(np.diag(H)).max()))
-
-
-def _aligned_reference(state: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """Shift the (continuous) reference heading by 2 pi k to the turn the vehicle is on."""
-    aligned = np.array(reference, dtype=float)
-    turns = np.round((state[2] - aligned[0, 2]) / (2.0 * math.pi))
-    aligned[:, 2] += 2.0 * math.pi * turns
-    return aligned
 
 
 def _aligned_guess(guess: Iterate, state: np.ndarray) -> Iterate:
