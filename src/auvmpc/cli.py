@@ -8,8 +8,16 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    Progress,
+    ProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rich.table import Table
+from rich.text import Text
 
 from auvmpc.errors import ConfigError
 
@@ -53,7 +61,9 @@ def progress_bar() -> Progress:
 
 @app.command()
 def run(
-    scenario: Annotated[str, typer.Argument(help="built-in name or path to a scenario YAML")],
+    scenario: Annotated[
+        str | None, typer.Argument(help="built-in name or path to a scenario YAML")
+    ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="run folder to write")] = None,
     controller: Annotated[
         str | None, typer.Option("--controller", help="override controller.type")
@@ -63,16 +73,38 @@ def run(
         typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
     ] = None,
     figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+    from_campaign: Annotated[
+        Path | None,
+        typer.Option("--from-campaign", help="campaign folder: rerun one of its runs (--index)"),
+    ] = None,
+    index: Annotated[
+        int | None, typer.Option("--index", help="run index within --from-campaign")
+    ] = None,
 ) -> None:
-    """Simulate one scenario and write log.csv, run.json and figures."""
+    """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
     overrides = list(set_ or [])
     if controller is not None:
         overrides.append(f"controller.type={controller}")
-    resolved = load_scenario(scenario, overrides)
+    if from_campaign is not None:
+        from auvmpc.campaign import scenario_for_run
+
+        if scenario is not None:
+            raise ConfigError("SCENARIO", scenario, "give a scenario or --from-campaign, not both")
+        if index is None:
+            raise ConfigError("--index", None, "--from-campaign needs the run index")
+        resolved = scenario_for_run(from_campaign, index, overrides)
+    else:
+        if scenario is None:
+            raise ConfigError("SCENARIO", None, "name one (or --from-campaign DIR --index K)")
+        if index is not None:
+            raise ConfigError("--index", index, "only with --from-campaign")
+        resolved = load_scenario(scenario, overrides)
     name = resolved.scenario.name
+    if from_campaign is not None:
+        name = f"{name}-run{index}"
     label = f"{name}-{resolved.scenario.controller.type}"
     out_dir = out if out is not None else Path("runs") / label
     with progress_bar() as progress:
@@ -154,6 +186,108 @@ def bench(
 
 def _split(values: list[str] | None) -> list[str]:
     return [part for value in values or () for part in value.split(",") if part]
+
+
+class _RunRateColumn(ProgressColumn):
+    """Finished runs per second (the speed over rich's recent updates)."""
+
+    def render(self, task) -> Text:
+        speed = task.finished_speed or task.speed
+        return Text("-- runs/s" if speed is None else f"{speed:.2f} runs/s")
+
+
+def campaign_progress_bar() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        _RunRateColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=errors,
+        transient=True,
+    )
+
+
+@app.command()
+def campaign(
+    file: Annotated[str, typer.Argument(help="built-in campaign name or path to a campaign YAML")],
+    out: Annotated[
+        Path, typer.Option("--out", help="campaign folder; run the same command again to resume")
+    ],
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="local worker processes (default: all CPUs)")
+    ] = None,
+    runs: Annotated[int | None, typer.Option("--runs", help="run only the first N runs")] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786"),
+    ] = None,
+    report: Annotated[bool, typer.Option(help="write report.md and figures when done")] = True,
+    criterion: Annotated[
+        str | None,
+        typer.Option("--criterion", help="success criterion, e.g. 'max_position_error_m < 1'"),
+    ] = None,
+) -> None:
+    """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
+    from auvmpc.campaign import campaign_report as make_report
+    from auvmpc.campaign import load_campaign, run_campaign
+
+    loaded = load_campaign(file)
+    with campaign_progress_bar() as progress:
+        task = None
+
+        def advance(done: int, total: int) -> None:
+            nonlocal task
+            if task is None:  # start at the runs already stored, so the rate counts new ones
+                task = progress.add_task(loaded.spec.name, total=total, completed=done)
+            else:
+                progress.update(task, completed=done, total=total)
+
+        summary = run_campaign(
+            loaded, out, workers=workers, runs=runs, scheduler=scheduler, on_progress=advance
+        )
+    console.print(
+        f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "
+        f"({summary.new} run now in {summary.wall_s:.1f} s)",
+        highlight=False,
+    )
+    if report:
+        result = make_report(out, criterion)
+        console.print(result.markdown, highlight=False, markup=False)
+    console.print(f"wrote {out}")
+
+
+@app.command("campaign-report")
+def campaign_report(
+    out: Annotated[Path, typer.Argument(help="a campaign folder")],
+    criterion: Annotated[
+        str | None,
+        typer.Option("--criterion", help="success criterion (default: the campaign file's)"),
+    ] = None,
+    worst: Annotated[int, typer.Option("--worst", help="worst runs to list")] = 5,
+    worst_by: Annotated[
+        str | None, typer.Option("--worst-by", help="column ranking the worst runs")
+    ] = None,
+    worst_order: Annotated[
+        str | None, typer.Option("--worst-order", help="desc: largest is worst; asc: smallest")
+    ] = None,
+    figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+) -> None:
+    """Success rate with a 95 % interval, metric percentiles, worst runs, plots."""
+    from auvmpc.campaign import campaign_report as make_report
+
+    result = make_report(
+        out,
+        criterion,
+        worst=worst,
+        worst_by=worst_by,
+        worst_order=worst_order,
+        figures=figures,
+    )
+    console.print(result.markdown, highlight=False, markup=False)
+    console.print(f"wrote {out}")
 
 
 @app.command()
