@@ -49,11 +49,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from auvmpc import __version__
-from auvmpc.config import StrictModel
+from auvmpc.config import StrictModel, builtin_descriptions, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.scenario import (
     ResolvedScenario,
@@ -514,13 +513,7 @@ class Campaign:
 
 def builtin_campaigns() -> dict[str, str]:
     """Built-in campaign names and their one-line descriptions."""
-    folder = resources.files("auvmpc.presets") / "campaigns"
-    found = {}
-    for item in sorted(folder.iterdir(), key=lambda p: p.name):
-        if item.name.endswith(".yaml"):
-            data = yaml.safe_load(item.read_text()) or {}
-            found[item.name.removesuffix(".yaml")] = str(data.get("description", ""))
-    return found
+    return builtin_descriptions("campaigns")
 
 
 def load_campaign(source: str | Path) -> Campaign:
@@ -557,15 +550,7 @@ def load_campaign(source: str | Path) -> Campaign:
 
 
 def _read_yaml(text: str, field: str, origin: str) -> dict[str, Any]:
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(field, origin, f"not valid YAML{where}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(field, origin, "expected a mapping")
-    return data
+    return read_yaml_mapping(text, field, origin, "campaign fields")
 
 
 def _validate_spec(data: dict[str, Any]) -> CampaignSpec:

@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel
+from auvmpc.config import StrictModel, builtin_descriptions, read_yaml_mapping
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.depth import DepthScenario, resolve_heave
 from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
@@ -124,13 +124,7 @@ def _load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> Veh
 
 def builtin_scenarios() -> dict[str, str]:
     """Built-in scenario names and their one-line descriptions."""
-    folder = resources.files("auvmpc.presets") / "scenarios"
-    found = {}
-    for item in sorted(folder.iterdir(), key=lambda p: p.name):
-        if item.name.endswith(".yaml"):
-            data = yaml.safe_load(item.read_text()) or {}
-            found[item.name.removesuffix(".yaml")] = str(data.get("description", ""))
-    return found
+    return builtin_descriptions("scenarios")
 
 
 class ResolvedDepthScenario:
@@ -167,14 +161,7 @@ def load_scenario(
                 f"no such file or built-in; built-ins: {list(builtin_scenarios())}",
             )
         text, base_dir = path.read_text(), path.resolve().parent
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError("scenario", text_source, f"not valid YAML{where}") from None
-    if not isinstance(data, dict):
-        raise ConfigError("scenario", text_source, "expected a mapping of scenario fields")
+    data = read_yaml_mapping(text, "scenario", text_source, "scenario fields")
     for override in overrides:
         apply_override(data, override)
     if data.get("kind") == "depth":

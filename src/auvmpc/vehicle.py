@@ -28,10 +28,9 @@ from typing import Annotated, Any
 
 import casadi as ca
 import numpy as np
-import yaml
 from pydantic import AfterValidator, Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel
+from auvmpc.config import StrictModel, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 
 __all__ = [
@@ -294,32 +293,19 @@ def preset_names() -> list[str]:
 def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:
     """Vehicle from a preset name, a YAML file path, or an inline mapping."""
     if isinstance(spec, Mapping):
-        data, where = dict(spec), field
+        data = dict(spec)
     else:
-        text_spec = str(spec)
-        if text_spec in preset_names():
-            resource = resources.files("auvmpc.presets") / "vehicles" / f"{text_spec}.yaml"
-            data, where = _read_yaml_text(resource.read_text(), field, text_spec), field
-        elif text_spec.endswith((".yaml", ".yml")) or Path(text_spec).exists():
-            path = Path(text_spec)
-            if not path.is_file():
-                raise ConfigError(field, text_spec, "vehicle file not found")
-            data, where = _read_yaml_text(path.read_text(), field, text_spec), field
+        name = str(spec)
+        if name in preset_names():
+            text = (resources.files("auvmpc.presets") / "vehicles" / f"{name}.yaml").read_text()
+        elif name.endswith((".yaml", ".yml")) or Path(name).exists():
+            if not Path(name).is_file():
+                raise ConfigError(field, name, "vehicle file not found")
+            text = Path(name).read_text()
         else:
-            raise ConfigError(field, text_spec, f"unknown preset; known: {preset_names()}")
+            raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
+        data = read_yaml_mapping(text, field, name, "vehicle fields")
     try:
         return VehicleParams.model_validate(data)
     except ValidationError as error:
-        raise format_validation_error(error, where) from None
-
-
-def _read_yaml_text(text: str, field: str, origin: str) -> dict[str, Any]:
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(field, origin, f"not valid YAML{where}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(field, origin, "expected a mapping of vehicle fields")
-    return data
+        raise format_validation_error(error, field) from None
