@@ -294,7 +294,7 @@ def test_grid_parameters_span_a_product_last_fastest(tmp_path):
     "value", [1e-5, 1e16, 1.5e300, -0.0, 0.1, 5e-324, 7, "yes", "1.0", [1e-7, {"a": None}], True]
 )
 def test_values_reach_the_scenario_exactly_through_yaml_text(value):
-    assert yaml.safe_load(campaign._yaml_text(value)) == value
+    assert yaml.safe_load(campaign.spec._yaml_text(value)) == value
 
 
 def test_list_length_and_defaults_are_written_as_plain_overrides(tmp_path):
@@ -384,7 +384,7 @@ def test_rerunning_a_finished_campaign_runs_nothing(reference, small_file):
 def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    campaign._Store(out, load_campaign(small_file)).close()  # as a first run leaves it
+    campaign.store._Store(out, load_campaign(small_file)).close()  # as a first run leaves it
     other = write_campaign(tmp_path, with_changes(seed=99))
     with pytest.raises(ConfigError, match=r"^--out: holds another campaign"):
         run_campaign(other, out, workers=1)
@@ -393,7 +393,7 @@ def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
 def test_one_coordinator_per_folder(tmp_path, small_file):
     out = tmp_path / "out"
     out.mkdir()
-    with campaign._exclusive(out):
+    with campaign.store._exclusive(out):
         with pytest.raises(ConfigError, match=r"^--out: another campaign process is writing here"):
             run_campaign(small_file, out, workers=1)
 
@@ -478,7 +478,7 @@ def test_a_run_that_kills_its_worker_is_failed_after_two_deaths(
     reference, small_file, tmp_path, monkeypatch
 ):
     _, expected = reference
-    monkeypatch.setattr(campaign, "execute_run", dies_on_run_5)
+    monkeypatch.setattr(campaign.execute, "execute_run", dies_on_run_5)
     out = tmp_path / "deaths"
     summary = run_campaign(small_file, out, workers=2, runs=8)
     assert (summary.ok, summary.failed) == (7, 1)

@@ -1,0 +1,44 @@
+"""``python -m auvmpc.campaign FILE --out DIR [--workers N] [--runs N] [--scheduler ADDR]``:
+a minimal entry point without the CLI's dependencies (the kill-and-resume tests use it)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from auvmpc.campaign.execute import run_campaign
+from auvmpc.campaign.spec import RESULTS_FILE
+from auvmpc.errors import ConfigError
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Minimal entry point without the CLI's dependencies; returns the exit code."""
+    parser = argparse.ArgumentParser(
+        prog="python -m auvmpc.campaign", description="Run or resume a robustness campaign."
+    )
+    parser.add_argument("campaign", help="built-in campaign name or campaign YAML")
+    parser.add_argument("--out", required=True, type=Path, help="campaign folder")
+    parser.add_argument(
+        "--workers", type=int, default=None, help="local processes (default: all CPUs)"
+    )
+    parser.add_argument("--runs", type=int, default=None, help="run only the first N runs")
+    parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    args = parser.parse_args(argv)
+    try:
+        summary = run_campaign(
+            args.campaign, args.out, workers=args.workers, runs=args.runs, scheduler=args.scheduler
+        )
+    except ConfigError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    print(
+        f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "
+        f"({summary.new} run now, {summary.wall_s:.1f} s) -> {summary.out_dir / RESULTS_FILE}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,280 @@
+"""Results storage: one SQLite file, written only by the coordinating process.
+
+Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import sqlite3
+from collections.abc import Iterator, Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from auvmpc import __version__
+from auvmpc.errors import ConfigError
+
+if TYPE_CHECKING:
+    pass
+
+from auvmpc.campaign.spec import (
+    LOCK_FILE,
+    RESULTS_FILE,
+    Campaign,
+    CampaignSpec,
+    _canonical_json,
+    _with_implicit_overrides,
+)
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS campaign (
+    id INTEGER PRIMARY KEY CHECK (id = 0),
+    hash TEXT NOT NULL,
+    name TEXT NOT NULL,
+    spec TEXT NOT NULL,
+    source TEXT NOT NULL,
+    base_source TEXT NOT NULL,
+    base_data TEXT NOT NULL,
+    base_dir TEXT NOT NULL,
+    parameter_columns TEXT NOT NULL,
+    metric_columns TEXT NOT NULL DEFAULT '[]',
+    created_utc TEXT NOT NULL,
+    auvmpc_version TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS runs (
+    "index" INTEGER PRIMARY KEY,
+    seed INTEGER NOT NULL,
+    status TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+    error TEXT,
+    traceback TEXT,
+    parameters TEXT NOT NULL,
+    metrics TEXT NOT NULL,
+    wall_s REAL,
+    worker_deaths INTEGER NOT NULL DEFAULT 0,
+    worker TEXT,
+    finished_utc TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS worker_deaths (
+    "index" INTEGER PRIMARY KEY,
+    deaths INTEGER NOT NULL
+);
+"""
+
+
+def _connect(path: Path, read_only: bool = False) -> sqlite3.Connection:
+    if read_only:
+        connection = sqlite3.connect(
+            f"{path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None
+        )
+    else:
+        connection = sqlite3.connect(path, isolation_level=None)
+        connection.execute("PRAGMA journal_mode=WAL")
+        # FULL: a committed run survives a power cut too, not only a killed process.
+        connection.execute("PRAGMA synchronous=FULL")
+    connection.execute("PRAGMA busy_timeout=10000")
+    return connection
+
+
+@contextlib.contextmanager
+def _transaction(connection: sqlite3.Connection) -> Iterator[sqlite3.Connection]:
+    connection.execute("BEGIN IMMEDIATE")
+    try:
+        yield connection
+    except BaseException:
+        connection.execute("ROLLBACK")
+        raise
+    connection.execute("COMMIT")
+
+
+class _Store:
+    """The results file of one campaign folder; only the coordinator holds one."""
+
+    def __init__(self, out_dir: Path, campaign: Campaign) -> None:
+        self.path = out_dir / RESULTS_FILE
+        self.connection = _connect(self.path)
+        self.campaign = campaign
+        try:
+            self._open(out_dir, campaign)
+        except BaseException:
+            self.connection.close()
+            raise
+
+    def _open(self, out_dir: Path, campaign: Campaign) -> None:
+        """Create the tables, or check that they hold this campaign."""
+        with _transaction(self.connection) as db:
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    db.execute(statement)
+            row = db.execute("SELECT hash, metric_columns FROM campaign").fetchone()
+            if row is not None and row[0] != campaign.hash:
+                raise ConfigError(
+                    "--out",
+                    str(out_dir),
+                    f"holds another campaign (hash {row[0][:12]}, this file {campaign.hash[:12]});"
+                    " use a new folder",
+                )
+            self.metric_columns: list[str] = json.loads(row[1]) if row else []
+            db.execute(
+                "INSERT INTO campaign (id, hash, name, spec, source, base_source, base_data, "
+                "base_dir, parameter_columns, created_utc, auvmpc_version) "
+                "VALUES (0, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT(id) DO UPDATE SET "
+                "name = excluded.name, spec = excluded.spec, source = excluded.source",
+                (
+                    campaign.hash,
+                    campaign.spec.name,
+                    json.dumps(campaign.spec.model_dump(mode="json")),
+                    campaign.source,
+                    campaign.base_source,
+                    _canonical_json(campaign.base_data),
+                    campaign.base_dir,
+                    json.dumps(list(campaign.parameter_columns)),
+                    _now(),
+                    __version__,
+                ),
+            )
+            self._create_view(db)
+
+    def close(self) -> None:
+        self.connection.close()
+
+    def finished(self) -> set[int]:
+        return {row[0] for row in self.connection.execute('SELECT "index" FROM runs')}
+
+    def deaths(self) -> dict[int, int]:
+        return dict(self.connection.execute('SELECT "index", deaths FROM worker_deaths'))
+
+    def add_death(self, index: int) -> int:
+        with _transaction(self.connection) as db:
+            db.execute(
+                'INSERT INTO worker_deaths ("index", deaths) VALUES (?, 1) '
+                'ON CONFLICT("index") DO UPDATE SET deaths = deaths + 1',
+                (index,),
+            )
+            return db.execute(
+                'SELECT deaths FROM worker_deaths WHERE "index" = ?', (index,)
+            ).fetchone()[0]
+
+    def record(self, result: Mapping[str, Any]) -> None:
+        """One finished run, in one transaction."""
+        metrics = _finite_or_none(result["metrics"])
+        index = result["index"]
+        with _transaction(self.connection) as db:
+            deaths = db.execute(
+                'SELECT deaths FROM worker_deaths WHERE "index" = ?', (index,)
+            ).fetchone()
+            db.execute(
+                'INSERT INTO runs ("index", seed, status, error, traceback, parameters, '
+                "metrics, wall_s, worker_deaths, worker, finished_utc) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    index,
+                    result["seed"],
+                    result["status"],
+                    result["error"],
+                    result["traceback"],
+                    json.dumps(_finite_or_none(result["parameters"]), allow_nan=False),
+                    json.dumps(metrics, allow_nan=False),
+                    result["wall_s"],
+                    deaths[0] if deaths else 0,
+                    result["worker"],
+                    _now(),
+                ),
+            )
+            new = [key for key in metrics if key not in self.metric_columns]
+            if new:
+                self.metric_columns += new
+                db.execute(
+                    "UPDATE campaign SET metric_columns = ?", (json.dumps(self.metric_columns),)
+                )
+                self._create_view(db)
+
+    def _create_view(self, db: sqlite3.Connection) -> None:
+        """``results``: one column per parameter and metric, for SQL queries (the exact
+        floats come from :func:`load_results`, which parses the JSON in Python)."""
+        columns = ['"index"', "seed", "status", "error"]
+        for name in self.campaign.parameter_columns:
+            columns.append(
+                f"json_extract(parameters, {_sql_text(_json_path(name))}) AS {_sql_name(name)}"
+            )
+        for name in self.metric_columns:
+            columns.append(
+                f"json_extract(metrics, {_sql_text(_json_path(name))}) AS {_sql_name(name)}"
+            )
+        columns += ["wall_s", "worker_deaths"]
+        db.execute("DROP VIEW IF EXISTS results")
+        db.execute(f"CREATE VIEW results AS SELECT {', '.join(columns)} FROM runs")
+
+
+def _sql_name(name: str) -> str:
+    return '"' + name.replace('"', '""') + '"'
+
+
+def _sql_text(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
+
+
+def _json_path(key: str) -> str:
+    return '$."' + key.replace('"', '\\"') + '"'
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _finite_or_none(values: Mapping[str, Any]) -> dict[str, Any]:
+    """JSON-ready: NaN and infinities become null (SQLite's JSON rejects them)."""
+    return {
+        key: None if isinstance(value, float) and not math.isfinite(value) else value
+        for key, value in values.items()
+    }
+
+
+@contextlib.contextmanager
+def _exclusive(out_dir: Path) -> Iterator[None]:
+    """One coordinator per folder (released by the OS even on SIGKILL)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        yield
+        return
+    with open(out_dir / LOCK_FILE, "a") as handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(
+                "--out", str(out_dir), "another campaign process is writing here"
+            ) from None
+        try:
+            yield
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
+def stored_campaign(out_dir: Path) -> Campaign:
+    """The campaign a results folder was written by (as stored, not as the file is now)."""
+    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
+        row = db.execute(
+            "SELECT spec, source, base_source, base_data, base_dir FROM campaign"
+        ).fetchone()
+    if row is None:
+        raise ConfigError("DIR", str(out_dir), "no campaign stored in results.sqlite")
+    spec, source, base_source, base_data, base_dir = row
+    return _with_implicit_overrides(
+        Campaign(
+            CampaignSpec.model_validate(json.loads(spec)),
+            source,
+            base_source,
+            json.loads(base_data),
+            base_dir,
+        )
+    )
+
+
+def _results_path(out_dir: Path) -> Path:
+    path = Path(out_dir) / RESULTS_FILE
+    if not path.is_file():
+        raise ConfigError("DIR", str(out_dir), f"no campaign results here ({RESULTS_FILE} missing)")
+    return path
