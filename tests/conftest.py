@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 # Issue 2's one-step replay bound: 0.1 mm and 1e-4 rad per 0.5 s sample.
@@ -32,3 +33,25 @@ def bluerov():
     from auvmpc.vehicle import load_vehicle
 
     return load_vehicle("bluerov2-heavy")
+
+
+def random_limit_case(rng, params, reference, sample_time: float, horizon: int):
+    """A state near a random reference point and a previous thrust inside or at the limits
+    (the hard-limit tests of every MPC draw from this)."""
+    t0 = rng.uniform(0.0, 90.0)
+    preview = reference.states(t0 + sample_time * np.arange(horizon + 1))
+    offset = rng.uniform(
+        [-3.0, -3.0, -math.pi, -1.0, -0.5, -0.5], [3.0, 3.0, math.pi, 1.0, 0.5, 0.5]
+    )
+    state = preview[0] + offset
+    state[3:] = offset[3:]  # velocities about zero, either sign
+    low, high = params.thrust_limits
+    kind = rng.integers(3)
+    n = params.n_thrusters
+    if kind == 0:
+        previous = rng.uniform(low, high, size=n)
+    elif kind == 1:  # every thruster at one of its limits
+        previous = rng.choice([low, high], size=n)
+    else:  # all at the upper limit, the asymmetric side for bluerov
+        previous = np.full(n, high)
+    return t0, state, preview, previous

@@ -41,6 +41,7 @@ from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_re
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
 from auvmpc.vehicle import VehicleParams, dynamics, load_vehicle
+from tests.conftest import random_limit_case
 
 SAMPLE_TIME = 0.5  # s, the paper's Te
 HORIZON = 30  # ny, the paper's
@@ -502,24 +503,7 @@ def test_unconstrained_mpc_equals_least_squares_solution(penalty):
 
 
 def _random_case(rng, params, reference):
-    """A state near a random reference point and a previous thrust inside or at the limits."""
-    t0 = rng.uniform(0.0, 90.0)
-    preview = reference.states(t0 + SAMPLE_TIME * np.arange(HORIZON + 1))
-    offset = rng.uniform(
-        [-3.0, -3.0, -math.pi, -1.0, -0.5, -0.5], [3.0, 3.0, math.pi, 1.0, 0.5, 0.5]
-    )
-    state = preview[0] + offset
-    state[3:] = offset[3:]  # velocities about zero, either sign
-    low, high = params.thrust_limits
-    kind = rng.integers(3)
-    n = params.n_thrusters
-    if kind == 0:
-        previous = rng.uniform(low, high, size=n)
-    elif kind == 1:  # every thruster at one of its limits
-        previous = rng.choice([low, high], size=n)
-    else:  # all at the upper limit, the asymmetric side for bluerov
-        previous = np.full(n, high)
-    return t0, state, preview, previous
+    return random_limit_case(rng, params, reference, SAMPLE_TIME, HORIZON)
 
 
 # (preset, QP solver, model_substeps; None = chosen for the vehicle). bluerov2-heavy with one

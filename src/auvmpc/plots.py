@@ -130,26 +130,18 @@ def figure_trajectory(
         gap, k, obstacle = min(drawn, key=lambda item: item[0])
         _draw_min_clearance(ax, log, obstacle, k, gap, vehicle_radius)
 
-    ax.plot(
-        *log.state[0, :2],
-        marker="o",
-        color="tab:green",
-        markeredgecolor="black",
-        markersize=8,
-        linestyle="none",
-        label="start",
-        zorder=5,
-    )
-    ax.plot(
-        *log.state[-1, :2],
-        marker="s",
-        color="tab:blue",
-        markeredgecolor="black",
-        markersize=7,
-        linestyle="none",
-        label="end",
-        zorder=5,
-    )
+    for row, marker, color, size, label in ((0, "o", "tab:green", 8, "start"),
+                                            (-1, "s", "tab:blue", 7, "end")):  # fmt: skip
+        ax.plot(
+            *log.state[row, :2],
+            marker=marker,
+            color=color,
+            markeredgecolor="black",
+            markersize=size,
+            linestyle="none",
+            label=label,
+            zorder=5,
+        )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

@@ -44,57 +44,56 @@ __all__ = [
 
 
 @dataclass
-class RunResult:
-    """A finished closed-loop run."""
+class _Finished:
+    """What both kinds of finished run share: the log, the metrics, and how to file them."""
 
-    resolved: ResolvedScenario
-    log: SimLog
+    resolved: ResolvedScenario | ResolvedDepthScenario
+    log: SimLog | DepthLog
     metrics: dict[str, Any]
 
     @property
-    def scenario(self) -> Scenario:
+    def scenario(self):
         return self.resolved.scenario
+
+    def simulated_plant(self) -> VehicleParams:
+        raise NotImplementedError
 
     def run_json(self) -> dict[str, Any]:
         return {
             "version": __version__,
             "scenario": scenario_to_dict(self.scenario),
-            "plant": self.resolved.plant.model_dump(mode="json"),
+            "plant": self.simulated_plant().model_dump(mode="json"),
             "model": self.resolved.model.model_dump(mode="json"),
             "metrics": self.metrics,
         }
 
     def csv_text(self) -> str:
         return self.log.to_csv_text()
+
+
+@dataclass
+class RunResult(_Finished):
+    """A finished closed-loop run."""
+
+    resolved: ResolvedScenario
+    log: SimLog
+
+    def simulated_plant(self) -> VehicleParams:
+        return self.resolved.plant
 
     def draw(self, folder: Path) -> None:
         draw_figures(self.log, self.scenario, self.resolved.model, folder)
 
 
 @dataclass
-class DepthRunResult:
+class DepthRunResult(_Finished):
     """A finished depth experiment."""
 
     resolved: ResolvedDepthScenario
     log: DepthLog
-    metrics: dict[str, Any]
 
-    @property
-    def scenario(self) -> DepthScenario:
-        return self.resolved.scenario
-
-    def run_json(self) -> dict[str, Any]:
-        plant = self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
-        return {
-            "version": __version__,
-            "scenario": self.scenario.model_dump(mode="json"),
-            "plant": plant.model_dump(mode="json"),
-            "model": self.resolved.model.model_dump(mode="json"),
-            "metrics": self.metrics,
-        }
-
-    def csv_text(self) -> str:
-        return self.log.to_csv_text()
+    def simulated_plant(self) -> VehicleParams:
+        return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
 
     def draw(self, folder: Path) -> None:
         draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder)

@@ -7,7 +7,6 @@ errors that name the field (:class:`auvmpc.errors.ConfigError`).
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -210,6 +209,6 @@ def apply_override(data: dict[str, Any], override: str) -> None:
             node = node[index]
 
 
-def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
+def scenario_to_dict(scenario: Scenario | DepthScenario) -> dict[str, Any]:
     """JSON-ready, fully resolved form (defaults filled in)."""
-    return copy.deepcopy(scenario.model_dump(mode="json"))
+    return scenario.model_dump(mode="json")

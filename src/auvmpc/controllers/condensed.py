@@ -114,6 +114,7 @@ class CondensedQp:
             self._input_gradient_map = np.zeros((self.n_moves, nu))
         self.limits = limits
         self.max_move = np.broadcast_to(limits.rate * sample_time, (nu,)).astype(float)
+        self._move_bound = np.tile(self.max_move, nc)  # every move, built once
         # Force bounds where the input changes (it is held in between and after the last move).
         self._input_rows = self.move_to_input[self.move_steps].reshape(nc * nu, self.n_moves)
         self._input_lower = np.broadcast_to(limits.lower, (nu,)).astype(float)
@@ -159,12 +160,8 @@ class CondensedQp:
         H[:n_moves, :n_moves] = 2.0 * weighted.T @ weighted + self._input_hessian
         H[:n_moves, :n_moves] += _HESSIAN_REGULARISATION * np.eye(n_moves)
         f[:n_moves] = 2.0 * weighted.T @ error + self._input_gradient_map @ previous
-        bound_lower = np.concatenate(
-            [np.tile(-self.max_move, len(self.move_steps)), np.zeros(n_slack)]
-        )
-        bound_upper = np.concatenate(
-            [np.tile(self.max_move, len(self.move_steps)), np.full(n_slack, np.inf)]
-        )
+        bound_lower = np.concatenate([-self._move_bound, np.zeros(n_slack)])
+        bound_upper = np.concatenate([self._move_bound, np.full(n_slack, np.inf)])
         nc = len(self.move_steps)
         input_rows = np.zeros((self._input_rows.shape[0], nz))
         input_rows[:, :n_moves] = self._input_rows
