@@ -66,10 +66,11 @@ LTV_ORDER_TOL = 0.35
 # Hard limits are exact: the applied command is projected into the box; only the round-off
 # of one subtraction (|F - F_prev| computed here) is allowed.
 LIMIT_ROUND_OFF_N = 1e-12
-# Far obstacles (in slots or beyond the slot count) must not change the solution. The
-# real-time QP drops their rows, so it is the same QP: measured 0 N. IPOPT keeps them as
-# inactive rows, which changes its iterates within its tolerance: measured 2.7e-11 N.
-SAME_SOLUTION_TOL_N = {NmpcMode.REAL_TIME: 1e-12, NmpcMode.FULL: 1e-6}
+# Far obstacles (in slots or beyond the slot count) must not change the solution. Both
+# interior-point solvers keep the far rows, inactive (the sparse real-time QP has a fixed
+# structure; their lower bound is lifted), which moves their iterates within tolerance:
+# measured 2.0e-11 N for HPIPM (real-time), 2.7e-11 N for IPOPT.
+SAME_SOLUTION_TOL_N = {NmpcMode.REAL_TIME: 1e-9, NmpcMode.FULL: 1e-6}
 
 LINE_REFERENCE = "reference={type: line, start: [0, 0], heading_deg: 0, speed: 0.5}"
 

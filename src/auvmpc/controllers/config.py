@@ -20,6 +20,7 @@ __all__ = [
     "ControllerConfig",
     "ControllerType",
     "NmpcMode",
+    "QpStructure",
     "ThrustPenalty",
 ]
 
@@ -42,6 +43,13 @@ class NmpcMode(StrEnum):
 
     FULL = "full"  # IPOPT to convergence: the accuracy reference
     REAL_TIME = "real-time"  # one SQP iteration from the shifted previous solution
+
+
+class QpStructure(StrEnum):
+    """How the real-time iteration poses its QP (docs/performance.md has the comparison)."""
+
+    SPARSE = "sparse"  # states kept, Riccati IPM (HPIPM): well posed for unstable vehicles
+    CONDENSED = "condensed"  # states eliminated, dense QP (qp_solver): ill-conditioned there
 
 
 class ThrustPenalty(StrEnum):
@@ -89,7 +97,15 @@ class ControllerConfig(StrictModel):
     obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
         default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
     )
-    qp_solver: QpSolverName = Field(default=QpSolverName.DAQP, description="QP backend")
+    qp_solver: QpSolverName = Field(
+        default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
+    )
+    qp_structure: QpStructure = Field(
+        default=QpStructure.SPARSE,
+        description="nmpc real-time: sparse QP solved by HPIPM (default: stays well posed on "
+        "open-loop-unstable vehicles) or condensed QP solved by qp_solver; with move blocking "
+        "(control_horizon or move_steps shorter than the horizon) the QP is condensed",
+    )
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
         default=None,
         description="cap on QP iterations (IPOPT iterations for nmpc full: below ~20 every "

@@ -9,15 +9,13 @@ CasADi Jacobians, so the prediction follows the turn.
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import io
-import shutil
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.config import ControllerConfig
+from auvmpc.codegen import compiled
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.estimation import world_disturbance_dynamics
 from auvmpc.integrators import rk4
@@ -45,35 +43,6 @@ def linearised_rollout(
     if jit:
         step = compiled(step)
     return step.mapaccum("rollout", horizon)
-
-
-@functools.cache
-def _jit_available() -> bool:
-    return shutil.which("gcc") is not None or shutil.which("cc") is not None
-
-
-def compiled(function: ca.Function) -> ca.Function:
-    """The same function compiled to machine code by the system C compiler (CasADi JIT).
-
-    Evaluating the RK4 step and its Jacobians interpreted costs ~0.3 ms per horizon;
-    compiled, ~0.07 ms (benchmarks). Falls back to the interpreted function when no C
-    compiler is present, so nothing depends on one.
-    """
-    if not _jit_available():
-        return function
-    options = {
-        "jit": True,
-        "compiler": "shell",
-        "jit_options": {"flags": ["-O2"], "verbose": False},
-    }
-    try:
-        with contextlib.redirect_stderr(io.StringIO()):
-            jitted = ca.Function(
-                function.name() + "_jit", function.sx_in(), function(*function.sx_in()), options
-            )
-    except RuntimeError:
-        return function
-    return jitted
 
 
 class LtvMpc(LinearMpc):

@@ -71,10 +71,11 @@ from auvmpc.controllers.base import (
     next_planned_move,
     project_to_limits,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure, ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
 from auvmpc.estimation import DisturbanceObserver, world_disturbance_dynamics
 from auvmpc.integrators import rk4
+from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]
@@ -606,7 +607,14 @@ class NonlinearMpc(Controller):
         self.preview_steps = self.horizon
         self.program = MultipleShootingProgram(model, config)
         if config.nmpc_mode is NmpcMode.FULL:
-            self._solver: _IpoptSolver | _RealTimeIteration = _IpoptSolver(self.program, config)
+            self._solver: _IpoptSolver | _RealTimeIteration | SparseRealTimeIteration = (
+                _IpoptSolver(self.program, config)
+            )
+        elif config.qp_structure is QpStructure.SPARSE and self.program.n_moves == self.horizon:
+            # Held thrusts would be equality rows, which an interior point handles badly
+            # (HPIPM took 50 iterations without converging); move blocking keeps the
+            # condensed QP, whose variables are the moves themselves.
+            self._solver = SparseRealTimeIteration(self.program)
         elif config.nmpc_mode is NmpcMode.REAL_TIME:
             self._solver = _RealTimeIteration(self.program, config)
         else:  # unreachable: NmpcMode has no other member
