@@ -76,14 +76,18 @@ def main(argv: list[str] | None = None) -> int:
         rows = list(pool.map(run_one, jobs, chunksize=1))
     by = {(r["index"], r["controller"]): r for r in rows}
     print(f"{args.vehicles} random vehicles, circle at {SPEED_M_PER_S} m/s, {DURATION_S:.0f} s")
-    print(f"{'controller':16s} {'vehicles w/ fallback':>21s} {'max fallbacks':>14s} "
-          f"{'median RMS m':>13s} {'max RMS m':>10s}")
+    print(
+        f"{'controller':16s} {'vehicles w/ fallback':>21s} {'max fallbacks':>14s} "
+        f"{'median RMS m':>13s} {'max RMS m':>10s}"
+    )
     for c in args.controllers:
         mine = [r for r in rows if r["controller"] == c]
         failing = [r for r in mine if r["fallbacks"]]
         rms = np.array([r["rms"] for r in mine])
-        print(f"{c:16s} {len(failing):21d} {max(r['fallbacks'] for r in mine):14d} "
-              f"{np.median(rms):13.4f} {rms.max():10.4f}")
+        print(
+            f"{c:16s} {len(failing):21d} {max(r['fallbacks'] for r in mine):14d} "
+            f"{np.median(rms):13.4f} {rms.max():10.4f}"
+        )
         for r in sorted(failing, key=lambda r: -r["fallbacks"])[:5]:
             print(f"    vehicle {r['index']:3d} ({r['mass']:7.1f} kg): {r['fallbacks']} fallbacks")
     if "nmpc-full" in args.controllers:
@@ -92,8 +96,10 @@ def main(argv: list[str] | None = None) -> int:
             if c == "nmpc-full":
                 continue
             bad = [i for i in solved if by[(i, c)]["fallbacks"]]
-            print(f"{c}: {len(bad)} of {len(solved)} vehicles that nmpc-full solves fall back"
-                  + (f" ({bad[:10]})" if bad else ""))
+            print(
+                f"{c}: {len(bad)} of {len(solved)} vehicles that nmpc-full solves fall back"
+                + (f" ({bad[:10]})" if bad else "")
+            )
     return 0
 
 

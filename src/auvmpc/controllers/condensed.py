@@ -18,6 +18,7 @@ depth controller (depth_mpc.py) are such plants.
 
 from __future__ import annotations
 
+import time
 from abc import abstractmethod
 from dataclasses import dataclass
 
@@ -33,6 +34,7 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.controllers.config import ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
+from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
 __all__ = ["AffinePrediction", "CondensedQp", "IncrementalMpc", "SoftRows"]
 
@@ -242,6 +244,7 @@ class IncrementalMpc(Controller):
     linearisation_iterations: int = 1
     solver_time_limit_ms: float | None = None
     trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
+    sparse_qp: SparseIncrementalQp | None = None  # set: solve the sparse form instead
 
     # -- plant-specific hooks --------------------------------------------------------
     @abstractmethod
@@ -274,6 +277,8 @@ class IncrementalMpc(Controller):
         state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
         reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
         moves = qp.shifted_moves(self._plan, previous)
+        if self.sparse_qp is not None:
+            return self._compute_sparse(state, disturbance, reference, moves, observation)
         solve_time = 0.0
         for _ in range(self.linearisation_iterations):
             # Each pass re-linearises (model and soft rows) around the last plan.
@@ -315,6 +320,52 @@ class IncrementalMpc(Controller):
             info={
                 "qp_iterations": float(result.iterations),
                 "max_slack": float(slack.max(initial=0.0)),
+                **{f"disturbance_{i}": float(v) for i, v in enumerate(np.ravel(disturbance))},
+            },
+        )
+
+    def _compute_sparse(self, state, disturbance, reference, moves, observation) -> ControlResult:
+        """The same sample with the QP in sparse form (solvers/sparse_qp.py)."""
+        qp, sparse, previous = self.qp, self.sparse_qp, self._previous_input
+        started = time.perf_counter()
+        iterations = 0
+        for _ in range(self.linearisation_iterations):
+            prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
+            nominal = prediction.nominal
+            if nominal is None:
+                free, sensitivity = qp.condense(state, previous, prediction)
+                nominal = free + sensitivity @ moves
+            soft = self.soft_rows(nominal, reference, observation)
+            trust = None
+            if prediction.nominal is not None and self.trust_region_weights is not None:
+                trust = (self.trust_region_weights, prediction.nominal)
+            solution = sparse.solve(state, previous, prediction, reference, soft, trust)
+            iterations += int(solution.iterations)
+            if solution.moves is None:
+                break
+            moves = solution.moves
+        solve_time = time.perf_counter() - started
+        limit = self.solver_time_limit_ms
+        if solution.moves is None or (limit is not None and 1e3 * solve_time > limit):
+            return self._fallback(solve_time)
+        wanted = previous + moves[: qp.nu]
+        command, _ = self.limits.project(wanted, previous, self.sample_time)
+        self._plan = qp.plan(moves, previous)
+        self._commit(command)
+        max_slack = float(solution.slack.max(initial=0.0))
+        status = ControlStatus.OK
+        if max_slack > _SLACK_ACTIVE:
+            status = ControlStatus.RELAXED
+        elif np.max(np.abs(command - wanted)) > 1e-6:
+            status = ControlStatus.SATURATED
+        return ControlResult(
+            thrust=command,
+            status=status,
+            solve_time_s=solve_time,
+            predicted_states=solution.states,
+            info={
+                "qp_iterations": float(iterations),
+                "max_slack": max_slack,
                 **{f"disturbance_{i}": float(v) for i, v in enumerate(np.ravel(disturbance))},
             },
         )

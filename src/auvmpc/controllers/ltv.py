@@ -14,11 +14,12 @@ import functools
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.config import ControllerConfig
 from auvmpc.codegen import compiled
+from auvmpc.controllers.config import ControllerConfig, QpStructure, ThrustPenalty
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.estimation import world_disturbance_dynamics
 from auvmpc.integrators import rk4
+from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["LtvMpc", "linearised_rollout"]
@@ -51,6 +52,20 @@ class LtvMpc(LinearMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
+        if config.qp_structure is QpStructure.SPARSE:
+            self.sparse_qp = SparseIncrementalQp(
+                horizon=config.prediction_horizon,
+                move_steps=config.move_schedule(),
+                stage_weight=np.array(config.Q, dtype=float),
+                terminal_weight=np.array(config.S, dtype=float),
+                input_weight=np.array(config.thrust_weights(model.n_thrusters), dtype=float),
+                absolute_input_penalty=config.thrust_penalty is ThrustPenalty.ABSOLUTE,
+                lower=model.thrust_min,
+                upper=model.thrust_max,
+                max_move=model.thrust_rate_limit * config.sample_time,
+                slack_penalty=config.obstacle_slack_penalty,
+                iteration_limit=config.qp_iteration_limit,
+            )
         self._rollout = _cached_rollout(
             model.model_dump_json(),
             config.sample_time,

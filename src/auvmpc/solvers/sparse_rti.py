@@ -39,7 +39,6 @@ import time
 import casadi as ca
 import numpy as np
 
-
 __all__ = ["SparseRealTimeIteration"]
 
 # Levenberg-Marquardt term on the thrust step (as in the condensed real-time iteration): keeps
@@ -279,12 +278,12 @@ def _build_qp_data(program) -> ca.Function:
             ca.horzcat(eye_n, zeros(n, 1)),
             ca.horzcat(normal @ jac_u[0:2, :], ca.SX.ones(S, 1)),
         )
-        on_next = ca.vertcat(
-            -ca.SX.eye(nz), zeros(n + S, nz)
-        )
+        on_next = ca.vertcat(-ca.SX.eye(nz), zeros(n + S, nz))
         row_blocks.append((on_z, on_v, on_next))
         obstacle_lower = [
-            ca.if_else(near[o, k] > 0.5, slots[4, o] - distances[o] - normals[o] @ gap[0:2], -np.inf)
+            ca.if_else(
+                near[o, k] > 0.5, slots[4, o] - distances[o] - normals[o] @ gap[0:2], -np.inf
+            )
             for o in range(S)
         ]
         lba += [-gap, -held_gap, -movable[k] * max_move - change, *obstacle_lower]
@@ -295,9 +294,7 @@ def _build_qp_data(program) -> ca.Function:
     for k, (on_z, on_v, on_next) in enumerate(row_blocks):
         left, right = k * stage, n_w - (k + 1) * stage - nz
         rows.append(
-            ca.horzcat(
-                zeros(on_z.size1(), left), on_z, on_v, on_next, zeros(on_z.size1(), right)
-            )
+            ca.horzcat(zeros(on_z.size1(), left), on_z, on_v, on_next, zeros(on_z.size1(), right))
         )
     inputs = [X, P, F, x_hat, previous, reference, force, slots, near, movable]
     names = ["X", "P", "F", "x_hat", "F_prev", "ref", "d_world", "slots", "near", "movable"]

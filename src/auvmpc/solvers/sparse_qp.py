@@ -1,0 +1,230 @@
+"""The incremental MPC's QP in sparse (stage-wise) form, solved by HPIPM's Riccati IPM.
+
+:class:`~auvmpc.controllers.condensed.CondensedQp` eliminates the states; along an
+open-loop-unstable linearisation the condensed Hessian carries the growing products of the
+A_n and becomes numerically indefinite (condition ~1e17, tests/test_mpc.py). This form
+keeps the states: its data are the one-step matrices A_n, B_n, bounded for any vehicle, and
+HPIPM's Riccati recursion factorises it stably. The problem is the same (paper-model.md
+section 4), stage k = 0..ny with
+
+    z_k = [x_k; u_{k-1}]           v_k = [du_k (only at a move step); s_k]
+    x_{k+1} = A_k x_k + B_k (u_{k-1} + du_k) + c_k,   u_k = u_{k-1} + du_k
+    z_0 = [x(k); u(k-1)],   |du_k| <= rate Te,   s_k >= 0
+    lower <= u_{k-1} + du_k <= upper                              (at move steps)
+    a_r . x_{k+1} + s_k >= b_r   for the soft rows of step k + 1  (one slack per step)
+
+A held input has no variable at all (the stage has fewer inputs), so move blocking adds no
+equality rows, which an interior point handles badly. The cost is the condensed QP's term
+for term; the exact L1 penalty is on one slack per step instead of one per row (still exact:
+a feasible problem leaves every slack at zero).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["SparseIncrementalQp", "SparseSolution"]
+
+# As in CondensedQp: keeps the move Hessian definite when R = 0; far below every real weight.
+_HESSIAN_REGULARISATION = 1e-9
+_SLACK_QUADRATIC_WEIGHT = 1.0
+# CasADi hands HPIPM every unbounded variable as a box of +-_INFINITY (solvers/sparse_rti.py).
+_INFINITY = 1e4
+_HPIPM_OPTIONS = {
+    "mode": "speed",
+    "mu0": 1e2,
+    "res_g_max": 1e-8,
+    "res_b_max": 1e-8,
+    "res_d_max": 1e-8,
+    "res_m_max": 1e-8,
+}
+_ITERATION_LIMIT = 50
+_HPIPM_SOLVED = 0
+
+
+class SparseSolution:
+    """Moves in the condensed QP's order (move step by move step), the per-step slacks, and
+    the predicted states; ``moves`` is None when HPIPM failed."""
+
+    def __init__(self, moves, slack, states, iterations, status):
+        self.moves = moves
+        self.slack = slack
+        self.states = states
+        self.iterations = iterations
+        self.status = status
+
+
+class SparseIncrementalQp:
+    """Builds and solves the sparse QP of one incremental MPC sample (module docstring)."""
+
+    def __init__(
+        self,
+        *,
+        horizon: int,
+        move_steps,
+        stage_weight,
+        terminal_weight,
+        input_weight,
+        absolute_input_penalty: bool,
+        lower,
+        upper,
+        max_move,
+        slack_penalty: float,
+        iteration_limit: int | None = None,
+    ) -> None:
+        self.horizon = horizon
+        self.move_steps = np.asarray(move_steps)
+        self.is_move = np.zeros(horizon, dtype=bool)
+        self.is_move[self.move_steps] = True
+        self.weights = np.vstack([np.tile(stage_weight, (horizon - 1, 1)), terminal_weight])
+        self.R = np.asarray(input_weight, dtype=float)
+        self.nu = len(self.R)
+        self.absolute = absolute_input_penalty
+        self.lower = np.broadcast_to(lower, (self.nu,)).astype(float)
+        self.upper = np.broadcast_to(upper, (self.nu,)).astype(float)
+        self.max_move = np.broadcast_to(max_move, (self.nu,)).astype(float)
+        self.slack_penalty = slack_penalty
+        self.iteration_limit = iteration_limit or _ITERATION_LIMIT
+        self._solvers: dict[tuple, ca.Function] = {}  # by stage-row structure
+
+    # -- one sample ------------------------------------------------------------------------
+    def solve(self, state, previous, prediction, reference, soft, trust=None) -> SparseSolution:
+        """``prediction``: A (ny, nx, nx), B (ny, nx, nu), c (ny, nx); ``reference``
+        (ny + 1, nx); ``soft``: SoftRows; ``trust``: (weights (nx,), nominal (ny + 1, nx))."""
+        ny, nu = self.horizon, self.nu
+        nx = len(state)
+        nz = nx + nu
+        soft_at = [np.flatnonzero(soft.steps == k + 1) for k in range(ny)]
+        n_inputs = [(nu if self.is_move[k] else 0) + 1 for k in range(ny)]
+        n_rows = [(nu if self.is_move[k] else 0) + len(soft_at[k]) for k in range(ny)]
+        columns = np.cumsum([0] + [nz + n_inputs[k] for k in range(ny)])  # z_k starts
+        n_w = columns[-1] + nz
+        H = np.zeros((n_w, n_w))
+        H_mask = np.zeros((n_w, n_w), dtype=bool)
+        g = np.zeros(n_w)
+        lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
+        rows = sum(nz + n_rows[k] for k in range(ny))
+        A = np.zeros((rows, n_w))
+        A_mask = np.zeros((rows, n_w), dtype=bool)
+        lba, uba = np.zeros(rows), np.zeros(rows)
+
+        state_weights = self.weights.copy()
+        state_targets = self.weights * reference[1:]
+        if trust is not None:
+            trust_weights, nominal = trust
+            state_weights = state_weights + trust_weights
+            state_targets = state_targets + trust_weights * nominal[1:]
+        lbx[:nx] = ubx[:nx] = state
+        lbx[nx:nz] = ubx[nx:nz] = previous
+        row = 0
+        for k in range(ny):
+            z, v = columns[k], columns[k] + nz
+            H_mask[z : columns[k + 1], z : columns[k + 1]] = True  # stage k's [z_k; v_k] block
+            x_cols, p_cols = slice(z, z + nx), slice(z + nx, z + nz)
+            moving = self.is_move[k]
+            du = slice(v, v + nu) if moving else slice(v, v)
+            s = v + (nu if moving else 0)
+            # Cost: the next state's (stage k + 1's z block), the input's, the slack's.
+            nxt = columns[k + 1]
+            H[nxt : nxt + nx, nxt : nxt + nx] += np.diag(2.0 * state_weights[k])
+            g[nxt : nxt + nx] -= 2.0 * state_targets[k]
+            if self.absolute:  # |u_k|_R^2 with u_k = p_k + du_k
+                H[p_cols, p_cols] += np.diag(2.0 * self.R)
+                if moving:
+                    H[du, du] += np.diag(2.0 * self.R)
+                    H[p_cols, du] += np.diag(2.0 * self.R)
+                    H[du, p_cols] += np.diag(2.0 * self.R)
+            elif moving:
+                H[du, du] += np.diag(2.0 * self.R)
+            if moving:
+                H[du, du] += _HESSIAN_REGULARISATION * np.eye(nu)
+                lbx[du], ubx[du] = -self.max_move, self.max_move
+            H[s, s] = 2.0 * _SLACK_QUADRATIC_WEIGHT
+            g[s] = self.slack_penalty
+            lbx[s] = 0.0
+
+            # Gap rows: A_k x_k + B_k p_k + B_k du_k - x_{k+1} = -c_k;  p_k + du_k - p_{k+1} = 0.
+            Ak, Bk, ck = prediction.A[k], prediction.B[k], prediction.c[k]
+            A[row : row + nx, x_cols] = Ak
+            A[row : row + nx, p_cols] = Bk
+            A[row + nx : row + nz, p_cols] = np.eye(nu)
+            if moving:
+                A[row : row + nx, du] = Bk
+                A[row + nx : row + nz, du] = np.eye(nu)
+            A[row : row + nz, nxt : nxt + nz] = -np.eye(nz)
+            lba[row : row + nx] = uba[row : row + nx] = -ck
+            A_mask[row : row + nz, z : nxt + nz] = True
+            A_mask[row : row + nz, nxt : nxt + nz] = np.eye(nz, dtype=bool)
+            row += nz
+            if moving:  # force limits on the new input
+                A[row : row + nu, p_cols] = np.eye(nu)
+                A[row : row + nu, du] = np.eye(nu)
+                lba[row : row + nu], uba[row : row + nu] = self.lower, self.upper
+                A_mask[row : row + nu, z:nxt] = True
+                row += nu
+            for r in soft_at[k]:  # a . (A_k x_k + B_k u_k + c_k) + s_k >= b
+                a = soft.coefficients[r]
+                A[row, x_cols] = a @ Ak
+                A[row, p_cols] = a @ Bk
+                if moving:
+                    A[row, du] = a @ Bk
+                A[row, s] = 1.0
+                lba[row], uba[row] = soft.lower[r] - a @ ck, np.inf
+                A_mask[row, z:nxt] = True
+                row += 1
+
+        if any(np.isnan(a).any() for a in (H, g, A, lba, uba)):
+            # A diverged linearisation: never hand NaN to the solver (CasADi raises on it).
+            return SparseSolution(None, None, None, 0, "non-finite QP data")
+        end = columns[-1]
+        H_mask[end:, end:] = True  # the last stage's z block
+        solver, h_pattern, a_pattern = self._solver(
+            H_mask, A_mask, tuple(n_inputs), tuple(n_rows), nz
+        )
+        result = solver(
+            h=ca.DM(h_pattern, H.T[H_mask.T]),
+            g=g,
+            a=ca.DM(a_pattern, A.T[A_mask.T]),
+            lba=lba,
+            uba=uba,
+            lbx=lbx,
+            ubx=ubx,
+        )
+        stats = solver.stats()
+        w = np.asarray(result["x"]).ravel()
+        if stats["return_status"] != _HPIPM_SOLVED or not np.all(np.isfinite(w)):
+            return SparseSolution(None, None, None, stats["iter_count"], stats["return_status"])
+        states = np.array([w[columns[k] : columns[k] + nx] for k in range(ny + 1)])
+        moves, slack = [], np.zeros(ny)
+        for k in range(ny):
+            v = columns[k] + nz
+            if self.is_move[k]:
+                moves.append(w[v : v + nu])
+            slack[k] = w[v + n_inputs[k] - 1]
+        return SparseSolution(
+            np.concatenate(moves), slack, states, stats["iter_count"], stats["return_status"]
+        )
+
+    def _solver(self, H_mask, A_mask, n_inputs, n_rows, nz):
+        """HPIPM for this stage structure (it changes only when soft rows come or go), with
+        the structural patterns of H and A (block positions, not values)."""
+        key = (n_inputs, n_rows)
+        if key not in self._solvers:
+            ny = self.horizon
+            options = {
+                "N": ny,
+                "nx": [nz] * (ny + 1),
+                "nu": [*n_inputs, 0],
+                "ng": [*n_rows, 0],
+                "inf": _INFINITY,
+                "error_on_fail": False,
+                "hpipm": {**_HPIPM_OPTIONS, "iter_max": self.iteration_limit},
+            }
+            h_pattern = ca.sparsify(ca.DM(H_mask.astype(float))).sparsity()
+            a_pattern = ca.sparsify(ca.DM(A_mask.astype(float))).sparsity()
+            solver = ca.conic(
+                "incremental_sparse_qp", "hpipm", {"h": h_pattern, "a": a_pattern}, options
+            )
+            self._solvers[key] = (solver, h_pattern, a_pattern)
+        return self._solvers[key]
