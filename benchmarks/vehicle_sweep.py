@@ -1,6 +1,7 @@
 """Random-vehicle sweep: does each controller solve every step on vehicles from 10 kg to 2 t?
 
-    python benchmarks/vehicle_sweep.py --vehicles 100 --workers 2 [--controllers nmpc ltv-mpc nmpc-full]
+    python benchmarks/vehicle_sweep.py --vehicles 100 --workers 2 \
+        [--controllers nmpc ltv-mpc-nc30 nmpc-full]
 
 Each vehicle comes from :func:`auvmpc.random_vehicles.random_vehicle` (seeded by its index);
 it follows a circle at 0.3 m/s (radius 4 m, or 4 s m for a vehicle of length scale s > 1)

@@ -18,7 +18,8 @@ The QP of one Gauss-Newton SQP step around an iterate (X, F), in deltas, stage k
                                        limit is a stage constraint)
     stage input  v_k = [dF_k; s_k]    (s_k >= 0: one exact-penalty slack for the obstacle rows
                                        of step k + 1)
-    dynamics     dX_{k+1} = A_k dX_k + B_k dF_k + (RK4(X_k, F_k) - X_{k+1}),  dp_{k+1} = dF_k + (F_k - p_{k+1})
+    dynamics     dX_{k+1} = A_k dX_k + B_k dF_k + (RK4(X_k, F_k) - X_{k+1}),
+                 dp_{k+1} = dF_k + (F_k - p_{k+1})
     bounds       dz_0 = [x_hat - X_0; F_prev - p_0],  F_min <= F_k + dF_k <= F_max
     rate rows    |(F_k + dF_k) - (p_k + dp_k)| <= rate Te at a move step, = 0 where the thrust
                  is held (move blocking is a stage equality, not a change of variables)
