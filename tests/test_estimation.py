@@ -215,3 +215,19 @@ def test_covariance_stays_symmetric_positive_definite_and_bounded_over_a_long_ru
     np.testing.assert_allclose(
         observer.disturbance_world, [*current, 0.0], atol=LONG_RUN_CURRENT_TOL_N
     )
+
+
+def test_a_diverged_prediction_restarts_the_filter_instead_of_crashing():
+    z, u = ca.SX.sym("z", 3), ca.SX.sym("u", 1)
+    # A model that blows up when u > 0 (as an RK4 step too long for the speed does).
+    blow_up = ca.if_else(u[0] > 0, ca.inf, 1.0)
+    step = ca.Function("unstable", [z, u], [z * blow_up, ca.jacobian(z * blow_up, z)])
+    prior = np.diag([1e-4, 1e-4, 4.0])
+    ekf = AugmentedEkf(step, 2, np.eye(3) * 1e-6, np.eye(2) * 1e-4, prior)
+    ekf.reset(np.array([0.0, 0.0, 3.0]))
+    ekf.correct(np.array([1.0, 2.0]))
+    ekf.predict(np.array([1.0]))
+    assert ekf.restarts == 1
+    np.testing.assert_array_equal(ekf.covariance, prior)
+    estimate = ekf.correct(np.array([1.5, 2.5]))  # re-seeded from the measurement
+    assert np.all(np.isfinite(estimate)) and estimate[:2] == pytest.approx([1.5, 2.5])

@@ -139,6 +139,7 @@ class AugmentedEkf:
         self._floor, self._ceiling = covariance_bounds(
             process_covariance, measurement_covariance, prior_covariance
         )
+        self.restarts = 0
         self.reset(np.zeros(prior_covariance.shape[0]))
 
     def reset(self, initial_estimate: np.ndarray) -> None:
@@ -170,13 +171,25 @@ class AugmentedEkf:
         return self.estimate.copy()
 
     def predict(self, applied_input: np.ndarray) -> None:
-        """Propagate over one sample with the input actually applied."""
+        """Propagate over one sample with the input actually applied.
+
+        If the prediction is not finite (the model's integration diverged, e.g. an RK4
+        step too long for the estimated speed), the filter restarts from the next
+        measurement with its prior covariance, keeping the unmeasured part of the
+        estimate if it is finite; ``restarts`` counts these.
+        """
         next_estimate, jacobian = self._step(self.estimate, applied_input)
         A = np.asarray(jacobian)
-        self.estimate = np.asarray(next_estimate).ravel()
-        self.covariance = condition_covariance(
-            A @ self.covariance @ A.T + self._process, self._floor, self._ceiling
-        )
+        next_estimate = np.asarray(next_estimate).ravel()
+        propagated = A @ self.covariance @ A.T + self._process
+        if not (np.all(np.isfinite(next_estimate)) and np.all(np.isfinite(propagated))):
+            self.restarts += 1
+            kept = self.estimate.copy()
+            kept[: self._measured] = 0.0
+            self.reset(np.where(np.isfinite(kept), kept, 0.0))
+            return
+        self.estimate = next_estimate
+        self.covariance = condition_covariance(propagated, self._floor, self._ceiling)
 
 
 class DisturbanceObserver:
