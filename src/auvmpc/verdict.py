@@ -147,7 +147,7 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
     if facts.relaxed_steps:
         degraded.append(f"{facts.relaxed_steps} steps with obstacle constraints relaxed")
     heading = facts.max_heading_error_after_transient_rad
-    if not is_underactuated(params) and heading is not None and heading > DEGRADED_HEADING_RAD:
+    if not params.underactuated and heading is not None and heading > DEGRADED_HEADING_RAD:
         degraded.append(
             f"heading error {heading:.2f} rad after the transient (limit {DEGRADED_HEADING_RAD})"
         )
@@ -177,11 +177,6 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
     return Verdict.OK, (
         f"tracked within {error:.3g} m ({error / length:.2g} vehicle lengths) after the transient"
     )
-
-
-def is_underactuated(params: VehicleParams) -> bool:
-    """Fewer than three independent body-frame force directions (surge, sway, yaw)."""
-    return bool(np.linalg.matrix_rank(params.T) < 3)
 
 
 def _capped(distance: float, fraction: float, extent: float) -> float:
