@@ -56,7 +56,7 @@ def test_a_tilted_pair_misses_a_mixed_direction_that_no_thrust_reaches(jmse):
     assert "sway" in pair.describe_actuation()  # a mix of all three axes, named
 
 
-@pytest.mark.parametrize("preset", ["jmse2210", "bluerov2-heavy"])
+@pytest.mark.parametrize("preset", ["jmse2210", "bluerov2-heavy", "rexrov"])
 def test_four_thruster_presets_are_fully_actuated(preset):
     vehicle = load_vehicle(preset)
     assert not vehicle.underactuated and vehicle.unactuated_direction is None
@@ -89,6 +89,25 @@ def test_videoray_pro3_preset_is_the_published_two_thruster_vehicle():
         -0.95, -6.04, -5.87, -30.73, -0.023, -0.45,
     )  # fmt: skip
     assert "Wang 2006" in vehicle.source and "mass" in vehicle.estimated
+
+
+def test_rexrov_allocation_matches_uuv_simulator_tam():
+    # uuv_thruster_manager/config/rexrov/TAM.yaml, thrusters 4-7, rows surge, sway (y to
+    # port) and yaw (z up): our y is to starboard and our z down, so rows 2 and 3 flip.
+    tam_surge = [0.7071068613706476, 0.7071068613706476, -0.7071065406341925, -0.7071065406341925]
+    tam_sway_port = [
+        0.7071067010024383,
+        -0.7071067010024383,
+        0.7071070217388206,
+        -0.7071070217388206,
+    ]
+    tam_yaw_up = [-0.6487987634902757, 0.6487987634902757, 0.6487987335687417, -0.6487987335687417]
+    rexrov = load_vehicle("rexrov")
+    expected = np.array([tam_surge, np.negative(tam_sway_port), np.negative(tam_yaw_up)])
+    # The TAM was computed from poses rounded to 1e-6 m and 1e-2 deg: 1e-6 covers it.
+    np.testing.assert_allclose(rexrov.T, expected, atol=1e-6)
+    assert rexrov.mass == 1862.87 and rexrov.m11 == pytest.approx(1862.87 + 779.79)
+    assert rexrov.Iz == pytest.approx(691.23 + 224.32)
 
 
 def test_controllers_that_need_full_actuation_refuse_an_underactuated_vehicle():
