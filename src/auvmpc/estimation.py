@@ -181,7 +181,8 @@ class AugmentedEkf:
         next_estimate, jacobian = self._step(self.estimate, applied_input)
         A = np.asarray(jacobian)
         next_estimate = np.asarray(next_estimate).ravel()
-        propagated = A @ self.covariance @ A.T + self._process
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite is handled below
+            propagated = A @ self.covariance @ A.T + self._process
         if not (np.all(np.isfinite(next_estimate)) and np.all(np.isfinite(propagated))):
             self.restarts += 1
             kept = self.estimate.copy()
