@@ -147,6 +147,30 @@ def test_lists(monkeypatch, capsys):
         (["run", "paper-ideal", "--controller", "fuzzy"], "controller.type"),
         (["run", "paper-ideal", "--set", "vehicle=rov9000"], "vehicle: unknown preset"),
         (["plot", "/nonexistent/run"], "RUN_DIR: not a run folder"),
+        (
+            [
+                "run",
+                "paper-ideal",
+                "--set",
+                "vehicle=videoray-pro3",
+                "--set",
+                "controller.R=[0.01]",
+            ],
+            "vehicle: underactuated: no sway; controller mpc needs full actuation",
+        ),
+        (
+            [
+                "run",
+                "paper-ideal",
+                "--set",
+                "vehicle=videoray-pro3",
+                "--set",
+                "controller.R=[0.01]",
+                "--controller",
+                "baseline",
+            ],
+            "controller baseline needs full actuation",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2(monkeypatch, capsys, args, expected):
@@ -171,3 +195,15 @@ def test_installed_entry_point_gives_no_traceback(tmp_path):
     assert process.returncode == 2
     assert process.stderr.count("\n") == 1 and "reference.circle.radius" in process.stderr
     assert "Traceback" not in process.stderr
+
+
+def test_a_run_that_is_not_ok_ends_with_one_warning_line(tmp_path, monkeypatch, capsys):
+    # A time limit no solver meets: every step falls back, nobody steers for the whole run.
+    code, stdout, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", "--set", "duration=15",
+        "--set", "controller.solver_time_limit_ms=0.001", "--no-figures",
+        "--out", str(tmp_path / "run"),
+    )  # fmt: skip
+    assert code == 0 and (tmp_path / "run" / "run.json").is_file()
+    warnings = [line for line in stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == ["warning: run lost: no control for 15 s (solver fallbacks in a row)"]

@@ -43,7 +43,7 @@ def test_bluerov_yaw_arm_is_published_value(bluerov):
     np.testing.assert_allclose(np.abs(bluerov.T[2]), 0.1888, atol=5e-5)
 
 
-def test_three_thrusters_are_enough_and_two_are_not():
+def test_three_thrusters_are_enough_two_are_underactuated_one_is_refused():
     three = (
         Thruster(position=(0.0, 0.0), angle_deg=0),
         Thruster(position=(0.5, 0.0), angle_deg=90),
@@ -52,8 +52,11 @@ def test_three_thrusters_are_enough_and_two_are_not():
     assert np.linalg.matrix_rank(allocation_matrix(three)) == 3
     base = load_vehicle("jmse2210").model_dump()
     base["thrusters"] = [t.model_dump() for t in three]
-    assert VehicleParams.model_validate(base).n_thrusters == 3
-    base["thrusters"] = base["thrusters"][:2]
+    vehicle = VehicleParams.model_validate(base)
+    assert vehicle.n_thrusters == 3 and not vehicle.underactuated
+    base["thrusters"] = base["thrusters"][1:]  # two sideways thrusters: sway and yaw
+    assert VehicleParams.model_validate(base).underactuated
+    base["thrusters"] = base["thrusters"][:1]
     with pytest.raises(ValueError, match="thrusters"):
         VehicleParams.model_validate(base)
 

@@ -373,7 +373,8 @@ def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None 
         ("median ms", "right"), ("p99 ms", "right"), ("max ms", "right"), ("wall s", "right"),
         *((("vs do-mpc", "right"),) if with_speedup else ()),
         ("RMS err m", "right"), ("RMS>tr m", "right"), ("final err m", "right"),
-        ("min clear. m", "right"), ("viol. F/dF", "right"), ("fails", "right"),
+        ("min clear. m", "right"), ("viol. F/dF", "right"), ("fallb./relax.", "right"),
+        ("verdict", "left"),
     )  # fmt: skip
     for title, justify in columns:
         table.add_column(title, justify=justify)
@@ -392,7 +393,8 @@ def format_table(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None 
             _number(row["final_position_error_m"], ".3f"),
             _number(row["min_obstacle_clearance_m"], ".3f"),
             f"{row['thrust_limit_violations']}/{row['thrust_rate_violations']}",
-            str(row["solver_failures"]),
+            f"{row.get('fallback_steps', row['solver_failures'])}/{row.get('relaxed_steps', '-')}",
+            str(row.get("verdict", "-")),
         )
     return table
 

@@ -115,6 +115,7 @@ def run(
     write_run(result, out_dir, figures=figures)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
+    warn_if_not_ok(result.metrics)
 
 
 @app.command()
@@ -319,6 +320,16 @@ def plot(
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
     redraw(run_dir)
     console.print(f"redrew figures in {run_dir}")
+
+
+def warn_if_not_ok(metrics: dict) -> None:
+    """One line on stderr when the run's verdict is not ok (auvmpc.verdict)."""
+    verdict = metrics.get("verdict")
+    if verdict is not None and verdict != "ok":
+        errors.print(
+            f"warning: run {verdict}: {metrics['verdict_reason']}",
+            highlight=False, soft_wrap=True, markup=False,
+        )  # fmt: skip
 
 
 def print_metrics(metrics: dict, title: str) -> None:

@@ -8,6 +8,14 @@ damping) are absorbed as an equivalent slowly varying force. The disturbance is 
 random walk, so a slowly varying current is tracked too. Every MPC feeds the
 estimate into its prediction, which removes the steady-state offset
 (Maeder, Borrelli, Morari 2009, "Linear offset-free model predictive control").
+
+The covariance stays a covariance for any run length: the measurement update is in
+Joseph form, P = (I - K H) P (I - K H)' + K R K' (Bucy and Joseph 1968; Simon 2006,
+"Optimal State Estimation", sec. 5.1), which keeps P symmetric positive semi-definite
+under round-off where the short form P - K H P does not; P is symmetrised after every
+update and its eigenvalues are held inside [floor, ceiling] (``covariance_bounds``).
+Without this the antisymmetric round-off of the short form grew tenfold every ~40 s on
+a 1500 s circle and P lost positive definiteness at 487 s (docs/model.md).
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ from typing import Annotated
 
 import casadi as ca
 import numpy as np
+import scipy.linalg
 from pydantic import Field
 
 from auvmpc.config import StrictModel
@@ -27,6 +36,8 @@ __all__ = [
     "AugmentedEkf",
     "DisturbanceObserver",
     "ObserverConfig",
+    "condition_covariance",
+    "covariance_bounds",
     "world_disturbance_dynamics",
 ]
 
@@ -65,11 +76,49 @@ def world_disturbance_dynamics(model: VehicleParams):
     return f
 
 
+# The smallest eigenvalue a covariance may have, as a fraction of the smallest noise
+# variance the filter assumes: far below any real uncertainty, far above round-off.
+COVARIANCE_FLOOR_FRACTION = 1e-6
+# The largest, as a multiple of the largest prior variance: a filter that knows 100 times
+# less than at the start carries no information, and beyond that only round-off grows.
+COVARIANCE_CEILING_FACTOR = 100.0
+
+
+def covariance_bounds(
+    process_covariance: np.ndarray,
+    measurement_covariance: np.ndarray,
+    prior_covariance: np.ndarray,
+) -> tuple[float, float]:
+    """(floor, ceiling) for the eigenvalues of the filter covariance (see the constants)."""
+    noise = np.concatenate([np.diag(process_covariance), np.diag(measurement_covariance)])
+    floor = COVARIANCE_FLOOR_FRACTION * float(np.min(noise[noise > 0]))
+    ceiling = COVARIANCE_CEILING_FACTOR * float(np.max(np.diag(prior_covariance)))
+    return floor, ceiling
+
+
+def condition_covariance(covariance: np.ndarray, floor: float, ceiling: float) -> np.ndarray:
+    """The symmetric part of ``covariance`` with its eigenvalues clipped to [floor, ceiling].
+
+    The eigen-decomposition is only rebuilt when a bound is crossed, so a healthy
+    covariance comes back as its symmetric part, unchanged otherwise.
+    """
+    symmetric = 0.5 * (covariance + covariance.T)
+    eigenvalues = np.linalg.eigvalsh(symmetric)
+    if eigenvalues[0] >= floor and eigenvalues[-1] <= ceiling:
+        return symmetric
+    eigenvalues, vectors = np.linalg.eigh(symmetric)
+    clipped = np.clip(eigenvalues, floor, ceiling)
+    rebuilt = (vectors * clipped) @ vectors.T
+    return 0.5 * (rebuilt + rebuilt.T)
+
+
 class AugmentedEkf:
     """Extended Kalman filter for a state augmented with a random-walk disturbance.
 
     ``step`` is a CasADi function (z, u) -> (z_next, dz_next/dz) over one sample; the
-    first ``measured`` entries of z are measured directly (H = [I 0]).
+    first ``measured`` entries of z are measured directly (H = [I 0]). The covariance
+    is updated in Joseph form and kept symmetric with bounded eigenvalues (module
+    docstring), so it stays positive definite however long the filter runs.
     """
 
     def __init__(
@@ -87,6 +136,10 @@ class AugmentedEkf:
         self._measurement = measurement_covariance
         self._prior = prior_covariance
         self._angle_index = angle_index
+        self._floor, self._ceiling = covariance_bounds(
+            process_covariance, measurement_covariance, prior_covariance
+        )
+        self.restarts = 0
         self.reset(np.zeros(prior_covariance.shape[0]))
 
     def reset(self, initial_estimate: np.ndarray) -> None:
@@ -107,18 +160,37 @@ class AugmentedEkf:
             i = self._angle_index
             innovation[i] = math.remainder(innovation[i], 2.0 * math.pi)
         P = self.covariance
-        S = P[:m, :m] + self._measurement
-        gain = np.linalg.solve(S, P[:m, :]).T  # P H' S^-1 with H = [I 0]
+        S = P[:m, :m] + self._measurement  # H P H' + R, positive definite
+        gain = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), P[:m, :]).T  # P H' S^-1
         self.estimate = self.estimate + gain @ innovation
-        self.covariance = P - gain @ P[:m, :]
+        # Joseph form: (I - K H) P (I - K H)' + K R K', with H = [I 0].
+        keep = np.eye(len(P))
+        keep[:, :m] -= gain
+        joseph = keep @ P @ keep.T + gain @ self._measurement @ gain.T
+        self.covariance = condition_covariance(joseph, self._floor, self._ceiling)
         return self.estimate.copy()
 
     def predict(self, applied_input: np.ndarray) -> None:
-        """Propagate over one sample with the input actually applied."""
+        """Propagate over one sample with the input actually applied.
+
+        If the prediction is not finite (the model's integration diverged, e.g. an RK4
+        step too long for the estimated speed), the filter restarts from the next
+        measurement with its prior covariance, keeping the unmeasured part of the
+        estimate if it is finite; ``restarts`` counts these.
+        """
         next_estimate, jacobian = self._step(self.estimate, applied_input)
         A = np.asarray(jacobian)
-        self.estimate = np.asarray(next_estimate).ravel()
-        self.covariance = A @ self.covariance @ A.T + self._process
+        next_estimate = np.asarray(next_estimate).ravel()
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite is handled below
+            propagated = A @ self.covariance @ A.T + self._process
+        if not (np.all(np.isfinite(next_estimate)) and np.all(np.isfinite(propagated))):
+            self.restarts += 1
+            kept = self.estimate.copy()
+            kept[: self._measured] = 0.0
+            self.reset(np.where(np.isfinite(kept), kept, 0.0))
+            return
+        self.estimate = next_estimate
+        self.covariance = condition_covariance(propagated, self._floor, self._ceiling)
 
 
 class DisturbanceObserver:

@@ -9,6 +9,7 @@ import numpy as np
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.log import SimLog
 from auvmpc.vehicle import VehicleParams
+from auvmpc.verdict import RunFacts, judge, relative_heading_turns
 
 __all__ = ["compute_metrics", "position_error", "heading_error", "LIMIT_TOLERANCE_N"]
 
@@ -38,11 +39,12 @@ def thrust_increments(log: SimLog) -> np.ndarray:
 
 def compute_metrics(
     log: SimLog, limits: VehicleParams, transient_s: float = 20.0
-) -> dict[str, float | int | None]:
+) -> dict[str, float | int | str | None]:
     """All interfaces.md metrics, plus steady-state errors after ``transient_s``.
 
     ``limits`` supplies the hard thrust and rate limits the log is checked against
-    (the controller's nominal vehicle: the limits are the hardware's).
+    (the controller's nominal vehicle: the limits are the hardware's) and the vehicle
+    size the verdict scales with (``auvmpc.verdict``).
     """
     error = position_error(log)
     heading = heading_error(log)
@@ -56,7 +58,11 @@ def compute_metrics(
     solve = log.solve_ms
     steady = log.t >= transient_s - 1e-9
     clearance = log.clearance_m
-    return {
+    fallback = np.array([status == ControlStatus.FALLBACK for status in log.status], dtype=bool)
+    relaxed_steps = sum(status == ControlStatus.RELAXED for status in log.status)
+    yaw_rate = np.abs(log.state[:, 5])
+    heading_after = np.abs(heading[steady])
+    metrics = {
         "rms_position_error_m": _rms(error),
         "max_position_error_m": float(error.max()),
         "final_position_error_m": float(error[-1]),
@@ -74,14 +80,47 @@ def compute_metrics(
         "solve_ms_p99": _percentile(solve, 99),
         "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
         "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
-        "solver_failures": sum(status == ControlStatus.FALLBACK for status in log.status),
+        "solver_failures": int(fallback.sum()),
+        "fallback_steps": int(fallback.sum()),
+        "relaxed_steps": int(relaxed_steps),
+        "longest_fallback_streak": longest_run(fallback),
+        "max_abs_yaw_rate_rad_per_s": float(yaw_rate.max()),
         "transient_s": float(transient_s),
         "rms_position_error_after_transient_m": _rms(error[steady]),
         "max_position_error_after_transient_m": float(error[steady].max())
         if steady.any()
         else None,
         "rms_heading_error_after_transient_rad": _rms(heading[steady]),
+        "max_heading_error_after_transient_rad": float(heading_after.max())
+        if steady.any()
+        else None,
     }
+    facts = RunFacts(
+        sample_time=log.sample_time,
+        max_error_after_transient_m=metrics["max_position_error_after_transient_m"],
+        max_heading_error_after_transient_rad=metrics["max_heading_error_after_transient_rad"],
+        max_abs_yaw_rate_after_transient=float(yaw_rate[steady].max()) if steady.any() else None,
+        max_abs_reference_yaw_rate=float(np.abs(log.reference[:, 5]).max()),
+        reference_extent_m=float(np.hypot(*np.ptp(log.reference[:, :2], axis=0))),
+        heading_turns=relative_heading_turns(log.state[:, 2], log.reference[:, 2]),
+        fallback_steps=metrics["fallback_steps"],
+        longest_fallback_streak=metrics["longest_fallback_streak"],
+        relaxed_steps=metrics["relaxed_steps"],
+        limit_violations=metrics["thrust_limit_violations"],
+        rate_violations=metrics["thrust_rate_violations"],
+        min_obstacle_clearance_m=metrics["min_obstacle_clearance_m"],
+    )
+    metrics["verdict"], metrics["verdict_reason"] = judge(facts, limits)
+    return metrics
+
+
+def longest_run(flags: np.ndarray) -> int:
+    """Length of the longest stretch of consecutive True values."""
+    longest = current = 0
+    for flag in flags:
+        current = current + 1 if flag else 0
+        longest = max(longest, current)
+    return longest
 
 
 def _rms(values: np.ndarray) -> float | None:

@@ -38,6 +38,7 @@ __all__ = [
     "Thruster",
     "VehicleParams",
     "allocation_matrix",
+    "allocation_rank",
     "body_from_world",
     "dynamics",
     "heave_dynamics",
@@ -130,21 +131,65 @@ class VehicleParams(StrictModel):
     Yvv: Damping = Field(description="quadratic sway damping (N s2/m2)")
     Nr: Damping = Field(description="linear yaw damping (N m s)")
     Nrr: Damping = Field(description="quadratic yaw damping (N m s2)")
-    thrusters: tuple[Thruster, ...] = Field(min_length=3, description="horizontal thrusters")
+    thrusters: tuple[Thruster, ...] = Field(
+        min_length=2,
+        description="horizontal thrusters; fewer than three independent directions make the "
+        "vehicle underactuated (``underactuated``)",
+    )
     thrust_limits: ThrustLimits = Field(description="per thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per thruster |dF/dt| bound (N/s)")
     heave: HeaveParams | None = Field(default=None, description="depth model, if any")
 
     @model_validator(mode="after")
-    def _controllable(self) -> VehicleParams:
-        rank = np.linalg.matrix_rank(allocation_matrix(self.thrusters))
-        if rank < 3:
+    def _steerable(self) -> VehicleParams:
+        rank = allocation_rank(allocation_matrix(self.thrusters))
+        if rank < 2:
             raise FieldError(
                 "thrusters",
                 [t.model_dump() for t in self.thrusters],
-                f"the layout spans only {rank} of surge, sway and yaw (need all 3)",
+                f"the layout spans only {rank} of surge, sway and yaw (need at least 2: "
+                "a vehicle must be able to push and turn)",
             )
         return self
+
+    @property
+    def underactuated(self) -> bool:
+        """True when the thrusters cannot make every body-frame force and moment
+        (allocation rank < 3), e.g. two stern thrusters: no sway force."""
+        return allocation_rank(self.T) < 3
+
+    @property
+    def unactuated_direction(self) -> np.ndarray | None:
+        """Unit [f_u, f_v, M_r] direction no thrust combination can produce (orthogonal to
+        the allocation's range), or None for a fully actuated vehicle."""
+        if not self.underactuated:
+            return None
+        left, _, _ = np.linalg.svd(self.T)
+        direction = left[:, -1]
+        return direction * np.sign(direction[np.argmax(np.abs(direction))])
+
+    def describe_actuation(self) -> str:
+        """'fully actuated', or which direction is missing, e.g. 'underactuated: no sway'."""
+        direction = self.unactuated_direction
+        if direction is None:
+            return "fully actuated"
+        axis = int(np.argmax(np.abs(direction)))
+        if abs(direction[axis]) > 1.0 - 1e-9:
+            return f"underactuated: no {('surge', 'sway', 'yaw')[axis]}"
+        names = ("surge", "sway", "yaw")
+        mix = ", ".join(f"{v:+.2f} {n}" for v, n in zip(direction, names, strict=True))
+        return f"underactuated: no {mix}"
+
+    def require_full_actuation(self, controller: str, why: str) -> None:
+        """Raise ConfigError (one line, exit 2 from the CLI) if this vehicle is
+        underactuated; ``controller`` and ``why`` say who needs full actuation and why."""
+        if self.underactuated:
+            raise ConfigError(
+                "vehicle",
+                self.name,
+                f"{self.describe_actuation()}; controller {controller} needs full actuation "
+                f"({why}); use ltv-mpc or nmpc",
+            )
 
     @property
     def Iz(self) -> float:
@@ -176,6 +221,17 @@ class VehicleParams(StrictModel):
     @property
     def thrust_max(self) -> float:
         return self.thrust_limits[1]
+
+
+# Singular values below this fraction of the largest count as zero in the allocation rank:
+# thruster angles are given in degrees to a few decimals, far coarser than round-off.
+ALLOCATION_RANK_TOL = 1e-9
+
+
+def allocation_rank(matrix: np.ndarray) -> int:
+    """Number of independent body-frame directions an allocation matrix (3, n) can make."""
+    singular = np.linalg.svd(matrix, compute_uv=False)
+    return int(np.sum(singular > ALLOCATION_RANK_TOL * singular[0])) if singular[0] > 0 else 0
 
 
 def allocation_matrix(thrusters: tuple[Thruster, ...] | list[Thruster]) -> np.ndarray:

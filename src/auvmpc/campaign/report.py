@@ -185,7 +185,13 @@ def campaign_report(
         passed = (frame["status"] == "ok").to_numpy() & (parsed is None)
     n, successes = len(frame), int(passed.sum())
     low, high = wilson_interval(successes, n)
-    metric_columns = frame.attrs["metric_columns"]
+    # Text metrics (verdict, verdict_reason) have no percentiles: verdicts are counted.
+    metric_columns = [c for c in frame.attrs["metric_columns"] if _numeric(frame[c])]
+    verdicts = (
+        {str(k): int(v) for k, v in ok["verdict"].value_counts().sort_index().items()}
+        if "verdict" in ok.columns
+        else {}
+    )
     numeric_parameters = [c for c in frame.attrs["parameter_columns"] if _numeric(frame[c])]
     rank_by = worst_by or (parsed.names[0] if parsed else "rms_position_error_m")
     if len(ok) and rank_by not in frame.columns:
@@ -236,6 +242,7 @@ def campaign_report(
         "successes": successes,
         "success_rate": successes / n if n else None,
         "success_ci95": [low, high],
+        "verdicts": verdicts,
         "metrics": {c: _stats(ok[c]) for c in metric_columns},
         "parameters": {c: _stats(frame[c]) for c in numeric_parameters},
         "worst_by": rank_by,
@@ -419,6 +426,9 @@ def _markdown(summary: Mapping[str, Any]) -> str:
         f"**{summary['successes']} / {summary['rows']} passed"
         + (f" = {100 * rate:.1f} %" if rate is not None else "")
         + f", 95 % Wilson interval [{100 * low:.1f} %, {100 * high:.1f} %]**",
+        "",
+        "Verdicts of the finished runs: "
+        + (", ".join(f"{k} {v}" for k, v in summary["verdicts"].items()) or "none recorded"),
         "",
         "## Metrics over the finished runs",
         "",

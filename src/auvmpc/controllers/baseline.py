@@ -165,6 +165,9 @@ class BaselineController(Controller):
             raise ValueError(f"sample_time must be finite and > 0, got {sample_time!r}")
         if not isinstance(gains, BaselineConfig):
             raise TypeError(f"gains must be a BaselineConfig, got {type(gains).__name__}")
+        model.require_full_actuation(
+            "baseline", "it commands surge, sway and yaw forces through the pseudo-inverse"
+        )
         self.model = model
         self.sample_time = float(sample_time)
         self.gains = gains

@@ -234,6 +234,11 @@ class PaperMpc(LinearMpc):
     """The paper's controller: SDC matrices refreshed at the current state every sample."""
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+        model.require_full_actuation(
+            "mpc",
+            "its model frozen at the current heading cannot move the vehicle sideways by "
+            "turning: without sway thrust the lateral position is uncontrollable in it",
+        )
         super().__init__(model, config)
         # Thrust and body-frame disturbance enter the same velocity rows: [B_c, G_c].
         self._input_matrix = np.hstack([input_matrix(model), disturbance_matrix(model)])

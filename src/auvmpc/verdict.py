@@ -1,0 +1,185 @@
+"""Whether a run went well: ``ok``, ``degraded`` or ``lost``, with a one-line reason.
+
+The rules (docs/verdict.md gives the reason for each number) scale with the vehicle and
+the reference, so that a 15 kg vehicle and a 2 t ROV are judged alike:
+
+lost, if any of
+    * after the transient the vehicle was farther from the reference than
+      ``LOST_LENGTHS`` vehicle lengths (at most ``LOST_EXTENT_FRACTION`` of the
+      reference's size): it left the path;
+    * its heading turned a full revolution or more relative to the reference's: it spun;
+    * the controller fell back for ``LOST_FALLBACK_S`` seconds in a row: nobody was steering.
+
+degraded, if not lost and any of
+    * a solver fallback, or an obstacle constraint relaxed;
+    * after the transient, a position error above ``DEGRADED_LENGTHS`` vehicle lengths (at
+      most ``DEGRADED_EXTENT_FRACTION`` of the reference's size);
+    * after the transient, a heading error above ``DEGRADED_HEADING_RAD`` (fully actuated
+      vehicles only: an underactuated one steers sideways with its heading);
+    * after the transient, a yaw rate above both ``YAW_RATE_REFERENCE_FACTOR`` times the
+      reference's largest and ``YAW_RATE_CAPABILITY_FRACTION`` of the vehicle's own
+      top yaw rate: a yaw-rate excursion;
+    * a thrust or thrust-rate limit violated, or an obstacle touched.
+
+ok otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from auvmpc.vehicle import VehicleParams
+
+__all__ = [
+    "Verdict",
+    "RunFacts",
+    "characteristic_length_m",
+    "judge",
+    "relative_heading_turns",
+    "top_yaw_rate_rad_per_s",
+]
+
+# Sea water density (kg/m3), for the volume-equivalent size of a vehicle.
+SEA_WATER_DENSITY = 1025.0
+
+LOST_LENGTHS = 5.0
+LOST_EXTENT_FRACTION = 0.25
+LOST_FALLBACK_S = 10.0
+DEGRADED_LENGTHS = 1.0
+DEGRADED_EXTENT_FRACTION = 0.1
+DEGRADED_HEADING_RAD = 0.5
+YAW_RATE_REFERENCE_FACTOR = 2.0
+YAW_RATE_CAPABILITY_FRACTION = 0.5
+
+
+class Verdict:
+    """The three verdicts (plain strings in run.json)."""
+
+    OK = "ok"
+    DEGRADED = "degraded"
+    LOST = "lost"
+
+
+def characteristic_length_m(params: VehicleParams) -> float:
+    """A vehicle's size (m): the span of its thruster layout or the side of the cube of
+    water it displaces, whichever is larger.
+
+    jmse2210 0.85 m, bluerov2-heavy 0.38 m, rexrov 1.30 m: the layout span tracks the
+    hull length of thruster-driven vehicles; the cube root keeps a vehicle with
+    thrusters bunched at the centre from looking tiny.
+    """
+    span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
+    cube = (params.mass / SEA_WATER_DENSITY) ** (1.0 / 3.0)
+    return max(span, cube)
+
+
+def top_yaw_rate_rad_per_s(params: VehicleParams) -> float:
+    """The steady yaw rate under the largest yaw moment the thrusters can make (rad/s):
+    |Nrr| r^2 + |Nr| r = M_max. Infinite for a vehicle without yaw damping."""
+    arms = params.T[2]
+    low, high = params.thrust_limits
+    moment = float(np.sum(np.maximum(arms * low, arms * high)))
+    linear, quadratic = abs(params.Nr), abs(params.Nrr)
+    if quadratic > 0.0:
+        return (-linear + math.sqrt(linear**2 + 4.0 * quadratic * moment)) / (2.0 * quadratic)
+    return moment / linear if linear > 0.0 else math.inf
+
+
+def relative_heading_turns(psi: np.ndarray, psi_ref: np.ndarray) -> float:
+    """How far the vehicle's heading wound relative to the reference's over the run, in
+    revolutions: the range of their difference divided by 2 pi. Both are continuous
+    (unwrapped) in the log, so the difference counts every turn. Aligning with the
+    reference from any start needs less than one."""
+    if len(psi) == 0:
+        return 0.0
+    relative = np.asarray(psi) - np.asarray(psi_ref)
+    return float((relative.max() - relative.min()) / (2.0 * math.pi))
+
+
+@dataclass(frozen=True)
+class RunFacts:
+    """What the verdict looks at, gathered from a log by ``metrics.compute_metrics``."""
+
+    sample_time: float
+    max_error_after_transient_m: float | None  # None: the run ended within the transient
+    max_heading_error_after_transient_rad: float | None
+    max_abs_yaw_rate_after_transient: float | None
+    max_abs_reference_yaw_rate: float
+    reference_extent_m: float  # diagonal of the reference path's bounding box
+    heading_turns: float  # relative_heading_turns over the whole run
+    fallback_steps: int
+    longest_fallback_streak: int
+    relaxed_steps: int
+    limit_violations: int
+    rate_violations: int
+    min_obstacle_clearance_m: float | None
+
+
+def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
+    """``(verdict, reason)`` for a run of ``params`` (the controller's nominal vehicle)."""
+    length = characteristic_length_m(params)
+    lost, degraded = [], []
+
+    lost_distance = _capped(LOST_LENGTHS * length, LOST_EXTENT_FRACTION, facts.reference_extent_m)
+    degraded_distance = _capped(
+        DEGRADED_LENGTHS * length, DEGRADED_EXTENT_FRACTION, facts.reference_extent_m
+    )
+    error = facts.max_error_after_transient_m
+    if error is not None and error > lost_distance:
+        lost.append(
+            f"left the path: {error:.3g} m off after the transient (limit {lost_distance:.3g} m)"
+        )
+    elif error is not None and error > degraded_distance:
+        degraded.append(
+            f"position error {error:.3g} m after the transient (limit {degraded_distance:.3g} m)"
+        )
+    if facts.heading_turns >= 1.0:
+        lost.append(f"spun: heading wound {facts.heading_turns:.1f} turns against the reference")
+    streak_s = facts.longest_fallback_streak * facts.sample_time
+    if streak_s >= LOST_FALLBACK_S:
+        lost.append(f"no control for {streak_s:.3g} s (solver fallbacks in a row)")
+    elif facts.fallback_steps:
+        streak = facts.longest_fallback_streak
+        degraded.append(f"{facts.fallback_steps} fallback steps (longest streak {streak})")
+    if facts.relaxed_steps:
+        degraded.append(f"{facts.relaxed_steps} steps with obstacle constraints relaxed")
+    heading = facts.max_heading_error_after_transient_rad
+    if not params.underactuated and heading is not None and heading > DEGRADED_HEADING_RAD:
+        degraded.append(
+            f"heading error {heading:.2f} rad after the transient (limit {DEGRADED_HEADING_RAD})"
+        )
+    yaw_rate = facts.max_abs_yaw_rate_after_transient
+    yaw_limit = max(
+        YAW_RATE_REFERENCE_FACTOR * facts.max_abs_reference_yaw_rate,
+        YAW_RATE_CAPABILITY_FRACTION * top_yaw_rate_rad_per_s(params),
+    )
+    if yaw_rate is not None and yaw_rate > yaw_limit:
+        degraded.append(
+            f"yaw rate {yaw_rate:.2f} rad/s after the transient (limit {yaw_limit:.2f})"
+        )
+    if facts.limit_violations or facts.rate_violations:
+        degraded.append(
+            f"thrust limits violated ({facts.limit_violations} force, {facts.rate_violations} rate)"
+        )
+    clearance = facts.min_obstacle_clearance_m
+    if clearance is not None and clearance < 0.0:
+        degraded.append(f"touched an obstacle (clearance {clearance:.3g} m)")
+
+    if lost:
+        return Verdict.LOST, "; ".join(lost + degraded)
+    if degraded:
+        return Verdict.DEGRADED, "; ".join(degraded)
+    if error is None:
+        return Verdict.OK, "no trouble found (the run ended within the transient)"
+    return Verdict.OK, (
+        f"tracked within {error:.3g} m ({error / length:.2g} vehicle lengths) after the transient"
+    )
+
+
+def _capped(distance: float, fraction: float, extent: float) -> float:
+    """``distance``, but no more than ``fraction`` of a reference path's size (a path that
+    stays put, extent 0, is judged by the vehicle's size alone)."""
+    return min(distance, fraction * extent) if extent > 0.0 else distance
