@@ -66,7 +66,12 @@ def run(
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="run folder to write")] = None,
     controller: Annotated[
-        str | None, typer.Option("--controller", help="override controller.type")
+        str | None,
+        typer.Option(
+            "--controller",
+            help="a controller.type (other settings from the scenario) or a bench label "
+            "such as ltv-mpc-nc30 (its overrides; --set still wins)",
+        ),
     ] = None,
     set_: Annotated[
         list[str] | None,
@@ -85,9 +90,7 @@ def run(
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
-    overrides = list(set_ or [])
-    if controller is not None:
-        overrides.append(f"controller.type={controller}")
+    overrides = [*controller_overrides(controller), *(set_ or [])]
     if from_campaign is not None:
         from auvmpc.campaign import scenario_for_run
 
@@ -105,7 +108,7 @@ def run(
     name = resolved.scenario.name
     if from_campaign is not None:
         name = f"{name}-run{index}"
-    label = f"{name}-{resolved.scenario.controller.type}"
+    label = f"{name}-{controller or resolved.scenario.controller.type}"
     out_dir = out if out is not None else Path("runs") / label
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
@@ -115,6 +118,27 @@ def run(
     write_run(result, out_dir, figures=figures)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
+
+
+def controller_overrides(label: str | None) -> tuple[str, ...]:
+    """The overrides ``run --controller LABEL`` stands for.
+
+    A ``controller.type`` value sets the type only (the scenario's tuning is kept, as
+    before); any other label of the bench (``CONTROLLER_PRESETS``, e.g. ``ltv-mpc-nc30``)
+    applies that preset's overrides.
+    """
+    from auvmpc.controllers.config import CONTROLLER_PRESETS, ControllerType
+
+    if label is None:
+        return ()
+    types = {kind.value for kind in ControllerType}
+    if label in types:
+        return (f"controller.type={label}",)
+    if label in CONTROLLER_PRESETS:
+        return CONTROLLER_PRESETS[label]
+    known = sorted(types | set(CONTROLLER_PRESETS))
+    reason = f"not a controller.type or bench label; one of {known}"
+    raise ConfigError("--controller", label, reason)
 
 
 @app.command()
