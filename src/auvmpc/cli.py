@@ -345,6 +345,28 @@ def plot(
     console.print(f"redrew figures in {run_dir}")
 
 
+@app.command()
+def schema(
+    kind: Annotated[str, typer.Argument(help="scenario | vehicle | campaign")] = "scenario",
+    markdown: Annotated[
+        bool,
+        typer.Option("--markdown", help="print docs/scenario-reference.md (all files) instead"),
+    ] = False,
+) -> None:
+    """Print the JSON Schema of a scenario, vehicle or campaign file (from the pydantic models)."""
+    import json
+
+    from auvmpc.schema import SchemaKind, json_schema, reference_markdown
+
+    if markdown:
+        sys.stdout.write(reference_markdown())
+        return
+    kinds = [member.value for member in SchemaKind]
+    if kind not in kinds:
+        raise ConfigError("KIND", kind, f"one of {kinds}")
+    sys.stdout.write(json.dumps(json_schema(kind), indent=2) + "\n")
+
+
 def print_metrics(metrics: dict, title: str) -> None:
     table = Table(title=title, show_header=True)
     table.add_column("metric")
