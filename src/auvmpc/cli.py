@@ -346,6 +346,24 @@ def plot(
 
 
 @app.command()
+def export(
+    run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+    format_: Annotated[
+        str, typer.Option("--format", help="rosbag2 (MCAP storage; needs auvmpc[ros])")
+    ] = "rosbag2",
+    out: Annotated[
+        Path | None, typer.Option("--out", help="folder to create (default RUN_DIR/rosbag2)")
+    ] = None,
+) -> None:
+    """Write a run in another tool's format: a ROS 2 bag for Foxglove, PlotJuggler, rviz."""
+    from auvmpc.export import export_rosbag2
+
+    if format_ != "rosbag2":
+        raise ConfigError("--format", format_, "one of ['rosbag2']")
+    console.print(f"wrote {export_rosbag2(run_dir, out)}")
+
+
+@app.command()
 def schema(
     kind: Annotated[str, typer.Argument(help="scenario | vehicle | campaign")] = "scenario",
     markdown: Annotated[
