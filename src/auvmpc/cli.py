@@ -332,17 +332,53 @@ def vehicles() -> None:
         console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
 
 
+FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
+Dpi = Annotated[int, typer.Option("--dpi", help="resolution (dots per inch) of raster output")]
+
+
+def check_figure_options(fmt: str, dpi: int) -> None:
+    from auvmpc.plots import FIGURE_FORMATS
+
+    if fmt not in FIGURE_FORMATS:
+        raise ConfigError("--format", fmt, f"one of {list(FIGURE_FORMATS)}")
+    if not 10 <= dpi <= 2400:
+        raise ConfigError("--dpi", dpi, "must be between 10 and 2400")
+
+
 @app.command()
 def plot(
     run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+    fmt: FigureFormat = "png",
+    dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
     from auvmpc.runner import redraw
 
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    redraw(run_dir)
-    console.print(f"redrew figures in {run_dir}")
+    check_figure_options(fmt, dpi)
+    redraw(run_dir, fmt, dpi)
+    console.print(f"redrew figures in {run_dir} ({fmt})")
+
+
+@app.command()
+def compare(
+    run_dirs: Annotated[list[Path], typer.Argument(help="two or more folders of 'auvmpc run'")],
+    out: Annotated[Path, typer.Option("--out", help="folder for the overlays and the table")],
+    label: Annotated[
+        list[str] | None, typer.Option("--label", help="legend name per run, in order")
+    ] = None,
+    fmt: FigureFormat = "png",
+    dpi: Dpi = 120,
+) -> None:
+    """Overlay runs (trajectories, errors, thrusts) and tabulate their metrics."""
+    from auvmpc.compare import compare_runs, load_compared_runs, metrics_markdown
+
+    check_figure_options(fmt, dpi)
+    runs = load_compared_runs(run_dirs, label)
+    compare_runs(runs, out, fmt, dpi)
+    console.print(metrics_markdown(runs), highlight=False, markup=False)
+    console.print(f"wrote {out}")
 
 
 @app.command()

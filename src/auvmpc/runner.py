@@ -187,30 +187,40 @@ def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool =
     return out_dir
 
 
-def draw_figures(log: SimLog, scenario: Scenario, limits: VehicleParams, folder: Path) -> None:
-    from auvmpc.plots import run_figures, save_figures
+def draw_figures(
+    log: SimLog,
+    scenario: Scenario,
+    limits: VehicleParams,
+    folder: Path,
+    fmt: str = "png",
+    dpi: int = 120,
+) -> None:
+    from auvmpc.plots import run_figures, run_title, save_figures
 
-    figures = run_figures(
-        log, scenario.obstacles, scenario.controller.vehicle_radius, limits, title=scenario.name
-    )
-    save_figures(figures, folder)
+    title = run_title(scenario, limits.name)
+    radius = scenario.controller.vehicle_radius
+    figures = run_figures(log, scenario.obstacles, radius, limits, title)
+    save_figures(figures, folder, dpi=dpi, fmt=fmt)
 
 
-def draw_depth_figures(log: DepthLog, scenario: DepthScenario, heave, folder: Path) -> None:
+def draw_depth_figures(
+    log: DepthLog, scenario: DepthScenario, heave, folder: Path, fmt: str = "png", dpi: int = 120
+) -> None:
     from auvmpc.plots import figure_depth, save_figures
 
-    save_figures({"depth": figure_depth(log, heave, title=scenario.name)}, folder)
+    title = f"{scenario.name}: {scenario.controller.type}"
+    save_figures({"depth": figure_depth(log, heave, title=title)}, folder, dpi=dpi, fmt=fmt)
 
 
-def redraw(run_dir: Path) -> None:
-    """Re-draw the figures of a saved run folder (horizontal or depth)."""
+def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
+    """Re-draw the figures of a saved run folder (horizontal or depth) as ``fmt`` files."""
     run_dir = Path(run_dir)
     info = json.loads((run_dir / "run.json").read_text())
     if info["scenario"].get("kind") == "depth":
         scenario = DepthScenario.model_validate(info["scenario"])
         log = DepthLog.read_csv(run_dir / "log.csv", scenario.controller.sample_time)
         heave = VehicleParams.model_validate(info["plant"]).heave
-        draw_depth_figures(log, scenario, heave, run_dir)
+        draw_depth_figures(log, scenario, heave, run_dir, fmt, dpi)
         return
     info, log = read_run(run_dir)
     draw_figures(
@@ -218,6 +228,8 @@ def redraw(run_dir: Path) -> None:
         Scenario.model_validate(info["scenario"]),
         VehicleParams.model_validate(info["model"]),
         run_dir,
+        fmt,
+        dpi,
     )
 
 
