@@ -14,7 +14,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev,compare,ros]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,compare,ros,video]"
 	touch $(STAMP)
 
 reproduce: $(STAMP)
