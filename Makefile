@@ -27,7 +27,7 @@ bench: $(STAMP)
 	$(BIN)/auvmpc bench
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
 
 clean:
 	rm -rf $(VENV) results runs

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from auvmpc.cli import controller_overrides
+from auvmpc.api import controller_overrides
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.errors import ConfigError
 from tests.test_cli import run_cli

@@ -108,7 +108,7 @@ def test_an_unknown_format_is_refused(tmp_path):
 @pytest.fixture(scope="module")
 def two_runs(tmp_path_factory):
     """paper-ideal for 5 s by the paper's MPC and by ltv-mpc-nc30 (two bench labels)."""
-    from auvmpc.cli import controller_overrides
+    from auvmpc.api import controller_overrides
     from auvmpc.runner import simulate, write_run
 
     folder = tmp_path_factory.mktemp("runs")

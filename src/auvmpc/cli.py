@@ -87,6 +87,7 @@ def run(
     ] = None,
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
+    from auvmpc.api import controller_overrides
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
@@ -118,27 +119,6 @@ def run(
     write_run(result, out_dir, figures=figures)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
-
-
-def controller_overrides(label: str | None) -> tuple[str, ...]:
-    """The overrides ``run --controller LABEL`` stands for.
-
-    A ``controller.type`` value sets the type only (the scenario's tuning is kept, as
-    before); any other label of the bench (``CONTROLLER_PRESETS``, e.g. ``ltv-mpc-nc30``)
-    applies that preset's overrides.
-    """
-    from auvmpc.controllers.config import CONTROLLER_PRESETS, ControllerType
-
-    if label is None:
-        return ()
-    types = {kind.value for kind in ControllerType}
-    if label in types:
-        return (f"controller.type={label}",)
-    if label in CONTROLLER_PRESETS:
-        return CONTROLLER_PRESETS[label]
-    known = sorted(types | set(CONTROLLER_PRESETS))
-    reason = f"not a controller.type or bench label; one of {known}"
-    raise ConfigError("--controller", label, reason)
 
 
 @app.command()

@@ -27,7 +27,7 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 import pandas as pd
@@ -109,13 +109,17 @@ def read_run_tables(run_dir: Path) -> RunTables:
     return RunTables(info, log)
 
 
-def read_log_frame(path: Path) -> pd.DataFrame:
-    """log.csv as a DataFrame, every number exactly as written (Python's float parser).
+def read_log_frame(source: Path | TextIO) -> pd.DataFrame:
+    """log.csv (a path or an open text stream) as a DataFrame, every number exactly as
+    written (Python's float parser).
 
     Columns are kept by name; text columns (``status``) stay text, empty cells are NaN.
     """
-    with open(path, newline="") as handle:
-        rows = list(csv.reader(handle))
+    if isinstance(source, str | Path):
+        with open(source, newline="") as handle:
+            rows = list(csv.reader(handle))
+    else:
+        rows = list(csv.reader(source))
     header, body = rows[0], rows[1:]
     columns = {}
     for i, name in enumerate(header):
