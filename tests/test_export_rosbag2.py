@@ -56,13 +56,20 @@ def test_paper_obstacles_bag_reads_back_as_the_log(monkeypatch, capsys, tmp_path
         "/odom": "nav_msgs/msg/Odometry",
         "/reference/odom": "nav_msgs/msg/Odometry",
         "/reference/path": "nav_msgs/msg/Path",
+        "/reference/horizon": "nav_msgs/msg/Path",
         "/thrust": "std_msgs/msg/Float64MultiArray",
         **{f"/thrusters/{name}": "geometry_msgs/msg/WrenchStamped" for name in thrusters},
         "/disturbance/true": "geometry_msgs/msg/WrenchStamped",
         "/obstacles": "visualization_msgs/msg/MarkerArray",
     }
     rows = len(log)
-    for topic in ("/odom", "/reference/odom", "/disturbance/true", "/obstacles"):
+    for topic in (
+        "/odom",
+        "/reference/odom",
+        "/reference/horizon",
+        "/disturbance/true",
+        "/obstacles",
+    ):
         assert len(messages[topic]) == rows, topic
     # Commands exist on rows 0..N-1 (the last row has none, interfaces.md).
     for topic in ("/thrust", *(f"/thrusters/{name}" for name in thrusters)):
@@ -96,6 +103,12 @@ def test_paper_obstacles_bag_reads_back_as_the_log(monkeypatch, capsys, tmp_path
         )
     ((_, path),) = messages["/reference/path"]
     assert len(path.poses) == rows
+    # The horizon from row k: the reference rows k..k+ny, cut at the end of the log.
+    ny = 30  # paper-obstacles' prediction_horizon
+    for k in (0, rows - 5):
+        poses = messages["/reference/horizon"][k][1].poses
+        assert len(poses) == min(ny + 1, rows - k)
+        assert poses[0].pose.position.x == log["x_ref"][k]
 
     # The thrusters' wrenches add up to the allocation T @ F of auvmpc.vehicle.
     model = load_vehicle(vehicle)

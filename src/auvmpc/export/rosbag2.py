@@ -45,6 +45,10 @@ TOPICS: dict[str, tuple[str, str]] = {
     "/odom": ("nav_msgs/msg/Odometry", "true vehicle state, one per log row"),
     "/reference/odom": ("nav_msgs/msg/Odometry", "reference state, one per log row"),
     "/reference/path": ("nav_msgs/msg/Path", "the whole reference path, once at t = 0"),
+    "/reference/horizon": (
+        "nav_msgs/msg/Path",
+        "the reference over the controller's prediction horizon from each log row",
+    ),
     "/thrust": (
         "std_msgs/msg/Float64MultiArray",
         "every thruster's force (N), one per applied command (rows 0..N-1)",
@@ -199,14 +203,18 @@ def _messages(tables: RunTables, m: _Messages) -> Iterator[tuple[str, str, int, 
     odometry = TOPICS["/odom"][0]
     wrench = TOPICS["/thrusters/<name>"][0]
 
+    path_type = TOPICS["/reference/path"][0]
+    horizon = int((scenario.get("controller") or {}).get("prediction_horizon") or 0)
+    poses = m.reference_poses(log) if has_reference else []
     if has_reference:
-        yield "/reference/path", TOPICS["/reference/path"][0], 0, m.path(log, 0.0)
-    for _, row in log.iterrows():
+        yield "/reference/path", path_type, 0, m.path(poses, 0.0)
+    for k, (_, row) in enumerate(log.iterrows()):
         t = float(row["t"])
         ns = _nanoseconds(t)
         yield "/odom", odometry, ns, m.odometry(row, t, "")
         if has_reference:
             yield "/reference/odom", odometry, ns, m.odometry(row, t, "_ref")
+            yield "/reference/horizon", path_type, ns, m.path(poses[k : k + horizon + 1], t)
         if thrust_columns and row[thrust_columns].notna().all():
             forces = row[thrust_columns].to_numpy(dtype=float)
             yield "/thrust", TOPICS["/thrust"][0], ns, m.float_array(forces, thrust_columns)
@@ -339,12 +347,15 @@ class _Messages:
             ),
         )
 
-    def path(self, log: pd.DataFrame, t: float):
+    def reference_poses(self, log: pd.DataFrame) -> list:
+        """The reference at every log row as stamped poses."""
         stamped = self._type("geometry_msgs/msg/PoseStamped")
-        poses = [
+        return [
             stamped(header=self.header(float(row["t"]), WORLD_FRAME), pose=self.pose(row, "_ref"))
             for _, row in log.iterrows()
         ]
+
+    def path(self, poses: list, t: float):
         return self._type("nav_msgs/msg/Path")(header=self.header(t, WORLD_FRAME), poses=poses)
 
     def float_array(self, values: np.ndarray, labels: list[str]):
