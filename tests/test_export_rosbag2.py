@@ -196,3 +196,41 @@ def test_without_rosbags_the_error_says_how_to_install(monkeypatch, tmp_path):
     monkeypatch.setattr(builtins, "__import__", no_rosbags)
     with pytest.raises(ConfigError, match=r"pip install 'auvmpc\[ros\]'"):
         export_rosbag2(tmp_path)
+
+
+def test_columns_added_later_are_exported_by_name(monkeypatch, capsys, tmp_path):
+    """A log with an estimate of the current and 6-DOF attitude columns (as later logs may
+    have): /disturbance/estimate appears, and the orientation is the z-y-x Euler rotation
+    (checked against scipy's Rotation)."""
+    from scipy.spatial.transform import Rotation
+
+    run_dir, log = _run_and_export(monkeypatch, capsys, tmp_path, "paper-ideal", "duration=2")
+    rows = len(log)
+    log["dist_X_hat"] = np.linspace(0, 1, rows)
+    log["dist_Y_hat"] = 2.0
+    log["dist_N_hat"] = -0.5
+    log["z"] = -np.linspace(1, 2, rows)
+    log["phi"] = 0.1
+    log["theta"] = -0.2
+    log.to_csv(run_dir / "log.csv", index=False, float_format="%.17g")
+    out = tmp_path / "bag6"
+    code, _, err = run_cli(monkeypatch, capsys, "export", str(run_dir), "--out", str(out))
+    assert code == 0, err
+    types, messages = _read(out)
+    assert types["/disturbance/estimate"] == "geometry_msgs/msg/WrenchStamped"
+    estimate = np.array(
+        [
+            [m.wrench.force.x, m.wrench.force.y, m.wrench.torque.z]
+            for _, m in messages["/disturbance/estimate"]
+        ]
+    )
+    np.testing.assert_allclose(
+        estimate, log[["dist_X_hat", "dist_Y_hat", "dist_N_hat"]], atol=1e-12
+    )
+    for (_, message), (_, row) in zip(messages["/odom"], log.iterrows(), strict=True):
+        q = message.pose.pose.orientation
+        expected = Rotation.from_euler("ZYX", [row["psi"], row["theta"], row["phi"]]).as_quat()
+        assert np.allclose([q.x, q.y, q.z, q.w], expected, atol=1e-12) or np.allclose(
+            [q.x, q.y, q.z, q.w], -expected, atol=1e-12
+        )
+        assert message.pose.pose.position.z == pytest.approx(row["z"], abs=1e-12)
