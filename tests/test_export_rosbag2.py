@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from auvmpc.export.rosbag2 import read_log_frame
+from auvmpc.run_folder import read_log_frame
 from auvmpc.vehicle import load_vehicle
 from tests.test_cli import run_cli
 

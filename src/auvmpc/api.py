@@ -129,7 +129,7 @@ def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:
     The thrust of the last row is NaN (the command on row k is applied over
     [t_k, t_k+1)); numbers are exactly the simulated ones.
     """
-    from auvmpc.export.rosbag2 import read_log_frame
+    from auvmpc.run_folder import read_log_frame
 
     log = run.log if isinstance(run, RunResult | DepthRunResult) else run
     return read_log_frame(io.StringIO(log.to_csv_text()))
@@ -158,7 +158,7 @@ def save_run(run: Run, folder: str | Path, figures: bool = True) -> Path:
 
 def load_run(folder: str | Path) -> tuple[dict[str, Any], pd.DataFrame]:
     """``run.json`` (as a dict) and ``log.csv`` (as a DataFrame) of a saved run folder."""
-    from auvmpc.export.rosbag2 import read_run_tables
+    from auvmpc.run_folder import read_run_tables
 
     tables = read_run_tables(Path(folder))
     return tables.info, tables.log

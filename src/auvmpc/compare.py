@@ -14,7 +14,7 @@ import shutil
 import tempfile
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +71,6 @@ def load_compared_runs(
         Fewer than two folders, a folder that is not a horizontal run, or a label count
         that does not match.
     """
-    from auvmpc.plots import controller_label
     from auvmpc.runner import read_run
 
     if len(run_dirs) < 2:
@@ -90,23 +89,26 @@ def load_compared_runs(
         info, log = read_run(folder)
         scenario = Scenario.model_validate(info["scenario"])
         model = VehicleParams.model_validate(info["model"])
-        loaded.append((folder, scenario, model, log, info.get("metrics", {})))
-    if labels:
-        names = list(labels)
-    else:
-        names = [controller_label(scenario.controller) for _, scenario, *_ in loaded]
-        for differs, text in (
-            (len({m.name for _, _, m, *_ in loaded}) > 1, lambda r: r[2].name),
-            (len({s.name for _, s, *_ in loaded}) > 1, lambda r: r[1].name),
-        ):
-            if differs:
-                names = [f"{name}, {text(run)}" for name, run in zip(names, loaded, strict=True)]
-        counts = Counter(names)
-        names = [
-            f"{name} [{run[0].name}]" if counts[name] > 1 else name
-            for name, run in zip(names, loaded, strict=True)
-        ]
-    return [ComparedRun(name, *run) for name, run in zip(names, loaded, strict=True)]
+        loaded.append(ComparedRun("", folder, scenario, model, log, info.get("metrics", {})))
+    names = list(labels) if labels else _labels(loaded)
+    return [replace(run, label=name) for run, name in zip(loaded, names, strict=True)]
+
+
+def _labels(runs: Sequence[ComparedRun]) -> list[str]:
+    """Controller labels, plus the vehicle and the scenario where those differ between runs,
+    plus the folder name where two labels are still the same."""
+    from auvmpc.plots import controller_label
+
+    names = [controller_label(run.scenario.controller) for run in runs]
+    if len({run.model.name for run in runs}) > 1:
+        names = [f"{name}, {run.model.name}" for name, run in zip(names, runs, strict=True)]
+    if len({run.scenario.name for run in runs}) > 1:
+        names = [f"{name}, {run.scenario.name}" for name, run in zip(names, runs, strict=True)]
+    counts = Counter(names)
+    return [
+        f"{name} [{run.folder.name}]" if counts[name] > 1 else name
+        for name, run in zip(names, runs, strict=True)
+    ]
 
 
 def compare_runs(

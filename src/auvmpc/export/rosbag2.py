@@ -17,24 +17,21 @@ export: missing pose or velocity components are 0.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import os
-import re
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from auvmpc.errors import ConfigError
+from auvmpc.run_folder import RunTables, read_run_tables
 
-__all__ = ["TOPICS", "RunTables", "export_rosbag2", "read_log_frame", "read_run_tables"]
+__all__ = ["TOPICS", "export_rosbag2"]
 
 WORLD_FRAME = "world"
 BODY_FRAME = "base_link"
@@ -71,68 +68,10 @@ TOPICS: dict[str, tuple[str, str]] = {
     ),
 }
 
-_HORIZONTAL_THRUST = re.compile(r"^F\d+$")
-_VERTICAL_THRUST = re.compile(r"^Fz\d+$")
 _OBSTACLE_HEIGHT_M = 1.0
 # Written once: offered as transient-local, so that a subscriber started during
 # `ros2 bag play` still receives it (as a latched topic in ROS 1).
 _LATCHED = frozenset({"/reference/path"})
-
-
-@dataclass(frozen=True)
-class RunTables:
-    """What a run folder holds, as read for export and plotting: run.json and log.csv."""
-
-    info: dict[str, Any]
-    log: pd.DataFrame
-
-    @property
-    def thrust_columns(self) -> list[str]:
-        names = [c for c in self.log.columns if _HORIZONTAL_THRUST.match(c)]
-        names += [c for c in self.log.columns if _VERTICAL_THRUST.match(c)]
-        return names
-
-    @property
-    def applied_rows(self) -> pd.DataFrame:
-        """Rows whose thrust was applied (all but the last: it has no command)."""
-        columns = self.thrust_columns
-        if not columns:
-            return self.log.iloc[:0]
-        return self.log[self.log[columns].notna().all(axis=1)]
-
-
-def read_run_tables(run_dir: Path) -> RunTables:
-    """run.json and log.csv of a run folder; a folder that is not one is a ConfigError."""
-    run_dir = Path(run_dir)
-    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
-        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    info = json.loads((run_dir / "run.json").read_text())
-    log = read_log_frame(run_dir / "log.csv")
-    if "t" not in log.columns or log.empty:
-        raise ConfigError("RUN_DIR", str(run_dir), "log.csv has no rows or no t column")
-    return RunTables(info, log)
-
-
-def read_log_frame(source: Path | TextIO) -> pd.DataFrame:
-    """log.csv (a path or an open text stream) as a DataFrame, every number exactly as
-    written (Python's float parser).
-
-    Columns are kept by name; text columns (``status``) stay text, empty cells are NaN.
-    """
-    if isinstance(source, str | Path):
-        with open(source, newline="") as handle:
-            rows = list(csv.reader(handle))
-    else:
-        rows = list(csv.reader(source))
-    header, body = rows[0], rows[1:]
-    columns = {}
-    for i, name in enumerate(header):
-        cells = [row[i] if i < len(row) else "" for row in body]
-        try:
-            columns[name] = np.array([float(c) if c else np.nan for c in cells], dtype=float)
-        except ValueError:
-            columns[name] = cells
-    return pd.DataFrame(columns)
 
 
 def export_rosbag2(run_dir: Path, out: Path | None = None) -> Path:
