@@ -205,3 +205,16 @@ def test_plot_writes_the_chosen_format(monkeypatch, capsys, two_runs):
         assert (two_runs[0] / f"{name}.pdf").read_bytes().startswith(b"%PDF")
     info = json.loads((two_runs[0] / "run.json").read_text())
     assert math.isfinite(info["metrics"]["rms_position_error_m"])
+
+
+def test_run_draws_its_figures_in_the_chosen_format(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "run"
+    code, _, err = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", "--set", "duration=2", "--set",
+        "vehicle=bluerov2-heavy", "--figure-format", "svg", "--dpi", "72", "--out", str(out),
+    )  # fmt: skip
+    assert code == 0, err
+    assert (out / "trajectory.svg").read_bytes().startswith(SIGNATURES["svg"])
+    assert not list(out.glob("*.png"))
+    code, _, err = run_cli(monkeypatch, capsys, "run", "paper-ideal", "--figure-format", "eps")
+    assert code == 2 and "--figure-format: one of ['png', 'pdf', 'svg'] (got 'eps')" in err

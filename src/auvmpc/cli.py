@@ -77,7 +77,9 @@ def run(
         list[str] | None,
         typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
     ] = None,
-    figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+    figures: Annotated[bool, typer.Option(help="draw figures")] = True,
+    figure_format: Annotated[str, typer.Option("--figure-format", help="png | pdf | svg")] = "png",
+    dpi: Annotated[int, typer.Option("--dpi", help="figure resolution (dots per inch)")] = 120,
     from_campaign: Annotated[
         Path | None,
         typer.Option("--from-campaign", help="campaign folder: rerun one of its runs (--index)"),
@@ -91,6 +93,7 @@ def run(
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
+    check_figure_options(figure_format, dpi, option="--figure-format")
     overrides = [*controller_overrides(controller), *(set_ or [])]
     if from_campaign is not None:
         from auvmpc.campaign import scenario_for_run
@@ -116,7 +119,7 @@ def run(
         result = simulate(
             resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n)
         )
-    write_run(result, out_dir, figures=figures)
+    write_run(result, out_dir, figures=figures, figure_format=figure_format, dpi=dpi)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
 
@@ -316,11 +319,11 @@ FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
 Dpi = Annotated[int, typer.Option("--dpi", help="resolution (dots per inch) of raster output")]
 
 
-def check_figure_options(fmt: str, dpi: int) -> None:
+def check_figure_options(fmt: str, dpi: int, option: str = "--format") -> None:
     from auvmpc.plots import FIGURE_FORMATS
 
     if fmt not in FIGURE_FORMATS:
-        raise ConfigError("--format", fmt, f"one of {list(FIGURE_FORMATS)}")
+        raise ConfigError(option, fmt, f"one of {list(FIGURE_FORMATS)}")
     if not 10 <= dpi <= 2400:
         raise ConfigError("--dpi", dpi, "must be between 10 and 2400")
 

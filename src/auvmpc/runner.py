@@ -81,8 +81,8 @@ class RunResult(_Finished):
     def simulated_plant(self) -> VehicleParams:
         return self.resolved.plant
 
-    def draw(self, folder: Path) -> None:
-        draw_figures(self.log, self.scenario, self.resolved.model, folder)
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        draw_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
 
 
 @dataclass
@@ -95,8 +95,8 @@ class DepthRunResult(_Finished):
     def simulated_plant(self) -> VehicleParams:
         return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
 
-    def draw(self, folder: Path) -> None:
-        draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder)
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder, fmt, dpi)
 
 
 def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
@@ -162,7 +162,13 @@ def simulate(
     return RunResult(resolved, log, metrics)
 
 
-def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool = True) -> Path:
+def write_run(
+    result: RunResult | DepthRunResult,
+    out_dir: Path,
+    figures: bool = True,
+    figure_format: str = "png",
+    dpi: int = 120,
+) -> Path:
     """Write log.csv, run.json and figures into ``out_dir``, all or nothing.
 
     Everything goes to a hidden sibling folder first, which is renamed into place
@@ -179,7 +185,7 @@ def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool =
         (staging / "log.csv").write_text(result.csv_text())
         (staging / "run.json").write_text(json.dumps(result.run_json(), indent=2, allow_nan=False))
         if figures:
-            result.draw(staging)
+            result.draw(staging, figure_format, dpi)
         _replace_dir(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
