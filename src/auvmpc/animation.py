@@ -126,6 +126,7 @@ def animate_run(
             )
     scene = _Scene(log, scenario, model, settings)
     rows = frame_rows(log, settings)
+    path.parent.mkdir(parents=True, exist_ok=True)
 
     def frames():
         for done, k in enumerate(rows, start=1):
