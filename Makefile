@@ -1,20 +1,21 @@
 # Two commands on a fresh clone (Python 3.11 and make):
 #   make reproduce   set up .venv, reproduce the paper's scenarios into results/paper
 #   make test        set up .venv (or reuse it), run the test suite
+#   make docs        build the documentation site into site/ (strict)
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 OUT ?= results/paper
 
-.PHONY: setup reproduce test bench lint clean
+.PHONY: setup reproduce test bench lint docs clean
 
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev,compare]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,compare,ros,video,docs]"
 	touch $(STAMP)
 
 reproduce: $(STAMP)
@@ -26,8 +27,13 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/auvmpc bench
 
+# The documentation site (mkdocs-material + mkdocstrings) into site/; strict: a broken
+# link or reference fails the build.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
 
 clean:
-	rm -rf $(VENV) results runs
+	rm -rf $(VENV) results runs site

@@ -66,13 +66,20 @@ def run(
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="run folder to write")] = None,
     controller: Annotated[
-        str | None, typer.Option("--controller", help="override controller.type")
+        str | None,
+        typer.Option(
+            "--controller",
+            help="a controller.type (other settings from the scenario) or a bench label "
+            "such as ltv-mpc-nc30 (its overrides; --set still wins)",
+        ),
     ] = None,
     set_: Annotated[
         list[str] | None,
         typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
     ] = None,
-    figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+    figures: Annotated[bool, typer.Option(help="draw figures")] = True,
+    figure_format: Annotated[str, typer.Option("--figure-format", help="png | pdf | svg")] = "png",
+    dpi: Annotated[int, typer.Option("--dpi", help="figure resolution (dots per inch)")] = 120,
     from_campaign: Annotated[
         Path | None,
         typer.Option("--from-campaign", help="campaign folder: rerun one of its runs (--index)"),
@@ -82,12 +89,12 @@ def run(
     ] = None,
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
+    from auvmpc.api import controller_overrides
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
-    overrides = list(set_ or [])
-    if controller is not None:
-        overrides.append(f"controller.type={controller}")
+    check_figure_options(figure_format, dpi, option="--figure-format")
+    overrides = [*controller_overrides(controller), *(set_ or [])]
     if from_campaign is not None:
         from auvmpc.campaign import scenario_for_run
 
@@ -105,14 +112,14 @@ def run(
     name = resolved.scenario.name
     if from_campaign is not None:
         name = f"{name}-run{index}"
-    label = f"{name}-{resolved.scenario.controller.type}"
+    label = f"{name}-{controller or resolved.scenario.controller.type}"
     out_dir = out if out is not None else Path("runs") / label
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
         result = simulate(
             resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n)
         )
-    write_run(result, out_dir, figures=figures)
+    write_run(result, out_dir, figures=figures, figure_format=figure_format, dpi=dpi)
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
     warn_if_not_ok(result.metrics)
@@ -309,17 +316,135 @@ def vehicles() -> None:
         console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
 
 
+FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
+Dpi = Annotated[int, typer.Option("--dpi", help="resolution (dots per inch) of raster output")]
+
+
+def check_figure_options(fmt: str, dpi: int, option: str = "--format") -> None:
+    from auvmpc.plots import FIGURE_FORMATS
+
+    if fmt not in FIGURE_FORMATS:
+        raise ConfigError(option, fmt, f"one of {list(FIGURE_FORMATS)}")
+    if not 10 <= dpi <= 2400:
+        raise ConfigError("--dpi", dpi, "must be between 10 and 2400")
+
+
 @app.command()
 def plot(
     run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+    fmt: FigureFormat = "png",
+    dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
     from auvmpc.runner import redraw
 
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    redraw(run_dir)
-    console.print(f"redrew figures in {run_dir}")
+    check_figure_options(fmt, dpi)
+    redraw(run_dir, fmt, dpi)
+    console.print(f"redrew figures in {run_dir} ({fmt})")
+
+
+@app.command()
+def compare(
+    run_dirs: Annotated[list[Path], typer.Argument(help="two or more folders of 'auvmpc run'")],
+    out: Annotated[Path, typer.Option("--out", help="folder for the overlays and the table")],
+    label: Annotated[
+        list[str] | None, typer.Option("--label", help="legend name per run, in order")
+    ] = None,
+    fmt: FigureFormat = "png",
+    dpi: Dpi = 120,
+) -> None:
+    """Overlay runs (trajectories, errors, thrusts) and tabulate their metrics."""
+    from auvmpc.compare import compare_runs, load_compared_runs, metrics_markdown
+
+    check_figure_options(fmt, dpi)
+    runs = load_compared_runs(run_dirs, label)
+    compare_runs(runs, out, fmt, dpi)
+    console.print(metrics_markdown(runs), highlight=False, markup=False)
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def animate(
+    run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="file .gif or .mp4 (default RUN_DIR/animation.gif)"),
+    ] = None,
+    fps: Annotated[float, typer.Option("--fps", help="playback frames per second")] = 20.0,
+    speed: Annotated[
+        float, typer.Option("--speed", help="simulated seconds per second of playback")
+    ] = 10.0,
+    dpi: Annotated[int, typer.Option("--dpi", help="resolution (6 in square frame)")] = 80,
+) -> None:
+    """Animate a run: vehicle, thrust arrows, reference and horizon, obstacles, clock."""
+    import json
+
+    from auvmpc.animation import AnimationSettings, animate_run
+    from auvmpc.runner import read_run
+    from auvmpc.scenario import Scenario
+    from auvmpc.vehicle import VehicleParams
+
+    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
+        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
+    if json.loads((run_dir / "run.json").read_text())["scenario"].get("kind") == "depth":
+        raise ConfigError("RUN_DIR", str(run_dir), "a depth run; animate takes horizontal runs")
+    settings = AnimationSettings(fps=fps, speed=speed, dpi=dpi)
+    if out is None:
+        out = run_dir / "animation.gif"  # auvmpc's own file in its own folder: replaced
+    elif out.exists():
+        raise ConfigError("--out", str(out), "exists; remove it or choose another file")
+    info, log = read_run(run_dir)
+    scenario = Scenario.model_validate(info["scenario"])
+    model = VehicleParams.model_validate(info["model"])
+    with progress_bar() as progress:
+        task = progress.add_task("frames", total=None)
+        animate_run(
+            log, scenario, model, out, settings,
+            on_frame=lambda done, total: progress.update(task, completed=done, total=total),
+        )  # fmt: skip
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def export(
+    run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
+    format_: Annotated[
+        str, typer.Option("--format", help="rosbag2 (MCAP storage; needs auvmpc[ros])")
+    ] = "rosbag2",
+    out: Annotated[
+        Path | None, typer.Option("--out", help="folder to create (default RUN_DIR/rosbag2)")
+    ] = None,
+) -> None:
+    """Write a run in another tool's format: a ROS 2 bag for Foxglove, PlotJuggler, rviz."""
+    from auvmpc.export import export_rosbag2
+
+    if format_ != "rosbag2":
+        raise ConfigError("--format", format_, "one of ['rosbag2']")
+    console.print(f"wrote {export_rosbag2(run_dir, out)}")
+
+
+@app.command()
+def schema(
+    kind: Annotated[str, typer.Argument(help="scenario | vehicle | campaign")] = "scenario",
+    markdown: Annotated[
+        bool,
+        typer.Option("--markdown", help="print docs/scenario-reference.md (all files) instead"),
+    ] = False,
+) -> None:
+    """Print the JSON Schema of a scenario, vehicle or campaign file (from the pydantic models)."""
+    import json
+
+    from auvmpc.schema import SchemaKind, json_schema, reference_markdown
+
+    if markdown:
+        sys.stdout.write(reference_markdown())
+        return
+    kinds = [member.value for member in SchemaKind]
+    if kind not in kinds:
+        raise ConfigError("KIND", kind, f"one of {kinds}")
+    sys.stdout.write(json.dumps(json_schema(kind), indent=2) + "\n")
 
 
 def warn_if_not_ok(metrics: dict) -> None:

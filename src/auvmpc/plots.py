@@ -32,6 +32,9 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "figure_depth",
+    "figure_compare_errors",
+    "figure_compare_thrusts",
+    "figure_compare_trajectory",
     "ACTUAL_STYLE",
     "REFERENCE_STYLE",
     "figure_error_vs_parameter",
@@ -40,7 +43,11 @@ __all__ = [
     "figure_thrusts",
     "figure_trajectory",
     "figure_velocities",
+    "FIGURE_FORMATS",
+    "THRUSTER_COLORS",
+    "controller_label",
     "run_figures",
+    "run_title",
     "save_figures",
 ]
 
@@ -50,6 +57,7 @@ LIMIT_STYLE = {"color": "tab:red", "linestyle": ":", "linewidth": 1.2}
 OBSTACLE_FACE = "tab:orange"
 OBSTACLE_EDGE = "saddlebrown"
 HIGHLIGHT = "tab:red"
+CURRENT_COLOR = "teal"
 BEYOND_STYLE = {"linestyle": "none", "marker": "x", "color": HIGHLIGHT, "markersize": 7}
 # Thruster colours: distinct from the reference grey, actual blue and limit red.
 THRUSTER_COLORS = (
@@ -60,6 +68,7 @@ THRUSTER_COLORS = (
 # Series of a parameter sweep: the first in the "actual" blue.
 SERIES_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
 
+FIGURE_FORMATS = ("png", "pdf", "svg")
 TIME_LABEL = "time t (s)"
 PANEL_WIDTH_IN = 7.0
 PANEL_HEIGHT_IN = 2.1
@@ -146,6 +155,7 @@ def figure_trajectory(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(True, alpha=0.4)
+    _draw_current_arrow(ax, log.disturbance_world)
     ax.legend(loc="best", fontsize="small", framealpha=0.85)
     return figure
 
@@ -329,6 +339,32 @@ def figure_solve_times(log: SimLog, title: str = "") -> Figure:
     return figure
 
 
+def controller_label(config) -> str:
+    """Short name of a controller and its horizons, e.g. ``ltv-mpc (nc 30/ny 30, offset-free)``.
+
+    Parameters
+    ----------
+    config : auvmpc.controllers.config.ControllerConfig
+    """
+    kind = str(config.type)
+    if kind == "baseline":
+        return kind
+    moves = len(config.move_schedule())
+    parts = [f"nc {moves}/ny {config.prediction_horizon}"]
+    if config.move_steps is not None:
+        parts[0] += " blocked"
+    if kind == "nmpc":
+        parts.append(str(config.nmpc_mode))
+    if config.offset_free:
+        parts.append("offset-free")
+    return f"{kind} ({', '.join(parts)})"
+
+
+def run_title(scenario, vehicle_name: str) -> str:
+    """Figure title naming the scenario, the controller and the vehicle."""
+    return f"{scenario.name}: {controller_label(scenario.controller)}, vehicle {vehicle_name}"
+
+
 def run_figures(
     log: SimLog,
     obstacles: Sequence[ObstacleConfig],
@@ -352,12 +388,15 @@ def run_figures(
     }
 
 
-def save_figures(figures: Mapping[str, Figure], folder: Path, dpi: int = 120) -> list[Path]:
-    """Write each figure to ``folder/<name>.png`` atomically.
+def save_figures(
+    figures: Mapping[str, Figure], folder: Path, dpi: int = 120, fmt: str = "png"
+) -> list[Path]:
+    """Write each figure to ``folder/<name>.<fmt>`` atomically.
 
     Each image is written to a hidden temporary file in ``folder`` and moved onto
-    its final name with ``os.replace``, so a reader never sees a partial PNG. The
-    folder is created if missing; existing files of the same name are replaced.
+    its final name with ``os.replace``, so a reader never sees a partial file. The
+    folder is created if missing; existing files of the same name are replaced. The
+    bounding box is fitted to everything drawn, so no legend or label is clipped.
 
     Parameters
     ----------
@@ -366,7 +405,9 @@ def save_figures(figures: Mapping[str, Figure], folder: Path, dpi: int = 120) ->
     folder : Path
         Output folder.
     dpi : int
-        Resolution, > 0.
+        Resolution, > 0 (of the raster parts of a PDF or SVG).
+    fmt : str
+        ``png``, ``pdf`` or ``svg`` (:data:`FIGURE_FORMATS`).
 
     Returns
     -------
@@ -375,6 +416,8 @@ def save_figures(figures: Mapping[str, Figure], folder: Path, dpi: int = 120) ->
     """
     if not dpi > 0:
         raise ValueError(f"dpi must be > 0, got {dpi!r}")
+    if fmt not in FIGURE_FORMATS:
+        raise ValueError(f"figure format must be one of {list(FIGURE_FORMATS)}, got {fmt!r}")
     for name in figures:
         if not name or name in {".", ".."} or Path(name).name != name or "\\" in name:
             raise ValueError(f"figure name {name!r} must be a plain file stem (no folders)")
@@ -382,11 +425,11 @@ def save_figures(figures: Mapping[str, Figure], folder: Path, dpi: int = 120) ->
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, figure in figures.items():
-        target = folder / f"{name}.png"
-        temporary = folder / f".{name}.{os.getpid()}.{uuid.uuid4().hex}.png.tmp"
+        target = folder / f"{name}.{fmt}"
+        temporary = folder / f".{name}.{os.getpid()}.{uuid.uuid4().hex}.{fmt}.tmp"
         try:
             with open(temporary, "xb") as stream:
-                figure.savefig(stream, format="png", dpi=dpi)
+                figure.savefig(stream, format=fmt, dpi=dpi, bbox_inches="tight")
                 stream.flush()
                 os.fsync(stream.fileno())
             os.replace(temporary, target)
@@ -462,7 +505,13 @@ def figure_depth(log, limits, title: str = "") -> Figure:
     depth_ax.set_ylabel("z (m, up)")
     steps = len(log.thrust)
     for i in range(log.thrust.shape[1]):
-        thrust_ax.step(log.t[:steps], log.thrust[:, i], where="post", label=f"Fz{i + 1}")
+        thrust_ax.step(
+            log.t[:steps],
+            log.thrust[:, i],
+            where="post",
+            color=THRUSTER_COLORS[i % len(THRUSTER_COLORS)],
+            label=f"Fz{i + 1}",
+        )
     for bound in limits.thrust_limits:
         thrust_ax.axhline(bound, color="tab:red", ls=":", lw=1.0)
     thrust_ax.plot([], [], color="tab:red", ls=":", label=f"limits {list(limits.thrust_limits)} N")
@@ -607,6 +656,35 @@ def _annotate_below(
     )
 
 
+def _draw_current_arrow(ax: Axes, disturbance_world: np.ndarray) -> None:
+    """The mean world-frame current force as an arrow in the top-left corner, with its size.
+
+    The arrow's direction is the force's (axes have equal aspect); its length is fixed.
+    Nothing is drawn for a run without a current.
+    """
+    if not len(disturbance_world):
+        return
+    force = disturbance_world[:, :2]
+    mean = force.mean(axis=0)
+    magnitude = float(np.hypot(*mean))
+    if magnitude < 1e-9:
+        return
+    varies = float(np.ptp(np.hypot(force[:, 0], force[:, 1]))) > 1e-6 * max(1.0, magnitude)
+    direction = mean / magnitude
+    centre, half = np.array([0.1, 0.9]), 0.05
+    ax.annotate(
+        "",
+        xy=tuple(centre + half * direction),
+        xytext=tuple(centre - half * direction),
+        xycoords="axes fraction",
+        arrowprops={"arrowstyle": "-|>", "color": CURRENT_COLOR, "linewidth": 2.0},
+        zorder=6,
+    )
+    label = f"current force, {'mean ' if varies else ''}{magnitude:.3g} N (arrow: direction)"
+    ax.plot([], [], color=CURRENT_COLOR, marker=r"$\rightarrow$", markersize=12, linestyle="none",
+            label=label)  # fmt: skip
+
+
 def _draw_vehicle(
     ax: Axes, state: np.ndarray, radius: float, color: str, alpha: float, label: str | None
 ) -> None:
@@ -660,3 +738,113 @@ def _draw_min_clearance(
         )
     else:
         ax.plot([], [], color=HIGHLIGHT, linewidth=2.0, label=text)
+
+
+# --- overlays of several runs (auvmpc compare) ------------------------------------------------
+
+
+def figure_compare_trajectory(
+    runs: Sequence[tuple[str, SimLog]],
+    obstacles: Sequence[ObstacleConfig] = (),
+    title: str = "",
+) -> Figure:
+    """Paths of several runs over the first run's reference, obstacles and current.
+
+    Parameters
+    ----------
+    runs : sequence of (label, SimLog)
+        One legend entry per run, in :data:`SERIES_COLORS` order.
+    obstacles : sequence of ObstacleConfig
+        Drawn where they are at the first run's closest approach.
+    title : str
+        Figure title; empty for none.
+    """
+    _check_runs(runs)
+    figure = _new_figure(PANEL_WIDTH_IN, 6.4, title)
+    ax = figure.add_subplot()
+    first = runs[0][1]
+    ax.plot(*first.reference[:, :2].T, **REFERENCE_STYLE, label="reference")
+    labelled: set[str] = set()
+    for obstacle in obstacles:
+        approach = _closest_approach(first, obstacle, 0.0)
+        if approach is not None:
+            _draw_obstacle(ax, first, obstacle, approach[0], labelled)
+    for i, (label, log) in enumerate(runs):
+        color = _series_color(i)
+        ax.plot(*log.state[:, :2].T, **ACTUAL_STYLE | {"color": color}, label=label)
+        ax.plot(*log.state[-1, :2], marker="s", color=color, markeredgecolor="black",
+                markersize=6, linestyle="none", zorder=5)  # fmt: skip
+    ax.plot(*first.state[0, :2], marker="o", color="tab:green", markeredgecolor="black",
+            markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
+    ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
+            label="end of each run")  # fmt: skip
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, alpha=0.4)
+    _draw_current_arrow(ax, first.disturbance_world)
+    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+    return figure
+
+
+def figure_compare_errors(runs: Sequence[tuple[str, SimLog]], title: str = "") -> Figure:
+    """Position error (m) and wrapped heading error (rad) of several runs, two panels."""
+    _check_runs(runs)
+    figure, axes = _time_panels(2, title)
+    top, bottom = axes
+    for i, (label, log) in enumerate(runs):
+        style = ACTUAL_STYLE | {"color": _series_color(i)}
+        top.plot(log.t, position_error(log), **style, label=label)
+        bottom.plot(log.t, heading_error(log), **style)
+    top.set_ylim(bottom=0.0)
+    top.set_ylabel(r"position error $\|p - p_\mathrm{ref}\|$ (m)")
+    bottom.axhline(0.0, color="0.3", linewidth=0.6)
+    bottom.set_ylabel(r"heading error $\psi - \psi_\mathrm{ref}$ (rad)")
+    _figure_legend(figure, axes)
+    _finish_compared_time_axes(runs, axes)
+    return figure
+
+
+def figure_compare_thrusts(
+    runs: Sequence[tuple[str, SimLog]], limits: VehicleParams | None = None, title: str = ""
+) -> Figure:
+    """Each thruster's force in its own panel, one line per run, with the thrust limits.
+
+    Runs of vehicles with fewer thrusters leave the extra panels to the others.
+    """
+    _check_runs(runs)
+    panels = max(log.n_thrusters for _, log in runs)
+    figure, axes = _time_panels(panels, title, height_in=1.6)
+    for i, (label, log) in enumerate(runs):
+        for j in range(log.n_thrusters):
+            axes[j].stairs(log.thrust[:, j], log.t, color=_series_color(i), linewidth=1.1,
+                           label=label)  # fmt: skip
+    for j, ax in enumerate(axes):
+        ax.set_ylabel(f"F{j + 1} (N)")
+    if limits is not None:
+        lower, upper = limits.thrust_limits
+        for ax in axes:
+            ax.axhline(upper, **LIMIT_STYLE, label=f"thrust limits [{lower:g}, {upper:g}] N")
+            ax.axhline(lower, **LIMIT_STYLE)
+    _figure_legend(figure, axes)
+    _finish_compared_time_axes(runs, axes)
+    return figure
+
+
+def _series_color(i: int) -> str:
+    return SERIES_COLORS[i % len(SERIES_COLORS)]
+
+
+def _check_runs(runs: Sequence[tuple[str, SimLog]]) -> None:
+    if not runs:
+        raise ValueError("need at least one run to draw")
+
+
+def _finish_compared_time_axes(runs: Sequence[tuple[str, SimLog]], axes: list[Axes]) -> None:
+    for ax in axes:
+        ax.grid(True, alpha=0.4)
+    end = max(float(log.t[-1]) for _, log in runs)
+    start = min(float(log.t[0]) for _, log in runs)
+    if end > start:
+        axes[-1].set_xlim(start, end)
+    axes[-1].set_xlabel(TIME_LABEL)

@@ -81,8 +81,8 @@ class RunResult(_Finished):
     def simulated_plant(self) -> VehicleParams:
         return self.resolved.plant
 
-    def draw(self, folder: Path) -> None:
-        draw_figures(self.log, self.scenario, self.resolved.model, folder)
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        draw_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
 
 
 @dataclass
@@ -95,8 +95,8 @@ class DepthRunResult(_Finished):
     def simulated_plant(self) -> VehicleParams:
         return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
 
-    def draw(self, folder: Path) -> None:
-        draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder)
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder, fmt, dpi)
 
 
 def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
@@ -162,7 +162,13 @@ def simulate(
     return RunResult(resolved, log, metrics)
 
 
-def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool = True) -> Path:
+def write_run(
+    result: RunResult | DepthRunResult,
+    out_dir: Path,
+    figures: bool = True,
+    figure_format: str = "png",
+    dpi: int = 120,
+) -> Path:
     """Write log.csv, run.json and figures into ``out_dir``, all or nothing.
 
     Everything goes to a hidden sibling folder first, which is renamed into place
@@ -179,7 +185,7 @@ def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool =
         (staging / "log.csv").write_text(result.csv_text())
         (staging / "run.json").write_text(json.dumps(result.run_json(), indent=2, allow_nan=False))
         if figures:
-            result.draw(staging)
+            result.draw(staging, figure_format, dpi)
         _replace_dir(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -187,30 +193,40 @@ def write_run(result: RunResult | DepthRunResult, out_dir: Path, figures: bool =
     return out_dir
 
 
-def draw_figures(log: SimLog, scenario: Scenario, limits: VehicleParams, folder: Path) -> None:
-    from auvmpc.plots import run_figures, save_figures
+def draw_figures(
+    log: SimLog,
+    scenario: Scenario,
+    limits: VehicleParams,
+    folder: Path,
+    fmt: str = "png",
+    dpi: int = 120,
+) -> None:
+    from auvmpc.plots import run_figures, run_title, save_figures
 
-    figures = run_figures(
-        log, scenario.obstacles, scenario.controller.vehicle_radius, limits, title=scenario.name
-    )
-    save_figures(figures, folder)
+    title = run_title(scenario, limits.name)
+    radius = scenario.controller.vehicle_radius
+    figures = run_figures(log, scenario.obstacles, radius, limits, title)
+    save_figures(figures, folder, dpi=dpi, fmt=fmt)
 
 
-def draw_depth_figures(log: DepthLog, scenario: DepthScenario, heave, folder: Path) -> None:
+def draw_depth_figures(
+    log: DepthLog, scenario: DepthScenario, heave, folder: Path, fmt: str = "png", dpi: int = 120
+) -> None:
     from auvmpc.plots import figure_depth, save_figures
 
-    save_figures({"depth": figure_depth(log, heave, title=scenario.name)}, folder)
+    title = f"{scenario.name}: {scenario.controller.type}"
+    save_figures({"depth": figure_depth(log, heave, title=title)}, folder, dpi=dpi, fmt=fmt)
 
 
-def redraw(run_dir: Path) -> None:
-    """Re-draw the figures of a saved run folder (horizontal or depth)."""
+def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
+    """Re-draw the figures of a saved run folder (horizontal or depth) as ``fmt`` files."""
     run_dir = Path(run_dir)
     info = json.loads((run_dir / "run.json").read_text())
     if info["scenario"].get("kind") == "depth":
         scenario = DepthScenario.model_validate(info["scenario"])
         log = DepthLog.read_csv(run_dir / "log.csv", scenario.controller.sample_time)
         heave = VehicleParams.model_validate(info["plant"]).heave
-        draw_depth_figures(log, scenario, heave, run_dir)
+        draw_depth_figures(log, scenario, heave, run_dir, fmt, dpi)
         return
     info, log = read_run(run_dir)
     draw_figures(
@@ -218,6 +234,8 @@ def redraw(run_dir: Path) -> None:
         Scenario.model_validate(info["scenario"]),
         VehicleParams.model_validate(info["model"]),
         run_dir,
+        fmt,
+        dpi,
     )
 
 

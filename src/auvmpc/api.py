@@ -1,0 +1,207 @@
+"""The public Python API: what a script or a notebook needs, in a few stable names.
+
+>>> import auvmpc
+>>> scenario = auvmpc.load_scenario("paper-obstacles", {"duration": 20}, controller="ltv-mpc-nc30")
+>>> run = auvmpc.simulate(scenario)
+>>> frame = auvmpc.log_dataframe(run)          # pandas, the columns of log.csv
+>>> run.metrics["rms_position_error_m"]        # doctest: +SKIP
+>>> figures = auvmpc.figures(run)              # matplotlib Figures, keyed by name
+>>> auvmpc.save_run(run, "runs/obs")           # the same folder as `auvmpc run --out`
+
+Everything here is also reachable from the command line; the names are kept stable
+(new keyword arguments may be added, none removed without a deprecation period).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import yaml
+from matplotlib.figure import Figure
+
+from auvmpc.controllers.base import Controller
+from auvmpc.depth import DepthLog
+from auvmpc.errors import ConfigError
+from auvmpc.log import SimLog
+from auvmpc.runner import DepthRunResult, RunResult, make_controller
+from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
+
+__all__ = [
+    "build_controller",
+    "controller_overrides",
+    "figures",
+    "load_run",
+    "load_scenario",
+    "log_dataframe",
+    "override",
+    "save_run",
+    "simulate",
+]
+
+Overrides = Mapping[str, Any] | Sequence[str] | None
+Scenario = ResolvedScenario | ResolvedDepthScenario
+Run = RunResult | DepthRunResult
+
+
+def load_scenario(
+    source: str | Path, overrides: Overrides = None, *, controller: str | None = None
+) -> Scenario:
+    """A built-in scenario by name, or a scenario YAML file, with overrides applied.
+
+    Parameters
+    ----------
+    source : str or Path
+        Built-in name (``auvmpc scenarios`` lists them) or a path to a YAML file.
+    overrides : mapping or sequence of str, optional
+        ``{"controller.control_horizon": 30, "obstacles.0.radius": 2}`` or the command
+        line's ``["controller.control_horizon=30"]``; any field of
+        ``docs/scenario-reference.md``.
+    controller : str, optional
+        A controller type or a bench label (``ltv-mpc-nc30``), as ``run --controller``;
+        ``overrides`` are applied after it.
+
+    Returns
+    -------
+    ResolvedScenario or ResolvedDepthScenario
+        ``.scenario`` (validated fields), ``.model`` (the controller's vehicle) and, for a
+        horizontal scenario, ``.plant`` (the simulated vehicle).
+
+    Raises
+    ------
+    auvmpc.errors.ConfigError
+        A bad name, file, field or value; the message names it.
+    """
+    from auvmpc.scenario import load_scenario as load
+
+    return load(source, [*controller_overrides(controller), *_override_strings(overrides)])
+
+
+def override(scenario: Scenario, overrides: Overrides) -> Scenario:
+    """A copy of a loaded scenario with more fields changed (the original is untouched)."""
+    from auvmpc.depth import DepthScenario
+    from auvmpc.errors import format_validation_error
+    from auvmpc.scenario import apply_override, scenario_to_dict, validate_scenario
+
+    data = scenario_to_dict(scenario.scenario)
+    for text in _override_strings(overrides):
+        apply_override(data, text)
+    if data.get("kind") == "depth":
+        from pydantic import ValidationError
+
+        try:
+            return ResolvedDepthScenario(DepthScenario.model_validate(data), scenario.base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
+    return ResolvedScenario(validate_scenario(data), scenario.base_dir)
+
+
+def build_controller(scenario: ResolvedScenario) -> Controller:
+    """The scenario's controller on its nominal vehicle model, ready for ``reset``/``compute``
+    (to step it yourself; :func:`simulate` builds its own)."""
+    if not isinstance(scenario, ResolvedScenario):
+        raise TypeError("build_controller takes a horizontal scenario (depth runs build inside)")
+    return make_controller(scenario.scenario, scenario.model)
+
+
+def simulate(scenario: Scenario | str, on_step: Callable[[int, int], None] | None = None) -> Run:
+    """Run the closed loop once; a name or path is loaded first.
+
+    Returns
+    -------
+    RunResult or DepthRunResult
+        ``.log`` (time-major arrays), ``.metrics`` (the names of run.json) and
+        ``.scenario``.
+    """
+    from auvmpc.runner import simulate as run
+
+    if isinstance(scenario, str | Path):
+        scenario = load_scenario(scenario)
+    return run(scenario, on_step)
+
+
+def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:
+    """The log as a DataFrame with the columns of ``log.csv`` (one row per sample k).
+
+    The thrust of the last row is NaN (the command on row k is applied over
+    [t_k, t_k+1)); numbers are exactly the simulated ones.
+    """
+    from auvmpc.run_folder import read_log_frame
+
+    log = run.log if isinstance(run, RunResult | DepthRunResult) else run
+    return read_log_frame(io.StringIO(log.to_csv_text()))
+
+
+def figures(run: RunResult) -> dict[str, Figure]:
+    """The standard figures of a run (``trajectory``, ``errors``, ``velocities``, ``thrusts``,
+    ``solve_times``; ``depth`` for a depth run), titled with the controller and vehicle."""
+    from auvmpc.plots import figure_depth, run_figures, run_title
+
+    scenario = run.scenario
+    if isinstance(run, DepthRunResult):
+        title = f"{scenario.name}: {scenario.controller.type}"
+        return {"depth": figure_depth(run.log, run.resolved.heave_plant, title=title)}
+    model = run.resolved.model
+    radius = scenario.controller.vehicle_radius
+    return run_figures(run.log, scenario.obstacles, radius, model, run_title(scenario, model.name))
+
+
+def save_run(run: Run, folder: str | Path, figures: bool = True) -> Path:
+    """Write the run folder (``log.csv``, ``run.json``, PNG figures), as ``auvmpc run --out``."""
+    from auvmpc.runner import write_run
+
+    return write_run(run, Path(folder), figures=figures)
+
+
+def load_run(folder: str | Path) -> tuple[dict[str, Any], pd.DataFrame]:
+    """``run.json`` (as a dict) and ``log.csv`` (as a DataFrame) of a saved run folder."""
+    from auvmpc.run_folder import read_run_tables
+
+    tables = read_run_tables(Path(folder))
+    return tables.info, tables.log
+
+
+def controller_overrides(label: str | None) -> tuple[str, ...]:
+    """The overrides ``run --controller LABEL`` stands for.
+
+    A ``controller.type`` value sets the type only (the scenario's tuning is kept, as
+    before); any other label of the bench (``CONTROLLER_PRESETS``, e.g. ``ltv-mpc-nc30``)
+    applies that preset's overrides.
+    """
+    from auvmpc.controllers.config import CONTROLLER_PRESETS, ControllerType
+
+    if label is None:
+        return ()
+    types = {kind.value for kind in ControllerType}
+    if label in types:
+        return (f"controller.type={label}",)
+    if label in CONTROLLER_PRESETS:
+        return CONTROLLER_PRESETS[label]
+    known = sorted(types | set(CONTROLLER_PRESETS))
+    reason = f"not a controller.type or bench label; one of {known}"
+    raise ConfigError("--controller", label, reason)
+
+
+def _override_strings(overrides: Overrides) -> list[str]:
+    if overrides is None:
+        return []
+    if isinstance(overrides, Mapping):
+        return [f"{key}={_yaml_value(value)}" for key, value in overrides.items()]
+    if isinstance(overrides, str):
+        return [overrides]
+    return list(overrides)
+
+
+def _yaml_value(value: Any) -> str:
+    """The value as one line of YAML, which apply_override reads back."""
+    if isinstance(value, tuple):
+        value = list(value)
+    return (
+        yaml.safe_dump(value, default_flow_style=True, width=10**9)
+        .strip()
+        .removesuffix("...")
+        .strip()
+    )
