@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import io
+import os
 import shutil
+import tempfile
 
 import casadi as ca
 
@@ -17,6 +20,13 @@ def jit_available() -> bool:
     return shutil.which("gcc") is not None or shutil.which("cc") is not None
 
 
+@functools.cache
+def _scratch_directory() -> str:
+    directory = tempfile.mkdtemp(prefix="auvmpc-jit-")
+    atexit.register(shutil.rmtree, directory, ignore_errors=True)
+    return directory
+
+
 def compiled(function: ca.Function) -> ca.Function:
     """The same function compiled to machine code by the system C compiler (CasADi JIT).
 
@@ -26,10 +36,18 @@ def compiled(function: ca.Function) -> ca.Function:
     """
     if not jit_available():
         return function
+    # CasADi writes the generated C file and the objects next to the current directory by
+    # default: the user's folder. They go to a temporary folder of their own instead.
+    scratch = _scratch_directory()
     options = {
         "jit": True,
         "compiler": "shell",
-        "jit_options": {"flags": ["-O2"], "verbose": False},
+        "jit_name": os.path.join(scratch, "auvmpc_jit"),
+        "jit_options": {
+            "flags": ["-O2"],
+            "verbose": False,
+            "directory": scratch + os.sep,
+        },
     }
     try:
         with contextlib.redirect_stderr(io.StringIO()):
