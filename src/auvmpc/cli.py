@@ -85,6 +85,7 @@ def progress_bar() -> Progress:
         TimeRemainingColumn(),
         console=errors,
         transient=True,
+        disable=not errors.is_terminal,  # a transient bar only leaves blank lines in a log
     )
 
 
@@ -249,6 +250,7 @@ def campaign_progress_bar() -> Progress:
         TimeRemainingColumn(),
         console=errors,
         transient=True,
+        disable=not errors.is_terminal,  # a transient bar only leaves blank lines in a log
     )
 
 

@@ -8,7 +8,9 @@ write a complete-looking result that the interrupt changed.
 
 So the handler also records the signal, and the closed loop calls :func:`check` after
 every step: a recorded signal raises :class:`Interrupted` there, before any result
-exists. Nothing half-written is left either (:mod:`auvmpc.outputs` stages every
+exists. CasADi also prints a ``WARNING("KeyboardInterruptException")`` line on stderr
+(through Python's ``sys.stderr``); once we know why, it is noise, and that one line is
+dropped so that an interrupted command prints one line. Nothing half-written is left either (:mod:`auvmpc.outputs` stages every
 folder). The command line reports what was kept and exits ``128 + signal``
 (130 for SIGINT, 143 for SIGTERM).
 """
@@ -17,8 +19,10 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 __all__ = ["Interrupted", "check", "describe_kept", "install", "kept", "requested", "reset"]
 
@@ -42,7 +46,38 @@ class Interrupted(KeyboardInterrupt):
 def _handler(signum: int, frame) -> None:
     global _requested
     _requested = signum
+    if frame is not None and "casadi" in Path(frame.f_code.co_filename).parts:
+        if not isinstance(sys.stderr, _WithoutCasadiInterruptNote):
+            sys.stderr = _WithoutCasadiInterruptNote(sys.stderr)
     raise Interrupted(signum)
+
+
+class _WithoutCasadiInterruptNote:
+    """Forwards text to ``stream`` line by line, except CasADi's note that it caught our
+    KeyboardInterrupt (CasADi writes it in pieces, so whole lines are collected first)."""
+
+    _NOTE = "KeyboardInterruptException"
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self._line = ""
+
+    def write(self, text: str) -> int:
+        self._line += text
+        while "\n" in self._line:
+            line, self._line = self._line.split("\n", 1)
+            if not (line.startswith("CasADi - ") and self._NOTE in line):
+                self._stream.write(line + "\n")
+        if self._line and not "CasADi - ".startswith(self._line[:9]):
+            self._stream.write(self._line)  # not CasADi's: no need to hold it back
+            self._line = ""
+        return len(text)
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def install() -> None:

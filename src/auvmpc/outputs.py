@@ -181,10 +181,10 @@ def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
     """``path`` must be an existing folder auvmpc wrote as ``kind`` (e.g. to redraw into)."""
     folder = Path(path)
     if not folder.is_dir():
-        raise ConfigError(option, str(path), f"no such folder (an auvmpc {kind} folder)")
+        raise ConfigError(option, str(path), f"not a {kind} folder (no such folder)")
     found = own_kind(folder)
     if found is not kind:
-        raise ConfigError(option, str(path), f"not an auvmpc {kind} folder")
+        raise ConfigError(option, str(path), f"not a {kind} folder written by auvmpc")
     return folder
 
 
