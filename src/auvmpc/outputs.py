@@ -69,10 +69,10 @@ _LEGACY_NAMES = {
         r"|figures[\w.-]*)$"
     ),
 }
-_LEGACY_REQUIRED = {
-    OutputKind.RUN: ("run.json", "log.csv"),
-    OutputKind.REPRODUCE: ("summary.md", "runs"),
-    OutputKind.CAMPAIGN: ("results.sqlite",),
+_LEGACY_REQUIRED = {  # any one of these sets of names marks the kind
+    OutputKind.RUN: ({"run.json", "log.csv"},),
+    OutputKind.REPRODUCE: ({"summary.md", "runs"},),
+    OutputKind.CAMPAIGN: ({"results.sqlite"}, {".campaign.lock"}),
 }
 
 
@@ -96,8 +96,8 @@ def own_kind(folder: Path) -> OutputKind | None:
         return OutputKind(marker["kind"])
     names = {entry.name for entry in folder.iterdir()}
     for kind, pattern in _LEGACY_NAMES.items():
-        if names and all(pattern.match(name) for name in names) and all(
-            required in names for required in _LEGACY_REQUIRED[kind]
+        if all(pattern.match(name) for name in names) and any(
+            required <= names for required in _LEGACY_REQUIRED[kind]
         ):
             return kind
     return None
