@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -20,7 +21,7 @@ from rich.table import Table
 from rich.text import Text
 
 from auvmpc import interrupts
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, RunFailed
 
 app = typer.Typer(
     add_completion=False,
@@ -34,6 +35,7 @@ if not console.is_terminal:  # piped or in CI: do not squeeze tables into 80 col
 errors = Console(stderr=True)
 
 USER_ERROR_EXIT = 2
+RUN_FAILED_EXIT = 1  # not the input's fault as far as auvmpc can tell
 
 
 def main() -> None:
@@ -46,6 +48,14 @@ def main() -> None:
     except ConfigError as error:
         errors.print(f"error: {error}", highlight=False, soft_wrap=True, markup=False)
         sys.exit(USER_ERROR_EXIT)
+    except RunFailed as error:
+        if os.environ.get("AUVMPC_TRACEBACK"):
+            raise
+        errors.print(
+            f"error: {error} (nothing was written; AUVMPC_TRACEBACK=1 shows where)",
+            highlight=False, soft_wrap=True, markup=False,
+        )  # fmt: skip
+        sys.exit(RUN_FAILED_EXIT)
     except KeyboardInterrupt:  # raised outside a command (typer turns the rest into exit 130)
         _interrupted()
     except SystemExit:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,6 +16,7 @@ from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
 from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.log import SimLog
 from auvmpc.metrics import compute_metrics
 from auvmpc.outputs import OutputKind, atomic_write_text, staged_folder
@@ -32,6 +34,7 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "DepthRunResult",
+    "RunFailed",
     "RunResult",
     "atomic_write_text",
     "fill_run_folder",
@@ -145,10 +148,36 @@ def simulate(
     stopwatch = Stopwatch()
     warnings = preflight(resolved)
 
+    reached = [0]
+
     def step(k: int, n: int) -> None:
+        reached[0] = k
         interrupts.check()
         if on_step is not None:
             on_step(k, n)
+
+    with _failures_named(resolved.scenario, reached):
+        return _simulate(resolved, step, stopwatch, warnings)
+
+
+@contextlib.contextmanager
+def _failures_named(scenario, reached: list[int]):
+    try:
+        yield
+    except (ConfigError, KeyboardInterrupt):
+        raise
+    except Exception as error:
+        k = reached[0]
+        t = k * scenario.controller.sample_time
+        text = str(error).strip().splitlines()
+        what = f"{type(error).__name__}: {text[0]}" if text else type(error).__name__
+        raise RunFailed(
+            f"{scenario.name} with {scenario.controller.type} failed at t = {t:g} s "
+            f"(step {k}): {what}"
+        ) from error
+
+
+def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
 
     libraries = _solver_libraries(resolved.scenario)
     if isinstance(resolved, ResolvedDepthScenario):

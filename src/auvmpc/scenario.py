@@ -193,8 +193,10 @@ def apply_override(data: dict[str, Any], override: str) -> None:
         raise ConfigError("--set", override, "expected field=value")
     try:
         value = load_yaml(raw_value)
-    except yaml.YAMLError:
-        raise ConfigError(path, raw_value, "value is not valid YAML") from None
+    except yaml.YAMLError as error:
+        problem = str(getattr(error, "problem", "") or "")
+        detail = f": {problem}" if problem.startswith("duplicate key") else ""
+        raise ConfigError(path, raw_value, f"value is not valid YAML{detail}") from None
     keys = path.split(".")
     node: Any = data
     for depth, key in enumerate(keys):

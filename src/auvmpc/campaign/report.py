@@ -263,7 +263,8 @@ def campaign_report(
     if write:
         from auvmpc.plots import save_figures
 
-        files += save_figures(drawn, out / figures_dir)
+        if drawn:
+            files += save_figures(drawn, out / figures_dir)
         atomic_write_text(out / report_json, json.dumps(summary, indent=2, allow_nan=False) + "\n")
         atomic_write_text(out / report_file, markdown)
         files += [out / report_json, out / report_file]
