@@ -35,6 +35,7 @@ from auvmpc.vehicle import VehicleParams
 __all__ = [
     "available_memory_bytes",
     "check_memory",
+    "largest_surge_thrust",
     "preflight",
     "reference_thrust_needs",
     "steady_top_speed",
@@ -149,27 +150,28 @@ def _check_start(scenario: Scenario) -> None:
 
 def steady_top_speed(params: VehicleParams) -> float:
     """Fastest steady straight surge (m/s): the largest pure surge force the thrusters can
-    make within their limits (a linear program) against Xu u + Xuu u|u| damping."""
-    force = _largest_pure_force(params, axis=0)
+    make within their limits (:func:`largest_surge_thrust`) against Xu u + Xuu u|u|."""
+    force = float(params.T[0] @ largest_surge_thrust(params))
     a, b = -params.Xuu, -params.Xu  # both >= 0: damping force a u^2 + b u
     if a > 0:
         return (-b + math.sqrt(b * b + 4.0 * a * force)) / (2.0 * a)
     return force / b if b > 0 else math.inf
 
 
-def _largest_pure_force(params: VehicleParams, axis: int) -> float:
+def largest_surge_thrust(params: VehicleParams) -> np.ndarray:
+    """Thrusts (n,) within the limits that make the largest surge force with no sway force
+    and no yaw moment (a linear program); zeros if the layout cannot push straight ahead."""
     from scipy.optimize import linprog
 
     T = params.T
-    others = [i for i in range(3) if i != axis]
     result = linprog(
-        -T[axis],
-        A_eq=T[others],
+        -T[0],
+        A_eq=T[1:],
         b_eq=np.zeros(2),
         bounds=[params.thrust_limits] * params.n_thrusters,
         method="highs",
     )
-    return float(-result.fun) if result.status == 0 else 0.0
+    return np.asarray(result.x) if result.status == 0 else np.zeros(params.n_thrusters)
 
 
 def reference_thrust_needs(
