@@ -164,7 +164,7 @@ def simulate(
 def _failures_named(scenario, reached: list[int]):
     try:
         yield
-    except (ConfigError, KeyboardInterrupt):
+    except (ConfigError, RunFailed, KeyboardInterrupt):
         raise
     except Exception as error:
         k = reached[0]
@@ -214,10 +214,25 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             on_step=step,
         )
+    _check_finite(log.state, scenario)
     metrics = compute_metrics(log, resolved.model, scenario.transient_s)
     return RunResult(
         resolved, log, metrics, provenance=stopwatch.record(libraries), warnings=warnings
     )
+
+
+def _check_finite(states: np.ndarray, scenario: Scenario) -> None:
+    """A plant integration that diverged (e.g. from an initial speed far beyond what the
+    vehicle's damping allows at the plant's step) is a failed run, not a result."""
+    finite = np.isfinite(states).all(axis=1)
+    if not finite.all():
+        k = int(np.argmin(finite))
+        raise RunFailed(
+            f"{scenario.name} with {scenario.controller.type} failed at "
+            f"t = {k * scenario.controller.sample_time:g} s (step {k}): the simulated state "
+            "became non-finite (the plant integration diverged; check initial_state and "
+            "plant.max_step)"
+        )
 
 
 def _solver_libraries(scenario: Scenario | DepthScenario) -> tuple[str, ...]:
