@@ -52,9 +52,6 @@ CASES = [
      "100000"),  # fmt: skip
     (("run", "paper-ideal", "--set", "duration=1e12"), "duration: 2e+12 samples",
      "1000000000000.0"),  # fmt: skip
-    (("run", "paper-obstacles", "--set", "initial_state=[2.0, 8.3, 0, 0, 0, 0]"),
-     "obstacles.0: the start position (2, 8.3) is 0.3 m from its centre, inside its "
-     "keep-out disc", "'radius': 1.0"),  # fmt: skip
     (("run", "paper-ideal", "--set", "reference={{type: line, speed: 20}}"),
      "reference.speed: the reference moves at 20 m/s (t = 0 s), faster than jmse2210's "
      "steady top speed 1.76 m/s", "20"),  # fmt: skip

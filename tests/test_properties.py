@@ -230,10 +230,6 @@ BREAKAGES = {
     "short state": (lambda d, v: d.update({"initial_state": [0, 0, 0]}), "initial_state"),
     "bad controller": (lambda d, v: d["controller"].update({"type": "pid"}), "controller.type"),
     "scale not used": (lambda d, v: d.update({"plant": {"scale": {"mass": 2.0}}}), "plant.scale"),
-    "start in obstacle": (
-        lambda d, v: d.update({"obstacles": [{"center": [5, 0], "radius": 1 + abs(v) % 5}]}),
-        "obstacles.0",
-    ),
     "too fast": (lambda d, v: d["reference"].update({"speed": 2 + abs(v) % 50}), "reference"),
 }
 

@@ -126,10 +126,13 @@ def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
     assert "thrust_rate_limit x sample_time = 2.5 N" in warning
 
 
-def test_start_inside_keep_out_disc_counts_only_obstacles_there_at_t0():
+def test_start_inside_keep_out_disc_is_a_warning_for_obstacles_there_at_t0():
     inside = "initial_state=[2.0, 9.4, 0, 0, 0, 0]"  # 1.4 m from obstacle 0: radius 1 + 0.5
-    with pytest.raises(ConfigError, match=r"^obstacles\.0: the start position \(2, 9\.4\)"):
-        preflight(load_scenario("paper-obstacles", [inside]))
+    (warning,) = preflight(load_scenario("paper-obstacles", [inside]))
+    assert warning.startswith(
+        "obstacles.0: the start position (2, 9.4) is 1.4 m from its centre, inside its "
+        "keep-out disc (radius 1 + vehicle_radius 0.5 m)"
+    )
     later = load_scenario("paper-obstacles", [inside, "obstacles.0.appear_time=5"])
     assert preflight(later) == []
     outside = "initial_state=[2.0, 9.6, 0, 0, 0, 0]"
@@ -182,3 +185,14 @@ def test_run_json_carries_provenance(monkeypatch, capsys, tmp_path, controller, 
 def test_depth_runs_carry_provenance_too():
     result = simulate(load_scenario("paper-depth-calm", ["duration=11"]))
     assert result.run_json()["provenance"]["libraries"]["daqp"]
+
+
+def test_start_in_an_obstacle_is_printed_and_stored(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-obstacles", "--set", "duration=2", "--no-figures",
+        "--set", "initial_state=[2.0, 8.3, 0, 0, 0, 0]", "--out", str(out),
+    )  # fmt: skip
+    assert code == 0
+    assert stderr.startswith("warning: obstacles.0: the start position (2, 8.3) is 0.3 m")
+    assert json.loads((out / "run.json").read_text())["warnings"][0].startswith("obstacles.0")

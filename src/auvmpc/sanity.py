@@ -6,8 +6,9 @@ run) when the run could not mean anything, and a warning (printed, stored in run
 with their reasons, are in ``docs/sanity-checks.md``:
 
 - sizes beyond the available memory: error (the run could only crash);
-- start inside an obstacle's keep-out disc (radius + ``vehicle_radius``): error (the
-  obstacle constraint is violated before the controller acts; clearance metrics are void);
+- start inside an obstacle's keep-out disc (radius + ``vehicle_radius``): warning (the
+  run starts in contact; the MPCs relax the constraint and leave, a recovery that is
+  worth simulating, e.g. an obstacle appearing on top of the vehicle);
 - a reference faster than the vehicle's steady top speed: error (no controller can
   track it; the tracking metrics would measure the thrust limits, not the controller);
 - a reference that needs more thrust than the limits allow somewhere else (a turn too
@@ -125,27 +126,26 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
     check_memory(resolved)
     if isinstance(resolved, ResolvedDepthScenario):
         return []
-    scenario = resolved.scenario
-    _check_start(scenario)
-    return _check_reference(resolved)
+    return _check_start(resolved.scenario) + _check_reference(resolved)
 
 
-def _check_start(scenario: Scenario) -> None:
+def _check_start(scenario: Scenario) -> list[str]:
     x, y = scenario.initial_state[:2]
     margin = scenario.controller.vehicle_radius
+    warnings = []
     for index, obstacle in enumerate(scenario.obstacles):
         if not obstacle.exists_at(0.0):
             continue
         cx, cy = obstacle.center_at(0.0)
         distance = math.hypot(x - cx, y - cy)
-        keep_out = obstacle.radius + margin
-        if distance < keep_out:
-            raise ConfigError(
-                f"obstacles.{index}",
-                {"center": list(obstacle.center), "radius": obstacle.radius},
-                f"the start position ({x:g}, {y:g}) is {distance:.3g} m from its centre, inside "
-                f"its keep-out disc (radius {obstacle.radius:g} + vehicle_radius {margin:g} m)",
+        if distance < obstacle.radius + margin:
+            warnings.append(
+                f"obstacles.{index}: the start position ({x:g}, {y:g}) is {distance:.3g} m from "
+                f"its centre, inside its keep-out disc (radius {obstacle.radius:g} + "
+                f"vehicle_radius {margin:g} m): the run starts in contact (negative clearance) "
+                "and the MPCs relax that constraint until the vehicle is out"
             )
+    return warnings
 
 
 def steady_top_speed(params: VehicleParams) -> float:
