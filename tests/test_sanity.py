@@ -147,6 +147,14 @@ def test_memory_check_names_the_horizon_and_counts_moves():
         check_memory(resolved, available=2**30)
 
 
+def test_memory_check_covers_the_nonlinear_mpc():
+    resolved = load_scenario("paper-ideal", ["controller.type=nmpc",
+                                             "controller.prediction_horizon=100000"])  # fmt: skip
+    with pytest.raises(ConfigError, match=r"^controller\.prediction_horizon: building the nmpc"):
+        check_memory(resolved, available=64 * 2**30)
+    check_memory(load_scenario("paper-ideal", ["controller.type=nmpc"]), available=2**30)
+
+
 def test_warnings_are_printed_and_stored(monkeypatch, capsys, tmp_path):
     out = tmp_path / "run"
     code, _, stderr = run_cli(

@@ -48,6 +48,10 @@ _RELATIVE_MARGIN = 1e-6
 # Memory a run may plan to use, as a share of what the machine has available now.
 _MEMORY_SHARE = 0.8
 _BYTES = 8  # float64
+# Peak memory of building the CasADi/IPOPT problem grows about as ny^2: measured with
+# `/usr/bin/time -f %M` around make_controller for nmpc on jmse2210 (paper-ideal,
+# control_horizon null): ny = 500 -> 0.18 GB, ny = 2000 -> 1.16 GB.
+_NLP_BYTES_PER_STAGE_SQUARED = 270
 
 
 def available_memory_bytes() -> int:
@@ -97,6 +101,16 @@ def check_memory(
             f"of log, more than the {_size(budget)} of memory available",
         )
     ny = config.prediction_horizon
+    if str(config.type) in ("nmpc", "do-mpc"):
+        nlp_bytes = _NLP_BYTES_PER_STAGE_SQUARED * ny * ny
+        if nlp_bytes > budget:
+            raise ConfigError(
+                "controller.prediction_horizon",
+                ny,
+                f"building the {config.type} problem with ny={ny} needs about "
+                f"{_size(nlp_bytes)}, more than the {_size(budget)} of memory available",
+            )
+        return
     condensed = isinstance(resolved, ResolvedDepthScenario) or str(config.type) in (
         "mpc",
         "ltv-mpc",
