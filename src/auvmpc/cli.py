@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -19,7 +20,8 @@ from rich.progress import (
 from rich.table import Table
 from rich.text import Text
 
-from auvmpc.errors import ConfigError
+from auvmpc import interrupts
+from auvmpc.errors import ConfigError, RunFailed
 
 app = typer.Typer(
     add_completion=False,
@@ -33,18 +35,55 @@ if not console.is_terminal:  # piped or in CI: do not squeeze tables into 80 col
 errors = Console(stderr=True)
 
 USER_ERROR_EXIT = 2
+RUN_FAILED_EXIT = 1  # not the input's fault as far as auvmpc can tell
 
 
 def main() -> None:
-    """Console-script entry point: user errors become one line on stderr, never a traceback."""
+    """Console-script entry point: user errors become one line on stderr, never a traceback;
+    SIGINT / SIGTERM one line on what was kept, exit 130 / 143."""
+    interrupts.reset()
+    interrupts.install()
     try:
         app()
     except ConfigError as error:
         errors.print(f"error: {error}", highlight=False, soft_wrap=True, markup=False)
         sys.exit(USER_ERROR_EXIT)
-    except KeyboardInterrupt:
-        errors.print("interrupted: nothing half-written was left behind", highlight=False)
-        sys.exit(130)
+    except RunFailed as error:
+        if os.environ.get("AUVMPC_TRACEBACK"):
+            raise
+        errors.print(
+            f"error: {error} (nothing was written; AUVMPC_TRACEBACK=1 shows where)",
+            highlight=False, soft_wrap=True, markup=False,
+        )  # fmt: skip
+        sys.exit(RUN_FAILED_EXIT)
+    except KeyboardInterrupt:  # raised outside a command (typer turns the rest into exit 130)
+        _interrupted()
+    except SystemExit:
+        if interrupts.requested() is not None:
+            _interrupted()
+        raise
+
+
+def _interrupted() -> None:
+    signum = interrupts.requested() or 2
+    name = "SIGTERM" if signum == 15 else "SIGINT" if signum == 2 else f"signal {signum}"
+    errors.print(
+        f"interrupted ({name}): {interrupts.kept()}", highlight=False, soft_wrap=True, markup=False
+    )
+    sys.exit(128 + signum)
+
+
+Overwrite = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite", help="replace an earlier auvmpc output folder there (never anything else)"
+    ),
+]
+
+
+def _warn(warnings: list[str]) -> None:
+    for warning in warnings:
+        errors.print(f"warning: {warning}", highlight=False, soft_wrap=True, markup=False)
 
 
 def progress_bar() -> Progress:
@@ -56,6 +95,7 @@ def progress_bar() -> Progress:
         TimeRemainingColumn(),
         console=errors,
         transient=True,
+        disable=not errors.is_terminal,  # a transient bar only leaves blank lines in a log
     )
 
 
@@ -87,9 +127,11 @@ def run(
     index: Annotated[
         int | None, typer.Option("--index", help="run index within --from-campaign")
     ] = None,
+    overwrite: Overwrite = False,
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
     from auvmpc.api import controller_overrides
+    from auvmpc.outputs import OutputKind, check_output_folder
     from auvmpc.runner import simulate, write_run
     from auvmpc.scenario import load_scenario
 
@@ -114,12 +156,21 @@ def run(
         name = f"{name}-run{index}"
     label = f"{name}-{controller or resolved.scenario.controller.type}"
     out_dir = out if out is not None else Path("runs") / label
+    check_output_folder(out_dir, OutputKind.RUN, overwrite=overwrite)  # before, not after
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
         result = simulate(
             resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n)
         )
-    write_run(result, out_dir, figures=figures, figure_format=figure_format, dpi=dpi)
+    _warn(result.warnings)
+    write_run(
+        result,
+        out_dir,
+        figures=figures,
+        figure_format=figure_format,
+        dpi=dpi,
+        overwrite=overwrite,
+    )
     print_metrics(result.metrics, title=label)
     console.print(f"wrote {out_dir}")
     warn_if_not_ok(result.metrics)
@@ -132,9 +183,13 @@ def reproduce(
     ),
     sweep: Annotated[bool, typer.Option(help="include the inertia-uncertainty sweep")] = True,
     figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+    overwrite: Overwrite = False,
 ) -> None:
     """Reproduce the paper's simulations (section 4.1) into one folder."""
+    from auvmpc.outputs import OutputKind, check_output_folder
     from auvmpc.reproduce import reproduce as run_all
+
+    check_output_folder(out, OutputKind.REPRODUCE, overwrite=overwrite)
 
     with progress_bar() as progress:
         task = progress.add_task("reproduce", total=None)
@@ -142,7 +197,7 @@ def reproduce(
         def advance(done: int, total: int, name: str) -> None:
             progress.update(task, completed=done, total=total, description=name)
 
-        run_all(out, include_sweep=sweep, figures=figures, on_run=advance)
+        run_all(out, include_sweep=sweep, figures=figures, on_run=advance, overwrite=overwrite)
     console.print((out / "summary.md").read_text(), highlight=False)
     console.print((out / "depth.md").read_text(), highlight=False)
     console.print(f"wrote {out}")
@@ -163,6 +218,9 @@ def bench(
     set_: Annotated[
         list[str] | None, typer.Option("--set", help="override a field in every run")
     ] = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="replace an existing --json file")
+    ] = False,
 ) -> None:
     """Time controllers x scenarios on one core: per-step median/p99/max, wall time, metrics."""
     from auvmpc.bench import (
@@ -173,8 +231,10 @@ def bench(
         rows_to_json,
         run_benchmark,
     )
-    from auvmpc.runner import atomic_write_text
+    from auvmpc.outputs import atomic_write_text, check_output_file
 
+    if json_file is not None:
+        check_output_file(json_file, overwrite=overwrite, option="--json")
     with progress_bar() as progress:
         task = progress.add_task("bench", total=None)
         rows = run_benchmark(
@@ -215,6 +275,7 @@ def campaign_progress_bar() -> Progress:
         TimeRemainingColumn(),
         console=errors,
         transient=True,
+        disable=not errors.is_terminal,  # a transient bar only leaves blank lines in a log
     )
 
 
@@ -237,13 +298,24 @@ def campaign(
         str | None,
         typer.Option("--criterion", help="success criterion, e.g. 'max_position_error_m < 1'"),
     ] = None,
+    overwrite: Annotated[
+        bool,
+        typer.Option("--overwrite", help="discard an earlier auvmpc campaign there, start over"),
+    ] = False,
 ) -> None:
     """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
     from auvmpc.campaign import campaign_report as make_report
-    from auvmpc.campaign import load_campaign, run_campaign
+    from auvmpc.campaign import count_finished, load_campaign, run_campaign
+    from auvmpc.outputs import OutputKind, check_output_folder
 
+    check_output_folder(out, OutputKind.CAMPAIGN, overwrite=overwrite, resume=True)
     loaded = load_campaign(file)
-    with campaign_progress_bar() as progress:
+
+    def kept() -> str:
+        rows = count_finished(out)
+        return f"{rows} finished runs kept in {out}; the same command resumes from there"
+
+    with interrupts.describe_kept(kept), campaign_progress_bar() as progress:
         task = None
 
         def advance(done: int, total: int) -> None:
@@ -254,7 +326,13 @@ def campaign(
                 progress.update(task, completed=done, total=total)
 
         summary = run_campaign(
-            loaded, out, workers=workers, runs=runs, scheduler=scheduler, on_progress=advance
+            loaded,
+            out,
+            workers=workers,
+            runs=runs,
+            scheduler=scheduler,
+            on_progress=advance,
+            overwrite=overwrite,
         )
     console.print(
         f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "
@@ -295,7 +373,7 @@ def campaign_report(
         figures=figures,
     )
     console.print(result.markdown, highlight=False, markup=False)
-    console.print(f"wrote {out}")
+    console.print(f"wrote {', '.join(str(path) for path in result.files[-2:])}")
 
 
 @app.command()
@@ -336,8 +414,10 @@ def plot(
     dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
+    from auvmpc.outputs import OutputKind, require_own_folder
     from auvmpc.runner import redraw
 
+    require_own_folder(run_dir, OutputKind.RUN, "RUN_DIR")
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
     check_figure_options(fmt, dpi)

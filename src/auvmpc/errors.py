@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "FieldError", "format_validation_error"]
+__all__ = ["ConfigError", "FieldError", "RunFailed", "format_validation_error"]
 
 
 class ConfigError(ValueError):
@@ -13,6 +13,13 @@ class ConfigError(ValueError):
         self.value = value
         self.reason = reason
         super().__init__(f"{field}: {reason} (got {_short(value)})")
+
+
+class RunFailed(RuntimeError):
+    """The simulation itself broke down (a numerical failure in a controller or the plant).
+
+    One line for the user: where (time and step) and what; the original exception is the
+    ``__cause__``. The CLI prints it as one line, exit code 1."""
 
 
 class FieldError(ValueError):

@@ -15,7 +15,8 @@ import numpy as np
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.depth import STEP_METRIC_KEYS
 from auvmpc.log import SimLog
-from auvmpc.runner import atomic_write_text, simulate, write_run
+from auvmpc.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
+from auvmpc.runner import fill_run_folder, simulate
 from auvmpc.scenario import load_scenario
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
@@ -79,9 +80,24 @@ def reproduce(
     include_sweep: bool = True,
     figures: bool = True,
     on_run: Callable[[int, int, str], None] | None = None,
+    *,
+    overwrite: bool = False,
 ) -> list[dict]:
-    """Run everything; write run folders, summary.csv/.md/.json and the sweep figure."""
-    out_dir = Path(out_dir)
+    """Run everything; write run folders, summary.csv/.md/.json and the sweep figure.
+
+    ``out_dir`` must be new, empty, or an earlier reproduction (then only with
+    ``overwrite``); it appears only when everything is written (:mod:`auvmpc.outputs`).
+    """
+    with staged_folder(out_dir, OutputKind.REPRODUCE, overwrite=overwrite) as staging:
+        return _reproduce_into(staging, include_sweep, figures, on_run)
+
+
+def _reproduce_into(
+    out_dir: Path,
+    include_sweep: bool,
+    figures: bool,
+    on_run: Callable[[int, int, str], None] | None,
+) -> list[dict]:
     (out_dir / "runs").mkdir(parents=True, exist_ok=True)
     planned = jobs(include_sweep)
     rows = []
@@ -90,7 +106,9 @@ def reproduce(
             on_run(index, len(planned), job.folder_name)
         resolved = load_scenario(job.scenario, job.overrides)
         result = simulate(resolved)
-        write_run(result, out_dir / "runs" / job.folder_name, figures=figures and job.level is None)
+        folder = out_dir / "runs" / job.folder_name
+        fill_run_folder(result, folder, figures=figures and job.level is None)
+        mark_folder(folder, OutputKind.RUN)
         row = {"scenario": job.scenario, "controller": job.controller, "level": job.level}
         row.update({key: result.metrics[key] for key in SUMMARY_KEYS})
         row.update(velocity_settling(result.log))
@@ -100,7 +118,8 @@ def reproduce(
         if on_run is not None:
             on_run(len(planned), len(planned), name)
         result = simulate(load_scenario(name))
-        write_run(result, out_dir / "runs" / name, figures=figures)
+        fill_run_folder(result, out_dir / "runs" / name, figures=figures)
+        mark_folder(out_dir / "runs" / name, OutputKind.RUN)
         depth_rows.append({"scenario": name, **result.metrics})
     if on_run is not None:
         on_run(len(planned), len(planned), "done")

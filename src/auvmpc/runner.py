@@ -2,24 +2,25 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
-import shutil
-import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from auvmpc import __version__
+from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
 from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.log import SimLog
 from auvmpc.metrics import compute_metrics
+from auvmpc.outputs import OutputKind, atomic_write_text, staged_folder
+from auvmpc.provenance import Stopwatch
 from auvmpc.references import make_reference
 from auvmpc.scenario import (
     ControllerType,
@@ -33,8 +34,10 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "DepthRunResult",
+    "RunFailed",
     "RunResult",
     "atomic_write_text",
+    "fill_run_folder",
     "make_controller",
     "read_run",
     "redraw",
@@ -50,6 +53,8 @@ class _Finished:
     resolved: ResolvedScenario | ResolvedDepthScenario
     log: SimLog | DepthLog
     metrics: dict[str, Any]
+    provenance: dict[str, Any] = field(default_factory=dict, kw_only=True)
+    warnings: list[str] = field(default_factory=list, kw_only=True)
 
     @property
     def scenario(self):
@@ -65,6 +70,8 @@ class _Finished:
             "plant": self.simulated_plant().model_dump(mode="json"),
             "model": self.resolved.model.model_dump(mode="json"),
             "metrics": self.metrics,
+            "warnings": list(self.warnings),
+            "provenance": self.provenance,
         }
 
     def csv_text(self) -> str:
@@ -129,11 +136,60 @@ def simulate(
     resolved: ResolvedScenario | ResolvedDepthScenario,
     on_step: Callable[[int, int], None] | None = None,
 ) -> RunResult | DepthRunResult:
-    """Run the scenario once. Randomness comes from children of the scenario seed."""
+    """Run the scenario once. Randomness comes from children of the scenario seed.
+
+    Checked first (:mod:`auvmpc.sanity`): the sizes fit in memory and the scenario is
+    physically possible; what is doubtful but possible becomes ``warnings``. A SIGINT or
+    SIGTERM stops the loop after the current step (:mod:`auvmpc.interrupts`), even one a
+    compiled solver swallowed, so no result is ever built from an interrupted run.
+    """
+    from auvmpc.sanity import preflight
+
+    stopwatch = Stopwatch()
+    warnings = preflight(resolved)
+
+    reached = [0]
+
+    def step(k: int, n: int) -> None:
+        reached[0] = k
+        interrupts.check()
+        if on_step is not None:
+            on_step(k, n)
+
+    with _failures_named(resolved.scenario, reached):
+        return _simulate(resolved, step, stopwatch, warnings)
+
+
+@contextlib.contextmanager
+def _failures_named(scenario, reached: list[int]):
+    try:
+        yield
+    except (ConfigError, RunFailed, KeyboardInterrupt):
+        raise
+    except Exception as error:
+        k = reached[0]
+        t = k * scenario.controller.sample_time
+        text = str(error).strip().splitlines()
+        what = f"{type(error).__name__}: {text[0]}" if text else type(error).__name__
+        raise RunFailed(
+            f"{scenario.name} with {scenario.controller.type} failed at t = {t:g} s "
+            f"(step {k}): {what}"
+        ) from error
+
+
+def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
+
+    libraries = _solver_libraries(resolved.scenario)
     if isinstance(resolved, ResolvedDepthScenario):
         with threadpool_limits(limits=1, user_api="blas"):
-            log, heave = simulate_depth(resolved.scenario, resolved.model, on_step)
-        return DepthRunResult(resolved, log, depth_metrics(log, resolved.scenario, heave))
+            log, heave = simulate_depth(resolved.scenario, resolved.model, step)
+        return DepthRunResult(
+            resolved,
+            log,
+            depth_metrics(log, resolved.scenario, heave),
+            provenance=stopwatch.record(libraries),
+            warnings=warnings,
+        )
     scenario = resolved.scenario
     disturbance_seed, sensor_seed = np.random.SeedSequence(scenario.seed).spawn(2)
     sample_time = scenario.controller.sample_time
@@ -156,10 +212,39 @@ def simulate(
             vehicle_radius=scenario.controller.vehicle_radius,
             max_plant_step=scenario.plant.max_step,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
-            on_step=on_step,
+            on_step=step,
         )
+    _check_finite(log.state, scenario)
     metrics = compute_metrics(log, resolved.model, scenario.transient_s)
-    return RunResult(resolved, log, metrics)
+    return RunResult(
+        resolved, log, metrics, provenance=stopwatch.record(libraries), warnings=warnings
+    )
+
+
+def _check_finite(states: np.ndarray, scenario: Scenario) -> None:
+    """A plant integration that diverged (e.g. from an initial speed far beyond what the
+    vehicle's damping allows at the plant's step) is a failed run, not a result."""
+    finite = np.isfinite(states).all(axis=1)
+    if not finite.all():
+        k = int(np.argmin(finite))
+        raise RunFailed(
+            f"{scenario.name} with {scenario.controller.type} failed at "
+            f"t = {k * scenario.controller.sample_time:g} s (step {k}): the simulated state "
+            "became non-finite (the plant integration diverged; check initial_state and "
+            "plant.max_step)"
+        )
+
+
+def _solver_libraries(scenario: Scenario | DepthScenario) -> tuple[str, ...]:
+    """Distributions beyond numpy, scipy and casadi that the scenario's controller uses."""
+    config = scenario.controller
+    if isinstance(scenario, DepthScenario):
+        return (str(config.qp_solver),)
+    if config.type in (ControllerType.MPC, ControllerType.LTV_MPC):
+        return (str(config.qp_solver),)
+    if config.type is ControllerType.DO_MPC:
+        return ("do-mpc",)
+    return ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
 
 
 def write_run(
@@ -168,29 +253,35 @@ def write_run(
     figures: bool = True,
     figure_format: str = "png",
     dpi: int = 120,
+    *,
+    overwrite: bool = False,
 ) -> Path:
     """Write log.csv, run.json and figures into ``out_dir``, all or nothing.
 
-    Everything goes to a hidden sibling folder first, which is renamed into place
-    only when complete: an interrupted write never leaves a folder that looks done.
-    An existing ``out_dir`` is replaced.
+    ``out_dir`` must be new, empty, or an earlier run folder of auvmpc's and then only
+    with ``overwrite`` (:mod:`auvmpc.outputs`); it is written in a hidden staging folder
+    renamed into place when complete, so an interrupted write leaves nothing that looks done.
     """
-    out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(
-        tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".partial", dir=out_dir.parent)
+    with staged_folder(out_dir, OutputKind.RUN, overwrite=overwrite) as staging:
+        fill_run_folder(result, staging, figures, figure_format, dpi)
+    return Path(out_dir)
+
+
+def fill_run_folder(
+    result: RunResult | DepthRunResult,
+    folder: Path,
+    figures: bool,
+    figure_format: str = "png",
+    dpi: int = 120,
+) -> None:
+    """Write a run's files into ``folder`` (a staging folder the caller owns)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(folder / "log.csv", result.csv_text())
+    atomic_write_text(
+        folder / "run.json", json.dumps(result.run_json(), indent=2, allow_nan=False) + "\n"
     )
-    try:
-        staging.chmod(0o755)  # mkdtemp makes it private; a run folder is for everyone
-        (staging / "log.csv").write_text(result.csv_text())
-        (staging / "run.json").write_text(json.dumps(result.run_json(), indent=2, allow_nan=False))
-        if figures:
-            result.draw(staging, figure_format, dpi)
-        _replace_dir(staging, out_dir)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return out_dir
+    if figures:
+        result.draw(folder, figure_format, dpi)
 
 
 def draw_figures(
@@ -248,28 +339,3 @@ def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:
     if initial is not None:
         log.initial_thrust = np.array(initial, dtype=float)
     return info, log
-
-
-def _replace_dir(staging: Path, target: Path) -> None:
-    if target.exists():
-        retired = target.with_name(f".{target.name}.old-{os.getpid()}")
-        os.replace(target, retired)
-        os.replace(staging, target)
-        shutil.rmtree(retired, ignore_errors=True)
-    else:
-        os.replace(staging, target)
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write a file so that readers see the old content or the new, never a part."""
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(handle, "w") as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise

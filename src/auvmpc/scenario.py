@@ -15,14 +15,20 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel, builtin_descriptions, read_yaml_mapping
+from auvmpc.config import (
+    StrictModel,
+    builtin_descriptions,
+    load_yaml,
+    read_text_file,
+    read_yaml_mapping,
+)
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.depth import DepthScenario, resolve_heave
 from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.obstacles import ObstacleConfig
 from auvmpc.references import ReferenceConfig
-from auvmpc.vehicle import VehicleParams, load_vehicle, scaled
+from auvmpc.vehicle import VehicleParams, check_plant_scale, load_vehicle, scaled
 
 __all__ = [
     "ControllerConfig",
@@ -96,6 +102,7 @@ class ResolvedScenario:
         self.scenario = scenario
         self.base_dir = base_dir
         self.model: VehicleParams = _load_vehicle_relative(scenario.vehicle, base_dir)
+        check_plant_scale(scenario.plant.scale)
         self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
         n = self.model.n_thrusters
         weights = scenario.controller.R
@@ -133,6 +140,7 @@ class ResolvedDepthScenario:
         self.scenario = scenario
         self.base_dir = base_dir
         self.model: VehicleParams = _load_vehicle_relative(scenario.vehicle, base_dir)
+        check_plant_scale(scenario.plant.scale, "depth")
         try:
             self.heave_model = resolve_heave(self.model, {})
             self.heave_plant = resolve_heave(self.model, scenario.plant.scale)
@@ -153,13 +161,13 @@ def load_scenario(
         base_dir = Path.cwd()
     else:
         path = Path(text_source)
-        if not path.is_file():
+        if not path.exists():
             raise ConfigError(
                 "scenario",
                 text_source,
                 f"no such file or built-in; built-ins: {list(builtin_scenarios())}",
             )
-        text, base_dir = path.read_text(), path.resolve().parent
+        text, base_dir = read_text_file(path, "scenario", "scenario file"), path.resolve().parent
     data = read_yaml_mapping(text, "scenario", text_source, "scenario fields")
     for override in overrides:
         apply_override(data, override)
@@ -184,9 +192,11 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     if not separator or not path:
         raise ConfigError("--set", override, "expected field=value")
     try:
-        value = yaml.safe_load(raw_value)
-    except yaml.YAMLError:
-        raise ConfigError(path, raw_value, "value is not valid YAML") from None
+        value = load_yaml(raw_value)
+    except yaml.YAMLError as error:
+        problem = str(getattr(error, "problem", "") or "")
+        detail = f": {problem}" if problem.startswith("duplicate key") else ""
+        raise ConfigError(path, raw_value, f"value is not valid YAML{detail}") from None
     keys = path.split(".")
     node: Any = data
     for depth, key in enumerate(keys):
@@ -205,6 +215,13 @@ def apply_override(data: dict[str, Any], override: str) -> None:
             node[index] = value
         else:
             if isinstance(node, dict) and (index not in node or node[index] is None):
+                if keys[depth + 1].isdigit():  # a list the document leaves at its default
+                    raise ConfigError(
+                        ".".join(keys[: depth + 2]),
+                        keys[depth + 1],
+                        f"no such list index ({'.'.join(keys[: depth + 1])} is not given, "
+                        "so it has no items to set; give the whole list)",
+                    )
                 node[index] = {}
             node = node[index]
 

@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 from pydantic import AfterValidator, Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel, read_yaml_mapping
+from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 
 __all__ = [
@@ -39,6 +39,7 @@ __all__ = [
     "VehicleParams",
     "allocation_matrix",
     "allocation_rank",
+    "check_plant_scale",
     "body_from_world",
     "dynamics",
     "heave_dynamics",
@@ -312,6 +313,43 @@ SCALABLE_FIELDS = (
 )  # fmt: skip
 
 
+# What the simulated 3-DOF plant reads from a vehicle (``dynamics``); the thrust limits are
+# the controller's (the plant applies each command as given), ``mass`` only the depth model's.
+HORIZONTAL_MODEL_FIELDS = ("m11", "m22", "Iz_rb", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr")
+HEAVE_MODEL_FIELDS = ("m_heave", "Zw", "Zww", "net_buoyancy_N", "thrust_rate_limit")
+
+
+def check_plant_scale(scale: Mapping[str, float], kind: str = "horizontal") -> None:
+    """A ``plant.scale`` factor on a field the simulated model does not use has no effect,
+    so it is an error that says which model uses what."""
+    used = HORIZONTAL_MODEL_FIELDS if kind == "horizontal" else HEAVE_MODEL_FIELDS
+    for field, factor in scale.items():
+        if field in used:
+            continue
+        if kind == "horizontal" and field in ("thrust_limits", "thrust_rate_limit"):
+            reason = (
+                f"{field} is the controller's limit, not the plant's (the simulated thrusters "
+                f"apply each command as given); change vehicle.{field} instead"
+            )
+        elif kind == "horizontal" and field in VehicleParams.model_fields:
+            reason = (
+                f"the horizontal (3-DOF) model does not use {field}: it uses "
+                f"{', '.join(HORIZONTAL_MODEL_FIELDS)} (masses and inertias incl. added mass, "
+                "damping); mass is used by depth scenarios only"
+            )
+        elif kind == "horizontal":
+            reason = (
+                "not a scalable field (not a vehicle field); the horizontal model uses "
+                f"{list(HORIZONTAL_MODEL_FIELDS)}"
+            )
+        else:
+            reason = (
+                f"the depth (heave) model does not use {field}: it uses the vehicle's heave "
+                f"section {list(HEAVE_MODEL_FIELDS)}"
+            )
+        raise ConfigError(f"plant.scale.{field}", factor, reason)
+
+
 def scaled(params: VehicleParams, scale: Mapping[str, float]) -> VehicleParams:
     """A copy of ``params`` with named fields multiplied by the given factors."""
     changes: dict[str, Any] = {}
@@ -355,9 +393,9 @@ def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -
         if name in preset_names():
             text = (resources.files("auvmpc.presets") / "vehicles" / f"{name}.yaml").read_text()
         elif name.endswith((".yaml", ".yml")) or Path(name).exists():
-            if not Path(name).is_file():
+            if not Path(name).exists():
                 raise ConfigError(field, name, "vehicle file not found")
-            text = Path(name).read_text()
+            text = read_text_file(name, field, "vehicle file")
         else:
             raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
         data = read_yaml_mapping(text, field, name, "vehicle fields")

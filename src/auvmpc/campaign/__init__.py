@@ -58,7 +58,9 @@ from auvmpc.campaign.spec import (
     load_campaign,
 )
 from auvmpc.campaign.store import (
+    count_finished,
     stored_campaign,
+    stored_sessions,
 )
 
 __all__ = [
@@ -75,6 +77,7 @@ __all__ = [
     "TIMING_METRICS",
     "builtin_campaigns",
     "campaign_report",
+    "count_finished",
     "execute_run",
     "load_campaign",
     "load_results",
@@ -85,6 +88,7 @@ __all__ = [
     "sample_run",
     "scenario_for_run",
     "stored_campaign",
+    "stored_sessions",
     "validate_campaign",
     "wilson_interval",
 ]

@@ -44,6 +44,8 @@ from auvmpc.campaign.store import (
     _exclusive,
     _Store,
 )
+from auvmpc.outputs import prepare_campaign_folder
+from auvmpc.provenance import Stopwatch
 
 
 @functools.lru_cache(maxsize=4)
@@ -153,6 +155,7 @@ def run_campaign(
     runs: int | None = None,
     scheduler: str | None = None,
     on_progress: Callable[[int, int], None] | None = None,
+    overwrite: bool = False,
 ) -> CampaignSummary:
     """Run (or resume) a campaign into ``out_dir``.
 
@@ -173,6 +176,9 @@ def run_campaign(
         able to import this version of auvmpc and read the scenario's files.
     on_progress : callable, optional
         ``on_progress(done, total)`` once before the first run and after each stored run.
+    overwrite : bool
+        Discard an earlier campaign folder at ``out_dir`` and start over (only one that
+        auvmpc wrote, :mod:`auvmpc.outputs`). Without it such a folder is resumed.
 
     Raises
     ------
@@ -199,8 +205,9 @@ def run_campaign(
         raise ConfigError("--workers", workers, "need a whole number >= 1")
     validate_campaign(campaign, total)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     new = 0
+    stopwatch = Stopwatch()
+    prepare_campaign_folder(out, overwrite=overwrite)
     with _exclusive(out):
         store = _Store(out, campaign)
         try:
@@ -227,6 +234,8 @@ def run_campaign(
                 ).fetchall()
             )
         finally:
+            with contextlib.suppress(Exception):  # also after an interrupt: who ran what
+                store.record_session(stopwatch.record(("osqp", "daqp", "proxsuite")), new)
             store.close()
     return CampaignSummary(
         out, total, counts.get("ok", 0), counts.get("failed", 0), new, time.perf_counter() - started

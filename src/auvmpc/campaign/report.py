@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import ast
 import contextlib
+import hashlib
 import json
 import math
+import re
 import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -44,6 +46,7 @@ from auvmpc.campaign.store import (
     _connect,
     _results_path,
     stored_campaign,
+    stored_sessions,
 )
 
 
@@ -167,9 +170,11 @@ def campaign_report(
     figures : bool
         Draw figures.
     write : bool
-        Write ``report.md``, ``report.json`` and ``figures/*.png`` into ``out_dir``.
+        Write ``report.md``, ``report.json`` and ``figures/*.png`` into ``out_dir``; for a
+        criterion other than the campaign file's, ``report-<criterion>.md``, ``.json`` and
+        ``figures-<criterion>/`` next to them (:func:`report_names`), never over them.
     """
-    from auvmpc.runner import atomic_write_text
+    from auvmpc.outputs import atomic_write_text
 
     out = Path(out_dir)
     campaign = stored_campaign(out)
@@ -177,6 +182,7 @@ def campaign_report(
     if frame.empty:
         raise ConfigError("DIR", str(out), "no finished runs yet")
     text = criterion if criterion is not None else campaign.spec.criterion
+    report_file, report_json, figures_dir = report_names(criterion, campaign.spec.criterion)
     parsed = parse_criterion(text) if text else None
     ok = frame[frame["status"] == "ok"]
     if parsed is not None and len(ok):
@@ -257,17 +263,33 @@ def campaign_report(
         if figures and len(ok)
         else {}
     )
-    summary["figures"] = [f"{FIGURES_DIR}/{name}.png" for name in drawn]
+    summary["figures"] = [f"{figures_dir}/{name}.png" for name in drawn]
+    summary["sessions"] = stored_sessions(out)
     markdown = _markdown(summary)
     files: list[Path] = []
     if write:
         from auvmpc.plots import save_figures
 
-        files += save_figures(drawn, out / FIGURES_DIR)
-        atomic_write_text(out / REPORT_JSON, json.dumps(summary, indent=2, allow_nan=False) + "\n")
-        atomic_write_text(out / REPORT_FILE, markdown)
-        files += [out / REPORT_JSON, out / REPORT_FILE]
+        if drawn:
+            files += save_figures(drawn, out / figures_dir)
+        atomic_write_text(out / report_json, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        atomic_write_text(out / report_file, markdown)
+        files += [out / report_json, out / report_file]
     return CampaignReport(summary, markdown, drawn, files)
+
+
+def report_names(criterion: str | None, own: str | None) -> tuple[str, str, str]:
+    """(report .md, report .json, figures folder) for a report by ``criterion``.
+
+    The campaign's own report (no criterion given, or the file's own) is ``report.md``,
+    ``report.json`` and ``figures/``; another criterion gets names of its own, made from
+    its text and a hash of it, so that it never replaces the campaign's report.
+    """
+    if criterion is None or criterion.strip() == (own or "").strip():
+        return REPORT_FILE, REPORT_JSON, FIGURES_DIR
+    slug = re.sub(r"[^A-Za-z0-9]+", "_", criterion).strip("_")[:40] or "criterion"
+    tag = f"{slug}-{hashlib.sha256(criterion.strip().encode()).hexdigest()[:8]}"
+    return f"report-{tag}.md", f"report-{tag}.json", f"{FIGURES_DIR}-{tag}"
 
 
 def _numeric(column: pd.Series) -> bool:

@@ -238,8 +238,9 @@ def scenario_for_run(
         if isinstance(campaign_or_dir, Campaign)
         else stored_campaign(Path(campaign_or_dir))
     )
-    if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-        raise ConfigError("--index", index, "need a whole number >= 0")
+    runs = campaign.spec.runs
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < runs:
+        raise ConfigError("--index", index, f"need a run index in 0..{runs - 1} ({runs} runs)")
     _, _, data = plan_run(campaign, index)
     for text in overrides:
         apply_override(data, text)

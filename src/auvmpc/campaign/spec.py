@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from auvmpc.config import StrictModel, builtin_descriptions, read_yaml_mapping
+from auvmpc.config import StrictModel, builtin_descriptions, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.scenario import (
     ResolvedScenario,
@@ -488,11 +488,11 @@ def load_campaign(source: str | Path) -> Campaign:
         folder = None
     else:
         path = Path(text_source)
-        if not path.is_file():
+        if not path.exists():
             raise ConfigError(
                 "campaign", text_source, f"no such file or built-in; built-ins: {list(builtins)}"
             )
-        text, folder = path.read_text(), path.resolve().parent
+        text, folder = read_text_file(path, "campaign", "campaign file"), path.resolve().parent
     data = _read_yaml(text, "campaign", text_source)
     spec = _validate_spec(data)
     base_source, base_data, base_dir = _read_base(spec.base, folder)
@@ -543,14 +543,15 @@ def _read_base(base: str, folder: Path | None) -> tuple[str, dict[str, Any], str
     path = Path(base)
     if not path.is_absolute():
         path = (folder or Path.cwd()) / path
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError(
             "base",
             base,
             f"no such scenario file or built-in; built-ins: {list(builtin_scenarios())}",
         )
     path = path.resolve()
-    return str(path), _read_yaml(path.read_text(), "base", base), str(path.parent)
+    text = read_text_file(path, "base", "scenario file")
+    return str(path), _read_yaml(text, "base", base), str(path.parent)
 
 
 def _with_implicit_overrides(campaign: Campaign) -> Campaign:

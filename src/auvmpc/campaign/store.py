@@ -57,6 +57,12 @@ CREATE TABLE IF NOT EXISTS runs (
     worker TEXT,
     finished_utc TEXT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS sessions (
+    started_utc TEXT NOT NULL,
+    wall_s REAL NOT NULL,
+    new_runs INTEGER NOT NULL,
+    provenance TEXT NOT NULL
+);
 CREATE TABLE IF NOT EXISTS worker_deaths (
     "index" INTEGER PRIMARY KEY,
     deaths INTEGER NOT NULL
@@ -114,7 +120,7 @@ class _Store:
                     "--out",
                     str(out_dir),
                     f"holds another campaign (hash {row[0][:12]}, this file {campaign.hash[:12]});"
-                    " use a new folder",
+                    " use a new folder, or --overwrite to discard it",
                 )
             self.metric_columns: list[str] = json.loads(row[1]) if row else []
             db.execute(
@@ -139,6 +145,20 @@ class _Store:
 
     def close(self) -> None:
         self.connection.close()
+
+    def record_session(self, provenance: Mapping[str, Any], new_runs: int) -> None:
+        """One coordinator session (``provenance``: interfaces.md keys), in one transaction."""
+        with _transaction(self.connection) as db:
+            db.execute(
+                "INSERT INTO sessions (started_utc, wall_s, new_runs, provenance) "
+                "VALUES (?, ?, ?, ?)",
+                (
+                    provenance["started_utc"],
+                    provenance["wall_s"],
+                    new_runs,
+                    json.dumps(provenance),
+                ),
+            )
 
     def finished(self) -> set[int]:
         return {row[0] for row in self.connection.execute('SELECT "index" FROM runs')}
@@ -251,6 +271,30 @@ def _exclusive(out_dir: Path) -> Iterator[None]:
             yield
         finally:
             fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
+def count_finished(out_dir: str | Path) -> int:
+    """Rows stored in a campaign folder (0 if it has no results file yet)."""
+    path = Path(out_dir) / RESULTS_FILE
+    if not path.is_file():
+        return 0
+    with contextlib.closing(_connect(path, read_only=True)) as db:
+        try:
+            return int(db.execute("SELECT COUNT(*) FROM runs").fetchone()[0])
+        except sqlite3.OperationalError:  # created, tables not yet
+            return 0
+
+
+def stored_sessions(out_dir: str | Path) -> list[dict[str, Any]]:
+    """Provenance of every session that ran runs of a campaign folder, oldest first."""
+    with contextlib.closing(_connect(_results_path(Path(out_dir)), read_only=True)) as db:
+        try:
+            rows = db.execute(
+                "SELECT provenance, new_runs FROM sessions ORDER BY rowid"
+            ).fetchall()
+        except sqlite3.OperationalError:  # a folder written before sessions were recorded
+            return []
+    return [{**json.loads(text), "new_runs": new_runs} for text, new_runs in rows]
 
 
 def stored_campaign(out_dir: Path) -> Campaign:

@@ -1,0 +1,278 @@
+"""Checks before a run: does it fit in memory, and can the vehicle do what is asked?
+
+Each finding is an error (:class:`~auvmpc.errors.ConfigError`: one line, exit 2, nothing
+run) when the run could not mean anything, and a warning (printed, stored in run.json
+``warnings``) when the run is possible but probably not what was meant. The decisions,
+with their reasons, are in ``docs/sanity-checks.md``:
+
+- sizes beyond the available memory: error (the run could only crash);
+- start inside an obstacle's keep-out disc (radius + ``vehicle_radius``): warning (the
+  run starts in contact; the MPCs relax the constraint and leave, a recovery that is
+  worth simulating, e.g. an obstacle appearing on top of the vehicle);
+- a reference faster than the vehicle's steady top speed: error (no controller can
+  track it; the tracking metrics would measure the thrust limits, not the controller);
+- a reference that needs more thrust than the limits allow somewhere else (a turn too
+  tight for its speed): warning (a steady-turn estimate; sideslip can help);
+- a reference whose thrust needs change faster than ``thrust_rate_limit`` allows within
+  one sample: warning (a minimum-norm allocation estimate; the vehicle lags there).
+
+The thrust the reference needs is the 3-DOF model solved for the force (inverse
+dynamics, :mod:`auvmpc.vehicle`) along the reference at the controller's samples, for
+the simulated plant, with no disturbance.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from auvmpc.errors import ConfigError
+from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
+from auvmpc.vehicle import VehicleParams
+
+__all__ = [
+    "available_memory_bytes",
+    "check_memory",
+    "largest_surge_thrust",
+    "preflight",
+    "reference_thrust_needs",
+    "steady_top_speed",
+]
+
+# Speeds and forces within this relative margin of a limit count as at the limit
+# (finite differences and the top-speed formula agree to about 1e-9 relative).
+_RELATIVE_MARGIN = 1e-6
+# Memory a run may plan to use, as a share of what the machine has available now.
+_MEMORY_SHARE = 0.8
+_BYTES = 8  # float64
+# Peak memory of building the CasADi/IPOPT problem grows about as ny^2: measured with
+# `/usr/bin/time -f %M` around make_controller for nmpc on jmse2210 (paper-ideal,
+# control_horizon null): ny = 500 -> 0.18 GB, ny = 2000 -> 1.16 GB.
+_NLP_BYTES_PER_STAGE_SQUARED = 270
+
+
+def available_memory_bytes() -> int:
+    """Memory available to a new allocation now (Linux MemAvailable), else physical memory."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, AttributeError):
+        return 2**63
+
+
+def _size(n_bytes: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n_bytes < 1024 or unit == "PiB":
+            return f"{n_bytes:.3g} {unit}"
+        n_bytes /= 1024
+    return f"{n_bytes:.3g} PiB"  # pragma: no cover
+
+
+def check_memory(
+    resolved: ResolvedScenario | ResolvedDepthScenario, available: int | None = None
+) -> None:
+    """Refuse sizes that cannot fit: the log (duration / sample_time samples) and the
+    condensed QP of the linear MPCs, whose prediction arrays grow as ny x nc x n^2."""
+    scenario = resolved.scenario
+    config = scenario.controller
+    budget = _MEMORY_SHARE * (available_memory_bytes() if available is None else available)
+    steps = scenario.duration / config.sample_time
+    n = (
+        resolved.model.heave.thruster_count
+        if isinstance(resolved, ResolvedDepthScenario)
+        else resolved.model.n_thrusters
+    )
+    nx = 2 if isinstance(resolved, ResolvedDepthScenario) else 6
+    # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
+    log_bytes = steps * (_BYTES * (3 * nx + n + 4) + 64)
+    if log_bytes > budget:
+        raise ConfigError(
+            "duration",
+            scenario.duration,
+            f"{steps:.3g} samples of {config.sample_time} s need about {_size(log_bytes)} "
+            f"of log, more than the {_size(budget)} of memory available",
+        )
+    ny = config.prediction_horizon
+    if str(config.type) in ("nmpc", "do-mpc"):
+        nlp_bytes = _NLP_BYTES_PER_STAGE_SQUARED * ny * ny
+        if nlp_bytes > budget:
+            raise ConfigError(
+                "controller.prediction_horizon",
+                ny,
+                f"building the {config.type} problem with ny={ny} needs about "
+                f"{_size(nlp_bytes)}, more than the {_size(budget)} of memory available",
+            )
+        return
+    condensed = isinstance(resolved, ResolvedDepthScenario) or str(config.type) in (
+        "mpc",
+        "ltv-mpc",
+    )
+    if not condensed:
+        return
+    nc = len(config.move_schedule())
+    moves = nc * n
+    # move-to-input map (ny, n, moves), forcing and stacked predictions (ny, nx, moves + 1),
+    # the Hessian and constraint rows (moves^2 each)
+    qp_bytes = _BYTES * ((ny + 1) * (n + 2 * nx) * (moves + 1) + 3 * moves * moves)
+    if qp_bytes > budget:
+        field = "controller.prediction_horizon"
+        value: object = ny
+        if config.control_horizon is not None and config.control_horizon > 1000:
+            field, value = "controller.control_horizon", config.control_horizon
+        raise ConfigError(
+            field,
+            value,
+            f"the condensed QP of {config.type} with ny={ny}, nc={nc} and {n} thrusters "
+            f"needs about {_size(qp_bytes)}, more than the {_size(budget)} of memory available",
+        )
+
+
+def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
+    """All checks of the module docstring; returns the warnings, raises the errors."""
+    check_memory(resolved)
+    if isinstance(resolved, ResolvedDepthScenario):
+        return []
+    return _check_start(resolved.scenario) + _check_reference(resolved)
+
+
+def _check_start(scenario: Scenario) -> list[str]:
+    x, y = scenario.initial_state[:2]
+    margin = scenario.controller.vehicle_radius
+    warnings = []
+    for index, obstacle in enumerate(scenario.obstacles):
+        if not obstacle.exists_at(0.0):
+            continue
+        cx, cy = obstacle.center_at(0.0)
+        distance = math.hypot(x - cx, y - cy)
+        if distance < obstacle.radius + margin:
+            warnings.append(
+                f"obstacles.{index}: the start position ({x:g}, {y:g}) is {distance:.3g} m from "
+                f"its centre, inside its keep-out disc (radius {obstacle.radius:g} + "
+                f"vehicle_radius {margin:g} m): the run starts in contact (negative clearance) "
+                "and the MPCs relax that constraint until the vehicle is out"
+            )
+    return warnings
+
+
+def steady_top_speed(params: VehicleParams) -> float:
+    """Fastest steady straight surge (m/s): the largest pure surge force the thrusters can
+    make within their limits (:func:`largest_surge_thrust`) against Xu u + Xuu u|u|."""
+    force = float(params.T[0] @ largest_surge_thrust(params))
+    a, b = -params.Xuu, -params.Xu  # both >= 0: damping force a u^2 + b u
+    if a > 0:
+        return (-b + math.sqrt(b * b + 4.0 * a * force)) / (2.0 * a)
+    return force / b if b > 0 else math.inf
+
+
+def largest_surge_thrust(params: VehicleParams) -> np.ndarray:
+    """Thrusts (n,) within the limits that make the largest surge force with no sway force
+    and no yaw moment (a linear program); zeros if the layout cannot push straight ahead."""
+    from scipy.optimize import linprog
+
+    T = params.T
+    result = linprog(
+        -T[0],
+        A_eq=T[1:],
+        b_eq=np.zeros(2),
+        bounds=[params.thrust_limits] * params.n_thrusters,
+        method="highs",
+    )
+    return np.asarray(result.x) if result.status == 0 else np.zeros(params.n_thrusters)
+
+
+def reference_thrust_needs(
+    params: VehicleParams, states: np.ndarray, sample_time: float
+) -> np.ndarray:
+    """Generalised force [f_u, f_v, M_r] (k, 3) that moves the model along ``states``
+    (k, 6) sampled every ``sample_time`` with no disturbance (the model solved for tau;
+    accelerations by central differences)."""
+    u, v, r = states[:, 3], states[:, 4], states[:, 5]
+    if len(states) > 1:
+        du, dv, dr = (np.gradient(q, sample_time) for q in (u, v, r))
+    else:
+        du = dv = dr = np.zeros(len(states))
+    p = params
+    return np.column_stack(
+        (
+            p.m11 * du - p.Xu * u - p.Xuu * np.abs(u) * u - p.m22 * v * r,
+            p.m22 * dv - p.Yv * v - p.Yvv * np.abs(v) * v + p.m11 * u * r,
+            p.Iz * dr - p.Nr * r - p.Nrr * np.abs(r) * r - (p.m11 - p.m22) * u * v,
+        )
+    )
+
+
+def _feasible(params: VehicleParams, tau: np.ndarray) -> bool:
+    """Whether some thrusts within the limits make exactly ``tau``."""
+    low, high = params.thrust_limits
+    slack = _RELATIVE_MARGIN * max(abs(low), abs(high))
+    minimum_norm = params.T_pinv @ tau
+    if np.all(minimum_norm >= low - slack) and np.all(minimum_norm <= high + slack):
+        return True
+    from scipy.optimize import linprog
+
+    result = linprog(
+        np.zeros(params.n_thrusters),
+        A_eq=params.T,
+        b_eq=tau,
+        bounds=[(low - slack, high + slack)] * params.n_thrusters,
+        method="highs",
+    )
+    return result.status == 0
+
+
+def _check_reference(resolved: ResolvedScenario) -> list[str]:
+    from auvmpc.references import make_reference
+
+    scenario = resolved.scenario
+    plant = resolved.plant
+    sample_time = scenario.controller.sample_time
+    steps = int(round(scenario.duration / sample_time))
+    t = sample_time * np.arange(steps + 1)
+    states = make_reference(scenario.reference, resolved.base_dir).states(t)
+    warnings: list[str] = []
+    speed = np.hypot(states[:, 3], states[:, 4])
+    top = steady_top_speed(plant)
+    fastest = int(np.argmax(speed))
+    if speed[fastest] > top * (1.0 + _RELATIVE_MARGIN):
+        config = scenario.reference
+        field, value = ("reference.speed", config.speed) if hasattr(config, "speed") else (
+            "reference",
+            config.type,
+        )
+        raise ConfigError(
+            field,
+            value,
+            f"the reference moves at {speed[fastest]:.3g} m/s (t = {t[fastest]:g} s), faster "
+            f"than {plant.name}'s steady top speed {top:.3g} m/s (thrust limits "
+            f"{list(plant.thrust_limits)} N against its surge damping)",
+        )
+    tau = reference_thrust_needs(plant, states, sample_time)
+    infeasible = [k for k in range(len(t)) if not _feasible(plant, tau[k])]
+    if infeasible:
+        k = infeasible[0]
+        radius = speed[k] / abs(states[k, 5]) if abs(states[k, 5]) > 1e-12 else math.inf
+        warnings.append(
+            f"reference: needs more thrust than {plant.name}'s limits {list(plant.thrust_limits)}"
+            f" N at {len(infeasible)} of {len(t)} samples, first at t = {t[k]:g} s "
+            f"(speed {speed[k]:.3g} m/s, turn radius {radius:.3g} m): the vehicle cannot "
+            "follow it there"
+        )
+    if len(t) > 1:
+        change = np.abs(np.diff(tau @ plant.T_pinv.T, axis=0)).max(axis=1)
+        allowed = plant.thrust_rate_limit * sample_time
+        worst = int(np.argmax(change))
+        if change[worst] > allowed * (1.0 + _RELATIVE_MARGIN):
+            warnings.append(
+                f"vehicle.thrust_rate_limit: the reference's thrust needs change by "
+                f"{change[worst]:.3g} N in one sample at t = {t[worst]:g} s, more than "
+                f"thrust_rate_limit x sample_time = {allowed:.3g} N: the vehicle lags there"
+            )
+    return warnings

@@ -1,0 +1,144 @@
+"""Every bad input of issue 12 gives one line naming the field and the value, exit 2, and
+touches nothing; a run that breaks down numerically gives one line too (exit 1)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from auvmpc.campaign import run_campaign
+from tests.test_cli import run_cli
+
+
+def _one_error_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("error: ")
+    return lines[0]
+
+
+@pytest.fixture
+def files(tmp_path):
+    (tmp_path / "binary.yaml").write_bytes(bytes(range(256)) * 4)
+    (tmp_path / "latin1.yaml").write_bytes("name: caf\xe9\n".encode("latin-1"))
+    (tmp_path / "folder.yaml").mkdir()
+    (tmp_path / "duplicate.yaml").write_text(
+        "name: dup\nduration: 10\nreference: {type: circle}\nreference: {type: line}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    (tmp_path / "vehicle.yaml").write_text(
+        "name: twice\nmass: 1\nmass: 2\n"
+    )  # a duplicate key in a vehicle file
+    return tmp_path
+
+
+CASES = [
+    # (arguments, the line's field and reason, the value it names)
+    (("run", "{d}/binary.yaml"), "scenario: is a binary file, not a scenario file", "binary.yaml"),
+    (("run", "{d}/latin1.yaml"), "scenario: is not UTF-8 text (byte 9)", "latin1.yaml"),
+    (("run", "{d}/folder.yaml"), "scenario: is a folder, not a scenario file", "folder.yaml"),
+    (("run", "{d}/duplicate.yaml"), "scenario: not valid YAML at line 4: duplicate key "
+     "'reference'", "duplicate.yaml"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "vehicle={d}/vehicle.yaml"),
+     "vehicle: not valid YAML at line 3: duplicate key 'mass'", "vehicle.yaml"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "controller={{type: mpc, type: baseline}}"),
+     "controller: value is not valid YAML: duplicate key 'type'", "baseline"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "controller.prediction_horizon=100000",
+      "--set", "controller.control_horizon=null"),
+     "controller.prediction_horizon: the condensed QP of mpc with ny=100000",
+     "100000"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "duration=1e12"), "duration: 2e+12 samples",
+     "1000000000000.0"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "reference={{type: line, speed: 20}}"),
+     "reference.speed: the reference moves at 20 m/s (t = 0 s), faster than jmse2210's "
+     "steady top speed 1.76 m/s", "20"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "vehicle=bluerov2-heavy",
+      "--set", "reference={{type: circle, radius: 10, speed: 1.5}}"),
+     "reference.speed: the reference moves at 1.5 m/s (t = 0 s), faster than "
+     "bluerov2-heavy's steady top speed", "1.5"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "plant.scale.mass=5"),
+     "plant.scale.mass: the horizontal (3-DOF) model does not use mass: it uses m11, m22, "
+     "Iz_rb, Iz_added, Xu", "5"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "plant.scale.thrust_limits=2"),
+     "plant.scale.thrust_limits: thrust_limits is the controller's limit", "2"),  # fmt: skip
+    (("run", "paper-depth-calm", "--set", "plant.scale.Iz_rb=2"),
+     "plant.scale.Iz_rb: the depth (heave) model does not use Iz_rb: it uses", "2"),  # fmt: skip
+    (("run", "paper-ideal", "--set", "obstacles.3.radius=1"),
+     "obstacles.3: no such list index (obstacles is not given", "'3'"),  # fmt: skip
+    (("run", "paper-obstacles", "--set", "obstacles.3.radius=1"),
+     "obstacles.3: no such list index (length 2)", "'3'"),  # fmt: skip
+    (("run", "paper-ideal", "--out", "{d}/binary.yaml"), "--out: is a file, not a folder",
+     "binary.yaml"),  # fmt: skip
+]
+
+
+@pytest.mark.parametrize(("args", "expected", "value"), CASES)
+def test_each_bad_input_is_one_line_naming_field_and_value(
+    monkeypatch, capsys, files, args, expected, value
+):
+    before = sorted(p.name for p in files.iterdir())
+    arguments = [a.format(d=files) for a in args]
+    code, _, stderr = run_cli(monkeypatch, capsys, *arguments, "--no-figures")
+    line = _one_error_line(stderr)
+    assert code == 2
+    assert line.startswith(f"error: {expected}"), line
+    assert value in line.rsplit("(got ", 1)[1], line
+    assert sorted(p.name for p in files.iterdir()) == before  # nothing written
+
+
+def test_index_beyond_the_campaign_is_refused(monkeypatch, capsys, tmp_path):
+    run_campaign("paper-robustness", tmp_path / "camp", runs=1, workers=1)
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "--from-campaign", str(tmp_path / "camp"), "--index", "5000"
+    )
+    assert code == 2
+    assert _one_error_line(stderr) == (
+        "error: --index: need a run index in 0..299 (300 runs) (got 5000)"
+    )
+
+
+def test_a_run_that_breaks_down_is_one_line_exit_1(monkeypatch, capsys, tmp_path):
+    """The long-run estimator failure of issue 10 (LinAlgError in the EKF), reproduced by a
+    controller that raises it at step 3: one line saying where, no traceback, no folder."""
+    from auvmpc.controllers.baseline import BaselineController
+
+    compute = BaselineController.compute
+
+    def failing(self, observation):
+        if observation.k == 3:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return compute(self, observation)
+
+    monkeypatch.setattr(BaselineController, "compute", failing)
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", "--controller", "baseline", "--out", str(out)
+    )
+    assert code == 1
+    assert _one_error_line(stderr).startswith(
+        "error: paper-ideal with baseline failed at t = 1.5 s (step 3): "
+        "LinAlgError: Singular matrix (nothing was written"
+    )
+    assert not out.exists()
+
+
+def test_a_criterion_report_is_written_next_to_the_campaigns_own(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "camp"
+    run_campaign("paper-robustness", out, runs=2, workers=1)
+    assert run_cli(monkeypatch, capsys, "campaign-report", str(out), "--no-figures")[0] == 0
+    own = (out / "report.md").read_text()
+    code, stdout, _ = run_cli(
+        monkeypatch, capsys, "campaign-report", str(out), "--criterion",
+        "max_position_error_m < 0.5", "--no-figures",
+    )  # fmt: skip
+    assert code == 0
+    assert (out / "report.md").read_text() == own
+    extra = sorted(p.name for p in out.glob("report-*"))
+    assert len(extra) == 2 and extra[0].startswith("report-max_position_error_m_0_5-")
+    assert "max_position_error_m < 0.5" in (out / extra[1].replace(".json", ".md")).read_text()
+    summary = json.loads((out / extra[0]).read_text())
+    assert summary["sessions"][0]["command"]  # provenance of the session that ran the rows
+    assert math.isfinite(summary["sessions"][0]["wall_s"])

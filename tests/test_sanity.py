@@ -1,0 +1,206 @@
+"""Physical sanity checks before a run (issue 12, item 4) and run provenance (item 5).
+
+The top speed is checked against analytic truth (thrust equals drag) and against the
+plant simulated at full thrust; the warnings against scenarios built to trigger them, on
+both vehicles; the paper scenarios must pass without a word."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import re
+from datetime import datetime
+
+import numpy as np
+import pytest
+
+from auvmpc.errors import ConfigError
+from auvmpc.runner import simulate
+from auvmpc.sanity import (
+    check_memory,
+    largest_surge_thrust,
+    preflight,
+    reference_thrust_needs,
+    steady_top_speed,
+)
+from auvmpc.scenario import load_scenario
+from auvmpc.vehicle import dynamics
+from tests.conftest import ROUND_OFF_TOL
+from tests.test_cli import run_cli
+
+
+def test_top_speed_is_where_full_thrust_equals_drag_jmse(jmse):
+    # four thrusters at +-45 deg, 15 N each: 4 * 15 cos 45 deg of surge force
+    force = 4 * 15.0 * math.cos(math.radians(45))
+    a, b = -jmse.Xuu, -jmse.Xu
+    expected = (-b + math.sqrt(b * b + 4 * a * force)) / (2 * a)
+    assert steady_top_speed(jmse) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("vehicle", ["jmse", "bluerov"])
+def test_top_speed_is_a_steady_state_at_the_largest_pure_surge_thrust(vehicle, request):
+    """Thrust equals drag there (all accelerations zero), and no other thrusts within the
+    limits push harder straight ahead: checked against every vertex of the feasible set
+    (n - 2 thrusters at a limit, the other two solving zero sway force and yaw moment),
+    an enumeration independent of the linear program."""
+    params = request.getfixturevalue(vehicle)
+    thrust = largest_surge_thrust(params)
+    speed = steady_top_speed(params)
+    derivative = dynamics(np.array([0, 0, 0, speed, 0, 0]), thrust, params)
+    assert np.allclose(derivative[3:], 0.0, atol=ROUND_OFF_TOL * 100)
+    best = _largest_surge_by_vertices(params)
+    assert params.T[0] @ thrust == pytest.approx(best, rel=1e-9)
+
+
+def _largest_surge_by_vertices(params) -> float:
+    T, n = params.T, params.n_thrusters
+    low, high = params.thrust_limits
+    best = -math.inf
+    for free in itertools.combinations(range(n), 2):
+        fixed = [i for i in range(n) if i not in free]
+        for values in itertools.product((low, high), repeat=len(fixed)):
+            thrust = np.zeros(n)
+            thrust[fixed] = values
+            block = T[1:][:, free]
+            if abs(np.linalg.det(block)) < 1e-12:
+                continue
+            thrust[list(free)] = np.linalg.solve(block, -T[1:][:, fixed] @ np.array(values))
+            if np.all(thrust >= low - 1e-9) and np.all(thrust <= high + 1e-9):
+                best = max(best, float(T[0] @ thrust))
+    return best
+
+
+@pytest.mark.parametrize("vehicle", ["jmse", "bluerov"])
+def test_thrust_needs_move_the_model_along_a_circle(vehicle, request):
+    """Inverse dynamics round trip: the force the check computes for a steady circle,
+    allocated to thrusters, gives zero body accelerations in the model."""
+    params = request.getfixturevalue(vehicle)
+    speed, radius = 0.5, 8.0
+    state = np.array([radius, 0, math.pi / 2, speed, 0, speed / radius])
+    tau = reference_thrust_needs(params, np.tile(state, (5, 1)), 0.5)
+    derivative = dynamics(state, params.T_pinv @ tau[2], params)
+    assert np.allclose(derivative[3:], 0.0, atol=ROUND_OFF_TOL * 100)
+
+
+@pytest.mark.parametrize("vehicle", ["jmse2210", "bluerov2-heavy"])
+@pytest.mark.parametrize("name", ["paper-ideal", "paper-disturbed", "paper-obstacles"])
+def test_the_paper_scenarios_pass_without_a_word(name, vehicle):
+    assert preflight(load_scenario(name, [f"vehicle={vehicle}"])) == []
+
+
+def test_reference_faster_than_top_speed_is_an_error_on_any_reference():
+    with pytest.raises(ConfigError, match=r"^reference\.speed: the reference moves at 2 m/s"):
+        preflight(load_scenario("paper-ideal", ["reference={type: waypoints, "
+                                                "points: [[0, 0], [50, 0]], speed: 2.0}"]))
+    just_below = 0.999 * steady_top_speed(load_scenario("paper-ideal").plant)
+    assert preflight(load_scenario("paper-ideal", [f"reference={{type: line, speed: "
+                                                   f"{just_below}}}"])) == []  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("vehicle", "speed", "radius"), [("jmse2210", 1.5, 1.0), ("bluerov2-heavy", 0.8, 0.3)]
+)
+def test_a_turn_too_tight_for_its_speed_is_a_warning(vehicle, speed, radius):
+    resolved = load_scenario(
+        "paper-ideal",
+        [f"vehicle={vehicle}", f"reference={{type: circle, radius: {radius}, speed: {speed}}}",
+         "duration=10"],
+    )  # fmt: skip
+    warnings = preflight(resolved)
+    assert len(warnings) == 1
+    assert re.match(
+        rf"reference: needs more thrust than {vehicle}'s limits .* at 21 of 21 samples, "
+        rf"first at t = 0 s \(speed {speed:g} m/s, turn radius {radius:g} m\)",
+        warnings[0],
+    ), warnings
+
+
+def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
+    resolved = load_scenario(
+        "paper-ideal",
+        ["reference={type: waypoints, points: [[0, 0], [20, 0], [20, 20]], speed: 1.0}"],
+    )
+    (warning,) = preflight(resolved)
+    assert warning.startswith("vehicle.thrust_rate_limit: the reference's thrust needs change")
+    assert "thrust_rate_limit x sample_time = 2.5 N" in warning
+
+
+def test_start_inside_keep_out_disc_is_a_warning_for_obstacles_there_at_t0():
+    inside = "initial_state=[2.0, 9.4, 0, 0, 0, 0]"  # 1.4 m from obstacle 0: radius 1 + 0.5
+    (warning,) = preflight(load_scenario("paper-obstacles", [inside]))
+    assert warning.startswith(
+        "obstacles.0: the start position (2, 9.4) is 1.4 m from its centre, inside its "
+        "keep-out disc (radius 1 + vehicle_radius 0.5 m)"
+    )
+    later = load_scenario("paper-obstacles", [inside, "obstacles.0.appear_time=5"])
+    assert preflight(later) == []
+    outside = "initial_state=[2.0, 9.6, 0, 0, 0, 0]"
+    assert preflight(load_scenario("paper-obstacles", [outside])) == []
+
+
+def test_memory_check_names_the_horizon_and_counts_moves():
+    resolved = load_scenario("paper-ideal", ["controller.control_horizon=null",
+                                             "controller.prediction_horizon=2000"])  # fmt: skip
+    check_memory(resolved, available=10 * 2**30)  # ~ 4.9 GiB: fits in 10 GiB
+    with pytest.raises(ConfigError, match=r"^controller\.prediction_horizon: .* ny=2000, nc=2000"):
+        check_memory(resolved, available=2**30)
+
+
+def test_memory_check_covers_the_nonlinear_mpc():
+    resolved = load_scenario("paper-ideal", ["controller.type=nmpc",
+                                             "controller.prediction_horizon=100000"])  # fmt: skip
+    with pytest.raises(ConfigError, match=r"^controller\.prediction_horizon: building the nmpc"):
+        check_memory(resolved, available=64 * 2**30)
+    check_memory(load_scenario("paper-ideal", ["controller.type=nmpc"]), available=2**30)
+
+
+def test_warnings_are_printed_and_stored(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", "--controller", "baseline", "--no-figures",
+        "--set", "reference={type: circle, radius: 1, speed: 1.5}", "--set", "duration=3",
+        "--out", str(out),
+    )  # fmt: skip
+    assert code == 0
+    assert stderr.startswith("warning: reference: needs more thrust than jmse2210's limits")
+    info = json.loads((out / "run.json").read_text())
+    assert info["warnings"] == [stderr.strip().removeprefix("warning: ")]
+
+
+@pytest.mark.parametrize(
+    ("controller", "solver"), [("mpc", "daqp"), ("baseline", None), ("nmpc", None)]
+)
+def test_run_json_carries_provenance(monkeypatch, capsys, tmp_path, controller, solver):
+    out = tmp_path / "run"
+    args = ("run", "paper-ideal", "--controller", controller, "--set", "duration=2",
+            "--no-figures", "--out", str(out))  # fmt: skip
+    assert run_cli(monkeypatch, capsys, *args)[0] == 0
+    provenance = json.loads((out / "run.json").read_text())["provenance"]
+    assert set(provenance) == {
+        "started_utc", "wall_s", "command", "auvmpc_version", "git_revision", "libraries",
+    }  # fmt: skip
+    assert datetime.fromisoformat(provenance["started_utc"]).utcoffset().total_seconds() == 0
+    assert provenance["wall_s"] > 0
+    assert provenance["command"].startswith("auvmpc run paper-ideal --controller")
+    revision = provenance["git_revision"]
+    assert revision is None or re.fullmatch(r"[0-9a-f]{40}(\+dirty)?", revision)
+    expected = {"numpy", "scipy", "casadi"} | ({solver} if solver else set())
+    assert set(provenance["libraries"]) == expected
+    assert all(isinstance(v, str) for v in provenance["libraries"].values())
+
+
+def test_depth_runs_carry_provenance_too():
+    result = simulate(load_scenario("paper-depth-calm", ["duration=11"]))
+    assert result.run_json()["provenance"]["libraries"]["daqp"]
+
+
+def test_start_in_an_obstacle_is_printed_and_stored(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-obstacles", "--set", "duration=2", "--no-figures",
+        "--set", "initial_state=[2.0, 8.3, 0, 0, 0, 0]", "--out", str(out),
+    )  # fmt: skip
+    assert code == 0
+    assert stderr.startswith("warning: obstacles.0: the start position (2, 8.3) is 0.3 m")
+    assert json.loads((out / "run.json").read_text())["warnings"][0].startswith("obstacles.0")
