@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.codegen import compiled
-from auvmpc.controllers.config import ControllerConfig, QpStructure, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.estimation import world_disturbance_dynamics
 from auvmpc.integrators import rk4
@@ -52,7 +52,7 @@ class LtvMpc(LinearMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
-        if config.qp_structure is QpStructure.SPARSE:
+        if config.sparse_qp():
             self.sparse_qp = SparseIncrementalQp(
                 horizon=config.prediction_horizon,
                 move_steps=config.move_schedule(),

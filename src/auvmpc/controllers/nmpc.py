@@ -71,7 +71,7 @@ from auvmpc.controllers.base import (
     next_planned_move,
     project_to_limits,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
 from auvmpc.estimation import DisturbanceObserver, world_disturbance_dynamics
 from auvmpc.integrators import rk4
@@ -610,7 +610,7 @@ class NonlinearMpc(Controller):
             self._solver: _IpoptSolver | _RealTimeIteration | SparseRealTimeIteration = (
                 _IpoptSolver(self.program, config)
             )
-        elif config.qp_structure is QpStructure.SPARSE and self.program.n_moves == self.horizon:
+        elif config.sparse_qp() and self.program.n_moves == self.horizon:
             # Held thrusts would be equality rows, which an interior point handles badly
             # (HPIPM took 50 iterations without converging); move blocking keeps the
             # condensed QP, whose variables are the moves themselves.
