@@ -42,7 +42,14 @@ def main() -> None:
     """Console-script entry point: user errors become one line on stderr, never a traceback;
     SIGINT / SIGTERM one line on what was kept, exit 130 / 143."""
     interrupts.reset()
-    interrupts.install()
+    previous = interrupts.install()
+    try:
+        _main()
+    finally:
+        interrupts.restore(previous)  # for callers of main() in a longer-lived process
+
+
+def _main() -> None:
     try:
         app()
     except ConfigError as error:
