@@ -391,13 +391,17 @@ def plot(
     run_dir: Annotated[Path, typer.Argument(help="a folder written by 'auvmpc run'")],
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
-    from auvmpc.outputs import OutputKind, require_own_folder
+    from auvmpc.outputs import OutputKind, record_written, require_own_folder
     from auvmpc.runner import redraw
 
     require_own_folder(run_dir, OutputKind.RUN, "RUN_DIR")
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
+    before = {entry.name for entry in run_dir.iterdir()}
     redraw(run_dir)
+    record_written(
+        run_dir, OutputKind.RUN, [e.name for e in run_dir.iterdir() if e.name not in before]
+    )
     console.print(f"redrew figures in {run_dir}")
 
 
