@@ -100,15 +100,13 @@ class _SwallowingController:
 def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch):
     controller = _SwallowingController(interrupt_at=3)
     monkeypatch.setattr("auvmpc.runner.make_controller", lambda scenario, model: controller)
-    previous = signal.getsignal(signal.SIGINT)
     interrupts.reset()
-    interrupts.install()
+    previous = interrupts.install()
     try:
         with pytest.raises(interrupts.Interrupted) as raised:
             simulate(load_scenario("paper-ideal"))
     finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        interrupts.restore(previous)
         interrupts.reset()
     assert raised.value.exit_code == 130
     assert controller.steps == 4  # stopped right after the step that was interrupted

@@ -191,3 +191,14 @@ def _dead_pid() -> int:
     process = subprocess.Popen([sys.executable, "-c", "pass"])
     process.wait()
     return process.pid
+
+
+def test_figures_redrawn_later_count_as_auvmpcs(monkeypatch, capsys, tmp_path):
+    out = tmp_path / "run"
+    assert run_cli(monkeypatch, capsys, "run", "paper-ideal", *SHORT, "--out", str(out))[0] == 0
+    assert run_cli(monkeypatch, capsys, "plot", str(out))[0] == 0
+    assert (out / "trajectory.png").is_file()
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", *SHORT, "--out", str(out), "--overwrite"
+    )
+    assert code == 0, stderr

@@ -19,6 +19,7 @@ from auvmpc.errors import ConfigError
 from auvmpc.runner import simulate
 from auvmpc.sanity import (
     check_memory,
+    feasible_forces,
     largest_surge_thrust,
     preflight,
     reference_thrust_needs,
@@ -124,6 +125,25 @@ def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
     (warning,) = preflight(resolved)
     assert warning.startswith("vehicle.thrust_rate_limit: the reference's thrust needs change")
     assert "thrust_rate_limit x sample_time = 2.5 N" in warning
+
+
+@pytest.mark.parametrize("vehicle", ["jmse", "bluerov"])
+def test_feasibility_agrees_with_a_linear_program(vehicle, request):
+    """The closed-form null-space interval test against scipy's LP on random forces."""
+    from scipy.optimize import linprog
+
+    params = request.getfixturevalue(vehicle)
+    rng = np.random.default_rng(7)
+    reach = np.abs(params.T).sum(axis=1) * max(np.abs(params.thrust_limits))  # per axis
+    tau = rng.uniform(-0.7, 0.7, size=(300, 3)) * reach
+    fast = feasible_forces(params, tau)
+    slow = [
+        linprog(np.zeros(params.n_thrusters), A_eq=params.T, b_eq=row,
+                bounds=[params.thrust_limits] * params.n_thrusters, method="highs").status == 0
+        for row in tau
+    ]  # fmt: skip
+    assert fast.tolist() == slow
+    assert 30 < fast.sum() < 270  # both outcomes are exercised
 
 
 def test_start_inside_keep_out_disc_is_a_warning_for_obstacles_there_at_t0():

@@ -42,7 +42,14 @@ def main() -> None:
     """Console-script entry point: user errors become one line on stderr, never a traceback;
     SIGINT / SIGTERM one line on what was kept, exit 130 / 143."""
     interrupts.reset()
-    interrupts.install()
+    previous = interrupts.install()
+    try:
+        _main()
+    finally:
+        interrupts.restore(previous)  # for callers of main() in a longer-lived process
+
+
+def _main() -> None:
     try:
         app()
     except ConfigError as error:
@@ -414,14 +421,18 @@ def plot(
     dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
-    from auvmpc.outputs import OutputKind, require_own_folder
+    from auvmpc.outputs import OutputKind, record_written, require_own_folder
     from auvmpc.runner import redraw
 
     require_own_folder(run_dir, OutputKind.RUN, "RUN_DIR")
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
     check_figure_options(fmt, dpi)
+    before = {entry.name for entry in run_dir.iterdir()}
     redraw(run_dir, fmt, dpi)
+    record_written(
+        run_dir, OutputKind.RUN, [e.name for e in run_dir.iterdir() if e.name not in before]
+    )
     console.print(f"redrew figures in {run_dir} ({fmt})")
 
 

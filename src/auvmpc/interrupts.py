@@ -24,7 +24,16 @@ import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-__all__ = ["Interrupted", "check", "describe_kept", "install", "kept", "requested", "reset"]
+__all__ = [
+    "Interrupted",
+    "check",
+    "describe_kept",
+    "install",
+    "kept",
+    "requested",
+    "reset",
+    "restore",
+]
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _requested: int | None = None
@@ -80,12 +89,18 @@ class _WithoutCasadiInterruptNote:
         return getattr(self._stream, name)
 
 
-def install() -> None:
-    """Handle SIGINT and SIGTERM in this (main-thread) process for the rest of its life."""
+def install() -> dict[int, object]:
+    """Handle SIGINT and SIGTERM in this (main-thread) process; returns the handlers
+    replaced (for :func:`restore`)."""
     if threading.current_thread() is not threading.main_thread():
-        return
-    for signum in _SIGNALS:
-        signal.signal(signum, _handler)
+        return {}
+    return {signum: signal.signal(signum, _handler) for signum in _SIGNALS}
+
+
+def restore(previous: dict[int, object]) -> None:
+    """Put back the handlers :func:`install` replaced."""
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
 
 
 def requested() -> int | None:

@@ -42,6 +42,7 @@ __all__ = [
     "check_output_folder",
     "mark_folder",
     "own_kind",
+    "record_written",
     "prepare_campaign_folder",
     "require_own_folder",
     "staged_folder",
@@ -127,6 +128,13 @@ def _absolute(path: Path, option: str) -> Path:
     return path
 
 
+_NOUN = {
+    OutputKind.RUN: "run",
+    OutputKind.REPRODUCE: "reproduction",
+    OutputKind.CAMPAIGN: "campaign",
+}
+
+
 def check_output_folder(
     path: Path | str,
     kind: OutputKind,
@@ -158,13 +166,17 @@ def check_output_folder(
             )
         if found is not kind:
             raise ConfigError(
-                option, shown, f"is an auvmpc {found} folder, not a {kind} folder; name another"
+                option,
+                shown,
+                f"is an auvmpc {_NOUN[found]} folder, not a {_NOUN[kind]} folder; name another",
             )
         if resume:
             return target
         if not overwrite:
             raise ConfigError(
-                option, shown, f"holds an earlier auvmpc {kind}; add --overwrite to replace it"
+                option,
+                shown,
+                f"holds an earlier auvmpc {_NOUN[kind]}; add --overwrite to replace it",
             )
         strangers = _strangers(target, kind)
         if strangers:
@@ -181,10 +193,10 @@ def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
     """``path`` must be an existing folder auvmpc wrote as ``kind`` (e.g. to redraw into)."""
     folder = Path(path)
     if not folder.is_dir():
-        raise ConfigError(option, str(path), f"not a {kind} folder (no such folder)")
+        raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder (no such folder)")
     found = own_kind(folder)
     if found is not kind:
-        raise ConfigError(option, str(path), f"not a {kind} folder written by auvmpc")
+        raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder written by auvmpc")
     return folder
 
 
@@ -208,6 +220,16 @@ def _write_marker(folder: Path, kind: OutputKind, files: list[str] | None = None
         "files": sorted(files) if files is not None else None,
     }
     atomic_write_text(folder / MARKER, json.dumps(data, indent=2) + "\n")
+
+
+def record_written(folder: Path, kind: OutputKind, names: list[str]) -> None:
+    """Add ``names`` (written into an own folder after the fact, e.g. redrawn figures) to
+    its marker, so that ``--overwrite`` later knows them as auvmpc's."""
+    marker = _marker(folder)
+    if marker is None:  # a folder from before the marker: everything in it is auvmpc's
+        _write_marker(folder, kind, [entry.name for entry in folder.iterdir()])
+    elif marker.get("files") is not None:
+        _write_marker(folder, kind, sorted({*marker["files"], *names}))
 
 
 def mark_folder(folder: Path, kind: OutputKind) -> None:

@@ -36,6 +36,7 @@ from auvmpc.vehicle import VehicleParams
 __all__ = [
     "available_memory_bytes",
     "check_memory",
+    "feasible_forces",
     "largest_surge_thrust",
     "preflight",
     "reference_thrust_needs",
@@ -209,23 +210,51 @@ def reference_thrust_needs(
     )
 
 
-def _feasible(params: VehicleParams, tau: np.ndarray) -> bool:
-    """Whether some thrusts within the limits make exactly ``tau``."""
+def feasible_forces(params: VehicleParams, tau: np.ndarray) -> np.ndarray:
+    """For each generalised force (k, 3), whether thrusts within the limits make it exactly.
+
+    The minimum-norm allocation decides most rows; the others are decided exactly by the
+    interval of the null-space coordinate when the null space is one-dimensional (four
+    thrusters), else by a linear program each.
+    """
     low, high = params.thrust_limits
     slack = _RELATIVE_MARGIN * max(abs(low), abs(high))
-    minimum_norm = params.T_pinv @ tau
-    if np.all(minimum_norm >= low - slack) and np.all(minimum_norm <= high + slack):
-        return True
+    base = tau @ params.T_pinv.T  # (k, n) minimum-norm thrusts
+    inside = np.all((base >= low - slack) & (base <= high + slack), axis=1)
+    if inside.all():
+        return inside
+    _, singular, vt = np.linalg.svd(params.T)
+    null = vt[int(np.sum(singular > 1e-9 * singular[0])) :]
+    result = inside.copy()
+    rows = np.flatnonzero(~inside)
+    if len(null) == 0:
+        return result
+    if len(null) == 1:  # F = base + a n: each thruster bounds a to an interval
+        n = null[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a1 = (low - slack - base[rows]) / n
+            a2 = (high + slack - base[rows]) / n
+        lower = np.where(np.abs(n) > 1e-12, np.minimum(a1, a2), -np.inf).max(axis=1)
+        upper = np.where(np.abs(n) > 1e-12, np.maximum(a1, a2), np.inf).min(axis=1)
+        fixed_ok = np.all(
+            (np.abs(n) > 1e-12)
+            | ((base[rows] >= low - slack) & (base[rows] <= high + slack)),
+            axis=1,
+        )
+        result[rows] = (lower <= upper) & fixed_ok
+        return result
     from scipy.optimize import linprog
 
-    result = linprog(
-        np.zeros(params.n_thrusters),
-        A_eq=params.T,
-        b_eq=tau,
-        bounds=[(low - slack, high + slack)] * params.n_thrusters,
-        method="highs",
-    )
-    return result.status == 0
+    for k in rows:
+        solved = linprog(
+            np.zeros(params.n_thrusters),
+            A_eq=params.T,
+            b_eq=tau[k],
+            bounds=[(low - slack, high + slack)] * params.n_thrusters,
+            method="highs",
+        )
+        result[k] = solved.status == 0
+    return result
 
 
 def _check_reference(resolved: ResolvedScenario) -> list[str]:
@@ -255,9 +284,9 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
             f"{list(plant.thrust_limits)} N against its surge damping)",
         )
     tau = reference_thrust_needs(plant, states, sample_time)
-    infeasible = [k for k in range(len(t)) if not _feasible(plant, tau[k])]
-    if infeasible:
-        k = infeasible[0]
+    infeasible = np.flatnonzero(~feasible_forces(plant, tau))
+    if len(infeasible):
+        k = int(infeasible[0])
         radius = speed[k] / abs(states[k, 5]) if abs(states[k, 5]) > 1e-12 else math.inf
         warnings.append(
             f"reference: needs more thrust than {plant.name}'s limits {list(plant.thrust_limits)}"

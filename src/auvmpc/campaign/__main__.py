@@ -8,8 +8,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from auvmpc import interrupts
 from auvmpc.campaign.execute import run_campaign
 from auvmpc.campaign.spec import RESULTS_FILE
+from auvmpc.campaign.store import count_finished
 from auvmpc.errors import ConfigError
 
 
@@ -26,6 +28,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=None, help="run only the first N runs")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
     args = parser.parse_args(argv)
+    previous = interrupts.install()
     try:
         summary = run_campaign(
             args.campaign, args.out, workers=args.workers, runs=args.runs, scheduler=args.scheduler
@@ -33,6 +36,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as stop:
+        kept = count_finished(args.out)
+        print(f"interrupted: {kept} finished runs kept in {args.out}", file=sys.stderr)
+        return stop.exit_code if isinstance(stop, interrupts.Interrupted) else 130
+    finally:
+        interrupts.restore(previous)
     print(
         f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "
         f"({summary.new} run now, {summary.wall_s:.1f} s) -> {summary.out_dir / RESULTS_FILE}"
