@@ -40,38 +40,88 @@ CASES = [
     (("run", "{d}/binary.yaml"), "scenario: is a binary file, not a scenario file", "binary.yaml"),
     (("run", "{d}/latin1.yaml"), "scenario: is not UTF-8 text (byte 9)", "latin1.yaml"),
     (("run", "{d}/folder.yaml"), "scenario: is a folder, not a scenario file", "folder.yaml"),
-    (("run", "{d}/duplicate.yaml"), "scenario: not valid YAML at line 4: duplicate key "
-     "'reference'", "duplicate.yaml"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "vehicle={d}/vehicle.yaml"),
-     "vehicle: not valid YAML at line 3: duplicate key 'mass'", "vehicle.yaml"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "controller={{type: mpc, type: baseline}}"),
-     "controller: value is not valid YAML: duplicate key 'type'", "baseline"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "controller.prediction_horizon=100000",
-      "--set", "controller.control_horizon=null"),
-     "controller.prediction_horizon: the condensed QP of mpc with ny=100000",
-     "100000"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "duration=1e12"), "duration: 2e+12 samples",
-     "1000000000000.0"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "reference={{type: line, speed: 20}}"),
-     "reference.speed: the reference moves at 20 m/s (t = 0 s), faster than jmse2210's "
-     "steady top speed 1.76 m/s", "20"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "vehicle=bluerov2-heavy",
-      "--set", "reference={{type: circle, radius: 10, speed: 1.5}}"),
-     "reference.speed: the reference moves at 1.5 m/s (t = 0 s), faster than "
-     "bluerov2-heavy's steady top speed", "1.5"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "plant.scale.mass=5"),
-     "plant.scale.mass: the horizontal (3-DOF) model does not use mass: it uses m11, m22, "
-     "Iz_rb, Iz_added, Xu", "5"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "plant.scale.thrust_limits=2"),
-     "plant.scale.thrust_limits: thrust_limits is the controller's limit", "2"),  # fmt: skip
-    (("run", "paper-depth-calm", "--set", "plant.scale.Iz_rb=2"),
-     "plant.scale.Iz_rb: the depth (heave) model does not use Iz_rb: it uses", "2"),  # fmt: skip
-    (("run", "paper-ideal", "--set", "obstacles.3.radius=1"),
-     "obstacles.3: no such list index (obstacles is not given", "'3'"),  # fmt: skip
-    (("run", "paper-obstacles", "--set", "obstacles.3.radius=1"),
-     "obstacles.3: no such list index (length 2)", "'3'"),  # fmt: skip
-    (("run", "paper-ideal", "--out", "{d}/binary.yaml"), "--out: is a file, not a folder",
-     "binary.yaml"),  # fmt: skip
+    (
+        ("run", "{d}/duplicate.yaml"),
+        "scenario: not valid YAML at line 4: duplicate key 'reference'",
+        "duplicate.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "vehicle={d}/vehicle.yaml"),
+        "vehicle: not valid YAML at line 3: duplicate key 'mass'",
+        "vehicle.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "controller={{type: mpc, type: baseline}}"),
+        "controller: value is not valid YAML: duplicate key 'type'",
+        "baseline",
+    ),  # fmt: skip
+    (
+        (
+            "run",
+            "paper-ideal",
+            "--set",
+            "controller.prediction_horizon=100000",
+            "--set",
+            "controller.control_horizon=null",
+        ),
+        "controller.prediction_horizon: the condensed QP of mpc with ny=100000",
+        "100000",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "duration=1e12"),
+        "duration: 2e+12 samples",
+        "1000000000000.0",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "reference={{type: line, speed: 20}}"),
+        "reference.speed: the reference moves at 20 m/s (t = 0 s), faster than jmse2210's "
+        "steady top speed 1.76 m/s",
+        "20",
+    ),  # fmt: skip
+    (
+        (
+            "run",
+            "paper-ideal",
+            "--set",
+            "vehicle=bluerov2-heavy",
+            "--set",
+            "reference={{type: circle, radius: 10, speed: 1.5}}",
+        ),
+        "reference.speed: the reference moves at 1.5 m/s (t = 0 s), faster than "
+        "bluerov2-heavy's steady top speed",
+        "1.5",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "plant.scale.mass=5"),
+        "plant.scale.mass: the horizontal (3-DOF) model does not use mass: it uses m11, m22, "
+        "Iz_rb, Iz_added, Xu",
+        "5",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "plant.scale.thrust_limits=2"),
+        "plant.scale.thrust_limits: thrust_limits is the controller's limit",
+        "2",
+    ),  # fmt: skip
+    (
+        ("run", "paper-depth-calm", "--set", "plant.scale.Iz_rb=2"),
+        "plant.scale.Iz_rb: the depth (heave) model does not use Iz_rb: it uses",
+        "2",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "obstacles.3.radius=1"),
+        "obstacles.3: no such list index (obstacles is not given",
+        "'3'",
+    ),  # fmt: skip
+    (
+        ("run", "paper-obstacles", "--set", "obstacles.3.radius=1"),
+        "obstacles.3: no such list index (length 2)",
+        "'3'",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--out", "{d}/binary.yaml"),
+        "--out: is a file, not a folder",
+        "binary.yaml",
+    ),  # fmt: skip
 ]
 
 

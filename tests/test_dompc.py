@@ -50,6 +50,8 @@ SAMPLE_TIME = 0.5  # s, the paper's Te
 HORIZON = 30  # ny, the paper's
 # do-mpc's objective vs the cost written out here, relative: the same sums in another order.
 # Measured 3.1e-16 at most.
+# IPOPT's own tolerance (do-mpc's setting), relative to the cost.
+PLAN_COST_TOL = 1e-8
 COST_RELATIVE_TOL = 1e-12
 # do-mpc's predicted states vs the RK4 rollout of its plan: the dynamics are equality
 # constraints met to IPOPT's tolerance (1e-8). Measured 1.2e-8 m.
@@ -197,11 +199,13 @@ def test_first_command_agrees_with_ltv_mpc_iterated_to_convergence(jmse, case):
     plan = yardstick._plan
     rollout = _rollout(jmse, observation.state, plan)
     np.testing.assert_allclose(result.predicted_states, rollout, rtol=0, atol=ROLLOUT_TOL)
-    # ... and that plan is at least as good as ltv-mpc's under the nonlinear cost.
+    # ... and that plan is as good as ltv-mpc's under the nonlinear cost, within IPOPT's
+    # tolerance (ltv-mpc iterated along its own plan converges further: measured 5e-10
+    # relative below do-mpc's on paper-start).
     reference = observation.reference
-    assert _paper_cost(yardstick.config, jmse, observation.state, plan, reference) <= _paper_cost(
-        yardstick.config, jmse, observation.state, ours._plan, reference
-    )
+    ours_cost = _paper_cost(yardstick.config, jmse, observation.state, ours._plan, reference)
+    theirs = _paper_cost(yardstick.config, jmse, observation.state, plan, reference)
+    assert theirs <= ours_cost * (1.0 + PLAN_COST_TOL)
 
 
 @pytest.mark.parametrize("case", ["line", "paper-start", "obstacle-active"])
@@ -280,8 +284,8 @@ def test_relaxed_when_the_prediction_cannot_clear_an_obstacle(jmse):
     controller.reset(state, np.zeros(4))
     result = controller.compute(observation)
     assert result.status == ControlStatus.RELAXED
-    assert result.info["max_slack_m"] > 0.1
-    assert result.info["rebuilt"] == 0.0
+    assert result.info["max_slack"] > 0.1
+    assert not controller.rebuilt
 
 
 def test_more_obstacles_than_slots_rebuild_the_problem_once(jmse):
@@ -289,8 +293,10 @@ def test_more_obstacles_than_slots_rebuild_the_problem_once(jmse):
     far = ObstacleState(center=np.array([30.0, 30.0]), radius=1.0, velocity=np.zeros(2))
     observation = _paper_observation(obstacles=(far,))
     controller.reset(observation.state, np.zeros(4))
-    first, second = controller.compute(observation), controller.compute(observation)
-    assert (first.info["rebuilt"], second.info["rebuilt"]) == (1.0, 0.0)
+    first = controller.compute(observation)
+    rebuilt_first = controller.rebuilt
+    second = controller.compute(observation)
+    assert (rebuilt_first, controller.rebuilt) == (True, False)
     assert first.status == second.status == ControlStatus.OK
 
 

@@ -37,9 +37,7 @@ def _cli(*args: str, cwd: Path) -> subprocess.Popen:
     )
 
 
-def _interrupt(
-    process: subprocess.Popen, signum: int, ready=None
-) -> tuple[int, str, float]:
+def _interrupt(process: subprocess.Popen, signum: int, ready=None) -> tuple[int, str, float]:
     if ready is None:
         time.sleep(SETTLE_S)
         ready = lambda: True  # noqa: E731

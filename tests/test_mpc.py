@@ -243,7 +243,8 @@ def _solve_ocp_with_ipopt(controller, state, reference, previous, obstacles=()):
     """The controller's OCP in non-condensed form, solved by IPOPT, pass by pass as it does.
 
     The first pass is linearised along the previous thrust held (the controller's nominal at
-    its first sample after a reset); each further pass along the plan of the one before.
+    its first sample after a reset); each further pass along the plan of the one before (for
+    ltv-mpc: at that plan's predicted states, its ``linearisation_nodes``).
     No disturbance estimate (``offset_free`` off).
     Returns the last pass's thrusts (ny, n), states (ny + 1, 6) and obstacle half-planes
     (normals, offsets, steps): the controller's own formulation (its ``soft_rows``) evaluated
@@ -251,7 +252,9 @@ def _solve_ocp_with_ipopt(controller, state, reference, previous, obstacles=()):
     """
     ny = controller.config.prediction_horizon
     nominal_thrust = np.tile(previous, (ny, 1))
+    nodes = None
     for _ in range(controller.config.linearisation_iterations):
+        controller.linearisation_nodes = nodes
         prediction = controller.prediction_model(state, nominal_thrust, NO_DISTURBANCE)
         half_planes = None
         if obstacles:
@@ -264,7 +267,7 @@ def _solve_ocp_with_ipopt(controller, state, reference, previous, obstacles=()):
         thrusts, states = _solve_one_ocp(
             controller, prediction, state, reference, previous, half_planes
         )
-        nominal_thrust = thrusts
+        nominal_thrust, nodes = thrusts, states
     return thrusts, states, half_planes
 
 

@@ -92,8 +92,12 @@ def test_the_paper_scenarios_pass_without_a_word(name, vehicle):
 
 def test_reference_faster_than_top_speed_is_an_error_on_any_reference():
     with pytest.raises(ConfigError, match=r"^reference\.speed: the reference moves at 2 m/s"):
-        preflight(load_scenario("paper-ideal", ["reference={type: waypoints, "
-                                                "points: [[0, 0], [50, 0]], speed: 2.0}"]))
+        preflight(
+            load_scenario(
+                "paper-ideal",
+                ["reference={type: waypoints, points: [[0, 0], [50, 0]], speed: 2.0}"],
+            )
+        )
     just_below = 0.999 * steady_top_speed(load_scenario("paper-ideal").plant)
     assert preflight(load_scenario("paper-ideal", [f"reference={{type: line, speed: "
                                                    f"{just_below}}}"])) == []  # fmt: skip

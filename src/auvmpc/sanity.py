@@ -237,8 +237,7 @@ def feasible_forces(params: VehicleParams, tau: np.ndarray) -> np.ndarray:
         lower = np.where(np.abs(n) > 1e-12, np.minimum(a1, a2), -np.inf).max(axis=1)
         upper = np.where(np.abs(n) > 1e-12, np.maximum(a1, a2), np.inf).min(axis=1)
         fixed_ok = np.all(
-            (np.abs(n) > 1e-12)
-            | ((base[rows] >= low - slack) & (base[rows] <= high + slack)),
+            (np.abs(n) > 1e-12) | ((base[rows] >= low - slack) & (base[rows] <= high + slack)),
             axis=1,
         )
         result[rows] = (lower <= upper) & fixed_ok
@@ -272,9 +271,13 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     fastest = int(np.argmax(speed))
     if speed[fastest] > top * (1.0 + _RELATIVE_MARGIN):
         config = scenario.reference
-        field, value = ("reference.speed", config.speed) if hasattr(config, "speed") else (
-            "reference",
-            config.type,
+        field, value = (
+            ("reference.speed", config.speed)
+            if hasattr(config, "speed")
+            else (
+                "reference",
+                config.type,
+            )
         )
         raise ConfigError(
             field,

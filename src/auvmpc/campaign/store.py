@@ -289,9 +289,7 @@ def stored_sessions(out_dir: str | Path) -> list[dict[str, Any]]:
     """Provenance of every session that ran runs of a campaign folder, oldest first."""
     with contextlib.closing(_connect(_results_path(Path(out_dir)), read_only=True)) as db:
         try:
-            rows = db.execute(
-                "SELECT provenance, new_runs FROM sessions ORDER BY rowid"
-            ).fetchall()
+            rows = db.execute("SELECT provenance, new_runs FROM sessions ORDER BY rowid").fetchall()
         except sqlite3.OperationalError:  # a folder written before sessions were recorded
             return []
     return [{**json.loads(text), "new_runs": new_runs} for text, new_runs in rows]

@@ -51,13 +51,8 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
-from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    project_to_limits,
-)
+from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
+from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
 from auvmpc.vehicle import VehicleParams
 
@@ -145,7 +140,7 @@ class BaselineConfig(StrictModel):
         return self
 
 
-class BaselineController(Controller):
+class BaselineController(ShelledController):
     """Feedback-linearising PID tracker with direction-keeping saturation (module docstring).
 
     Parameters
@@ -170,6 +165,7 @@ class BaselineController(Controller):
         )
         self.model = model
         self.sample_time = float(sample_time)
+        self.limits = horizontal_limits(model)
         self.gains = gains
         n = model.n_thrusters
         self._kp = np.array([gains.along_kp, gains.cross_kp])
@@ -178,9 +174,7 @@ class BaselineController(Controller):
         self._mass = np.array([model.m11, model.m22])
         # Scaling tau towards zero keeps its direction only if zero thrust is allowed.
         self._zero_thrust_feasible = model.thrust_min <= 0.0 <= model.thrust_max
-        self._previous_thrust = np.zeros(n)
-        self._force_integral = np.zeros(2)  # d_hat (X, Y), world frame (N)
-        self._moment_integral = 0.0  # d_hat N (N m)
+        self.reset(np.zeros(6), np.zeros(n))
 
     # ----------------------------------------------------------------------------------------
     # Controller interface
@@ -191,7 +185,7 @@ class BaselineController(Controller):
         """Integral state ``[X, Y, N]``: world-frame force (N) and yaw moment (N m), a copy."""
         return np.array([*self._force_integral, self._moment_integral])
 
-    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         """Clear the integrators and remember ``initial_thrust`` as F(-1) for the rate limit.
 
         ``initial_state`` is not needed: the law has no state besides the integrators and the
@@ -206,9 +200,11 @@ class BaselineController(Controller):
         self._force_integral = np.zeros(2)
         self._moment_integral = 0.0
 
-    def compute(self, observation: Observation) -> ControlResult:
-        """Thrust for the coming sample; SATURATED when a hard limit had to cut the demand."""
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
+        """Thrust for the coming sample, already inside the limits; ``limited`` when a hard
+        limit had to cut the demand."""
         started = time.perf_counter()
+        self._previous_thrust = previous
         state = np.asarray(observation.state, dtype=float)
         reference = np.asarray(observation.reference, dtype=float)
         if state.shape != (6,):
@@ -222,9 +218,8 @@ class BaselineController(Controller):
         thrust, saturated = self._saturate(tau_des)
         deficit = tau_des - self.model.T @ thrust  # zero unless a limit cut the demand
         self._integrate(state[2], reference[0, 2], integrated, deficit, saturated)
-        self._previous_thrust = thrust.copy()
 
-        info = {
+        details = {
             "tau_u_N": float(tau_des[0]),
             "tau_v_N": float(tau_des[1]),
             "tau_r_N_m": float(tau_des[2]),
@@ -235,11 +230,12 @@ class BaselineController(Controller):
             "integral_force_y_N": float(self._force_integral[1]),
             "integral_moment_N_m": float(self._moment_integral),
         }
-        return ControlResult(
-            thrust=thrust,
-            status=ControlStatus.SATURATED if saturated else ControlStatus.OK,
+        return Proposal(
+            plan=thrust[None, :],
             solve_time_s=time.perf_counter() - started,
-            info=info,
+            disturbance=self.disturbance_estimate,
+            limited=saturated,
+            details=details,
         )
 
     # ----------------------------------------------------------------------------------------

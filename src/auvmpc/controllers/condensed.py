@@ -24,16 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.base import (
-    ActuatorLimits,
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    next_planned_move,
-)
+from auvmpc.controllers.base import ActuatorLimits, Observation
 from auvmpc.controllers.config import ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
+from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
 __all__ = ["AffinePrediction", "CondensedQp", "IncrementalMpc", "SoftRows"]
@@ -43,8 +37,6 @@ _HESSIAN_REGULARISATION = 1e-9
 # Quadratic part of the slack penalty: makes H definite in the slack; the linear
 # part (the configured penalty) is what makes the penalty exact.
 _SLACK_QUADRATIC_WEIGHT = 1.0
-# A slack below this is solver tolerance, not a relaxed constraint.
-_SLACK_ACTIVE = 1e-6
 
 
 @dataclass
@@ -231,20 +223,22 @@ class CondensedQp:
         return np.clip(moves, -self.max_move, self.max_move).ravel()
 
 
-class IncrementalMpc(Controller):
-    """One sample of an incremental condensed MPC, for any plant.
+class IncrementalMpc(ShelledController):
+    """One sample of an incremental MPC, for any plant, inside the safety shell.
 
     Subclasses supply the plant-specific parts: the estimator, the reference
     alignment, the prediction model and the soft state constraints. This class
-    owns the solve loop, the hard limits, the fallback and the plan.
+    owns the solve loop (condensed or sparse QP); the shell owns the hard limits, the
+    fallback and the plan.
     """
 
     qp: CondensedQp
-    limits: ActuatorLimits
     linearisation_iterations: int = 1
-    solver_time_limit_ms: float | None = None
     trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
     sparse_qp: SparseIncrementalQp | None = None  # set: solve the sparse form instead
+    # The plan's predicted states (ny + 1, nx), shifted to this sample and aligned to the
+    # measured heading, or None: where a plant that linearises along the plan may do so.
+    linearisation_nodes: np.ndarray | None = None
 
     # -- plant-specific hooks --------------------------------------------------------
     @abstractmethod
@@ -267,119 +261,74 @@ class IncrementalMpc(Controller):
         """Called with every applied command (estimators propagate here)."""
 
     # -- the loop ----------------------------------------------------------------------
-    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self._previous_input = np.array(initial_thrust, dtype=float)
-        self._plan: np.ndarray | None = None  # (ny, nu) inputs of the last good solution
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._predicted: np.ndarray | None = None  # (ny + 1, nx) states of the last plan
+        self._proposed: np.ndarray | None = None  # the states of this sample's proposal
 
-    def compute(self, observation: Observation) -> ControlResult:
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         qp = self.qp
-        previous = self._previous_input
         state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
         reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
         moves = qp.shifted_moves(self._plan, previous)
-        if self.sparse_qp is not None:
-            return self._compute_sparse(state, disturbance, reference, moves, observation)
-        solve_time = 0.0
+        self.linearisation_nodes = (
+            self.aligned_reference(state, _shifted(self._predicted))
+            if self._predicted is not None
+            else None
+        )
+        started = time.perf_counter()
+        iterations, max_slack, predicted = 0, 0.0, None
         for _ in range(self.linearisation_iterations):
             # Each pass re-linearises (model and soft rows) around the last plan.
             prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
-            free, sensitivity = qp.condense(state, previous, prediction)
             nominal = prediction.nominal
-            if nominal is None:
-                nominal = free + sensitivity @ moves
-            soft = self.soft_rows(nominal, reference, observation)
-            problem = qp.problem(free, sensitivity, reference, previous, soft)
-            if prediction.nominal is not None and self.trust_region_weights is not None:
-                qp.add_trust_region(
-                    problem, free, sensitivity, prediction.nominal, self.trust_region_weights
-                )
-            result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
-            solve_time += result.solve_time_s
-            if result.z is None:
-                break
-            moves = result.z[: qp.n_moves]
-        limit = self.solver_time_limit_ms
-        if result.z is None or (limit is not None and 1e3 * solve_time > limit):
-            return self._fallback(solve_time)
-
-        slack = result.z[qp.n_moves :]
-        wanted = previous + moves[: qp.nu]
-        command, _ = self.limits.project(wanted, previous, self.sample_time)
-        self._plan = qp.plan(moves, previous)
-        self._commit(command)
-        status = ControlStatus.OK
-        if len(slack) and slack.max() > _SLACK_ACTIVE:
-            status = ControlStatus.RELAXED
-        elif np.max(np.abs(command - wanted)) > 1e-6:
-            status = ControlStatus.SATURATED
-        return ControlResult(
-            thrust=command,
-            status=status,
-            solve_time_s=solve_time,
-            predicted_states=free + sensitivity @ moves,
-            info={
-                "qp_iterations": float(result.iterations),
-                "max_slack": float(slack.max(initial=0.0)),
-                **{f"disturbance_{i}": float(v) for i, v in enumerate(np.ravel(disturbance))},
-            },
-        )
-
-    def _compute_sparse(self, state, disturbance, reference, moves, observation) -> ControlResult:
-        """The same sample with the QP in sparse form (solvers/sparse_qp.py)."""
-        qp, sparse, previous = self.qp, self.sparse_qp, self._previous_input
-        started = time.perf_counter()
-        iterations = 0
-        for _ in range(self.linearisation_iterations):
-            prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
-            nominal = prediction.nominal
-            if nominal is None:
+            free = sensitivity = None
+            if nominal is None or self.sparse_qp is None:
                 free, sensitivity = qp.condense(state, previous, prediction)
+            if nominal is None:
                 nominal = free + sensitivity @ moves
             soft = self.soft_rows(nominal, reference, observation)
             trust = None
             if prediction.nominal is not None and self.trust_region_weights is not None:
                 trust = (self.trust_region_weights, prediction.nominal)
-            solution = sparse.solve(state, previous, prediction, reference, soft, trust)
-            iterations += int(solution.iterations)
-            if solution.moves is None:
+            if self.sparse_qp is not None:
+                solution = self.sparse_qp.solve(state, previous, prediction, reference, soft, trust)
+                iterations += int(solution.iterations)
+                solved, new_moves = solution.moves is not None, solution.moves
+                if solved:
+                    max_slack = float(solution.slack.max(initial=0.0))
+                    predicted = solution.states
+            else:
+                problem = qp.problem(free, sensitivity, reference, previous, soft)
+                if trust is not None:
+                    weights, nominal_states = trust
+                    qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
+                result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
+                iterations += int(result.iterations)
+                solved = result.z is not None
+                if solved:
+                    new_moves = result.z[: qp.n_moves]
+                    max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
+                    predicted = free + sensitivity @ new_moves
+            if not solved:
                 break
-            moves = solution.moves
-        solve_time = time.perf_counter() - started
-        limit = self.solver_time_limit_ms
-        if solution.moves is None or (limit is not None and 1e3 * solve_time > limit):
-            return self._fallback(solve_time)
-        wanted = previous + moves[: qp.nu]
-        command, _ = self.limits.project(wanted, previous, self.sample_time)
-        self._plan = qp.plan(moves, previous)
-        self._commit(command)
-        max_slack = float(solution.slack.max(initial=0.0))
-        status = ControlStatus.OK
-        if max_slack > _SLACK_ACTIVE:
-            status = ControlStatus.RELAXED
-        elif np.max(np.abs(command - wanted)) > 1e-6:
-            status = ControlStatus.SATURATED
-        return ControlResult(
-            thrust=command,
-            status=status,
-            solve_time_s=solve_time,
-            predicted_states=solution.states,
-            info={
-                "qp_iterations": float(iterations),
-                "max_slack": max_slack,
-                **{f"disturbance_{i}": float(v) for i, v in enumerate(np.ravel(disturbance))},
-            },
+            moves = new_moves
+            self.linearisation_nodes = predicted
+        self._proposed = predicted if solved else None
+        return Proposal(
+            plan=qp.plan(moves, previous) if solved else None,
+            solve_time_s=time.perf_counter() - started,
+            iterations=iterations,
+            max_slack=max_slack,
+            predicted_states=predicted,
+            disturbance=disturbance,
         )
 
-    def _commit(self, command: np.ndarray) -> None:
-        self._previous_input = command
+    def applied(self, command: np.ndarray, fell_back: bool) -> None:
+        # After a fallback the next sample linearises afresh.
+        self._predicted = None if fell_back else self._proposed
         self.after_command(command)
 
-    def _fallback(self, solve_time_s: float) -> ControlResult:
-        """Solver failed or was too slow: apply the previous plan's next move, clipped."""
-        previous = self._previous_input
-        wanted, self._plan = next_planned_move(self._plan, previous)
-        command, _ = self.limits.project(wanted, previous, self.sample_time)
-        self._commit(command)
-        return ControlResult(
-            thrust=command, status=ControlStatus.FALLBACK, solve_time_s=solve_time_s
-        )
+
+def _shifted(states: np.ndarray) -> np.ndarray:
+    """A predicted trajectory one sample on (the last state repeated)."""
+    return np.vstack([states[1:], states[-1:]])

@@ -48,7 +48,6 @@ class NmpcMode(StrEnum):
 class QpStructure(StrEnum):
     """How the real-time iteration poses its QP (docs/performance.md has the comparison)."""
 
-    AUTO = "auto"  # sparse when every move is free, condensed with move blocking
     SPARSE = "sparse"  # states kept, Riccati IPM (HPIPM): well posed for unstable vehicles
     CONDENSED = "condensed"  # states eliminated, dense QP (qp_solver): ill-conditioned there
 
@@ -102,12 +101,10 @@ class ControllerConfig(StrictModel):
         default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
     )
     qp_structure: QpStructure = Field(
-        default=QpStructure.AUTO,
+        default=QpStructure.SPARSE,
         description="nmpc real-time and ltv-mpc: sparse QP solved by HPIPM (stays well posed "
-        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver; auto: sparse "
-        "when every move is free, condensed with move blocking (the sparse ltv-mpc QP fell "
-        "back on 39 steps of paper-obstacles with 2 moves); nmpc is always condensed with "
-        "move blocking",
+        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver; nmpc with move "
+        "blocking always uses the condensed QP",
     )
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
         default=None,
@@ -184,12 +181,6 @@ class ControllerConfig(StrictModel):
         return self.model_copy(
             update={"model_substeps": stable_model_substeps(model, self.sample_time)}
         )
-
-    def sparse_qp(self) -> bool:
-        """Whether the QP is posed in sparse form (``qp_structure``)."""
-        if self.qp_structure is QpStructure.AUTO:
-            return len(self.move_schedule()) == self.prediction_horizon
-        return self.qp_structure is QpStructure.SPARSE
 
     def move_schedule(self) -> tuple[int, ...]:
         """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""

@@ -38,16 +38,9 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    align_heading,
-    next_planned_move,
-    project_to_limits,
-)
+from auvmpc.controllers.base import Observation, align_heading, horizontal_limits
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.integrators import rk4
 from auvmpc.vehicle import VehicleParams, dynamics
@@ -55,8 +48,6 @@ from auvmpc.vehicle import VehicleParams, dynamics
 __all__ = ["DoMpcController"]
 
 NX = 6
-# A slack below this (m) is IPOPT's tolerance, not a relaxed constraint (as in mpc.py).
-_SLACK_ACTIVE_M = 1e-6
 # Unused obstacle slots sit this far away (m) with zero reach: never active.
 _PARKED_OBSTACLE_M = 1e6
 # Keeps the distance differentiable if a predicted position ever hits a centre exactly (m^2).
@@ -65,7 +56,7 @@ _DISTANCE_REGULARISATION_M2 = 1e-12
 _HELD_MOVE_WEIGHT = 1.0
 
 
-class DoMpcController(Controller):
+class DoMpcController(ShelledController):
     """The paper's OCP (incremental form, nonlinear RK4 model) built and solved by do-mpc.
 
     Parameters
@@ -77,7 +68,7 @@ class DoMpcController(Controller):
     obstacle_slots : int
         Obstacles the problem has room for (give the scenario's count). A sample that sees
         more rebuilds the problem with enough slots (its time includes the rebuild, and
-        ``info["rebuilt"]`` is 1); unused slots are parked far away, which costs IPOPT
+        ``rebuilt`` is True after it); unused slots are parked far away, which costs IPOPT
         iterations, hence the default of none.
 
     Raises
@@ -116,6 +107,8 @@ class DoMpcController(Controller):
         self.sample_time = config.sample_time
         self.horizon = config.prediction_horizon
         self.preview_steps = self.horizon
+        self.limits = horizontal_limits(model)
+        self.solver_time_limit_ms = config.solver_time_limit_ms
         # g_k: 1 where a move is free (0..nc-1, or the blocking steps), 0 where F is held.
         self._gates = np.zeros(self.horizon + 1)
         self._gates[list(config.move_schedule())] = 1.0
@@ -211,61 +204,42 @@ class DoMpcController(Controller):
         self._needs_guess = True
 
     # -- Controller interface ------------------------------------------------------------
-    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self._previous_thrust = np.array(initial_thrust, dtype=float)
-        self._plan: np.ndarray | None = None  # (ny, n) thrusts of the last good solution
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._needs_guess = True
         self._mpc.reset_history()
 
-    def compute(self, observation: Observation) -> ControlResult:
-        n, ny = self.model.n_thrusters, self.horizon
-        previous = self._previous_thrust
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
+        ny = self.horizon
         state = np.asarray(observation.state, dtype=float)
-        rebuilt = 0.0
+        self.rebuilt = False
         if len(observation.obstacles) > self._slots:
             self._build(len(observation.obstacles))
-            rebuilt = 1.0
+            self.rebuilt = True
         self._set_parameters(state, observation)
         x0 = np.concatenate([state, previous])
         mpc = self._mpc
         if self._needs_guess:
             # Every stage at the measured state and thrust, no moves: do-mpc's own start.
             mpc.x0 = x0
-            mpc.u0 = np.zeros(n)
+            mpc.u0 = np.zeros(self.model.n_thrusters)
             mpc.set_initial_guess()
             self._needs_guess = False
         started = time.perf_counter()
         mpc.make_step(x0)
         solve_time = time.perf_counter() - started
-        solved = bool(mpc.solver_stats["success"])  # CasADi's verdict on IPOPT's return status
-        time_limit = self.config.solver_time_limit_ms
-        timed_out = time_limit is not None and 1e3 * solve_time > time_limit
-        if not solved or timed_out:
-            return self._fallback(solve_time, rebuilt)
-
+        iterations = int(mpc.solver_stats.get("iter_count", 0))
+        if not mpc.solver_stats["success"]:  # CasADi's verdict on IPOPT's return status
+            return Proposal(plan=None, solve_time_s=solve_time, iterations=iterations)
         solution = np.asarray(mpc.opt_x_num.cat).ravel()
         moves = solution[self._move_index] * self._gates[:ny, None]  # (ny, n)
         slack = solution[self._slack_index]  # (ny, slots)
-        self._plan = previous + np.cumsum(moves, axis=0)
-        thrust, clipped = project_to_limits(self._plan[0], previous, self.model, self.sample_time)
-        self._previous_thrust = thrust
-        # Stage 0 is the measured state: its slack is an unavoidable violation, not a choice.
-        max_slack = float(slack[1:].max(initial=0.0))
-        status = ControlStatus.OK
-        if max_slack > _SLACK_ACTIVE_M:
-            status = ControlStatus.RELAXED
-        elif clipped and np.max(np.abs(thrust - self._plan[0])) > 1e-6:
-            status = ControlStatus.SATURATED
-        return ControlResult(
-            thrust=thrust,
-            status=status,
+        return Proposal(
+            plan=previous + np.cumsum(moves, axis=0),
             solve_time_s=solve_time,
+            iterations=iterations,
+            # Stage 0 is the measured state: its slack is an unavoidable violation.
+            max_slack=float(slack[1:].max(initial=0.0)),
             predicted_states=solution[self._state_index],
-            info={
-                "ipopt_iterations": float(mpc.solver_stats.get("iter_count", 0)),
-                "max_slack_m": max_slack,
-                "rebuilt": rebuilt,
-            },
         )
 
     # -- pieces --------------------------------------------------------------------------
@@ -284,16 +258,3 @@ class DoMpcController(Controller):
                 slots[:, slot, 2] = obstacle.radius + self._reach_extra
             values[self._tvp_index["obstacles"]] = slots.reshape(ny + 1, -1)
         self._tvp.master = ca.DM(values)
-
-    def _fallback(self, solve_time_s: float, rebuilt: float) -> ControlResult:
-        """IPOPT failed or was too slow: apply the previous plan's next move, clipped."""
-        previous = self._previous_thrust
-        wanted, self._plan = next_planned_move(self._plan, previous)
-        thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
-        self._previous_thrust = thrust
-        return ControlResult(
-            thrust=thrust,
-            status=ControlStatus.FALLBACK,
-            solve_time_s=solve_time_s,
-            info={"rebuilt": rebuilt},
-        )

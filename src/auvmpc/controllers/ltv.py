@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.codegen import compiled
-from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, QpStructure, ThrustPenalty
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.estimation import world_disturbance_dynamics
 from auvmpc.integrators import rk4
@@ -25,15 +25,11 @@ from auvmpc.vehicle import VehicleParams
 __all__ = ["LtvMpc", "linearised_rollout"]
 
 
-def linearised_rollout(
-    model: VehicleParams, sample_time: float, substeps: int, horizon: int, jit: bool = False
+def linearised_step(
+    model: VehicleParams, sample_time: float, substeps: int, jit: bool = False
 ) -> ca.Function:
-    """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
-
-    X[:, i] is the state after step i of the rollout under the world-frame force and
-    moment d; A_i, B_i are the Jacobians of the one-sample RK4 map at (X_{i-1}, F_i),
-    built once and evaluated many times.
-    """
+    """CasADi function (x (6), F (n), d (3)) -> (x+ (6), A (6, 6), B (6, n)): the one-sample
+    RK4 map under the world-frame force and moment d, and its Jacobians."""
     state = ca.SX.sym("x", NX)
     thrust = ca.SX.sym("F", model.n_thrusters)
     disturbance = ca.SX.sym("d", 3)
@@ -41,9 +37,18 @@ def linearised_rollout(
     next_state = rk4(lambda x, u: f(x, u, disturbance), state, thrust, sample_time, substeps)
     outputs = [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)]
     step = ca.Function("step", [state, thrust, disturbance], outputs)
-    if jit:
-        step = compiled(step)
-    return step.mapaccum("rollout", horizon)
+    return compiled(step) if jit else step
+
+
+def linearised_rollout(
+    model: VehicleParams, sample_time: float, substeps: int, horizon: int, jit: bool = False
+) -> ca.Function:
+    """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
+
+    X[:, i] is the state after step i of the rollout; A_i, B_i are the Jacobians of the
+    one-sample RK4 map at (X_{i-1}, F_i), built once and evaluated many times.
+    """
+    return linearised_step(model, sample_time, substeps, jit).mapaccum("rollout", horizon)
 
 
 class LtvMpc(LinearMpc):
@@ -52,7 +57,7 @@ class LtvMpc(LinearMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
-        if config.sparse_qp():
+        if config.qp_structure is QpStructure.SPARSE:
             self.sparse_qp = SparseIncrementalQp(
                 horizon=config.prediction_horizon,
                 move_steps=config.move_schedule(),
@@ -66,7 +71,7 @@ class LtvMpc(LinearMpc):
                 slack_penalty=config.obstacle_slack_penalty,
                 iteration_limit=config.qp_iteration_limit,
             )
-        self._rollout = _cached_rollout(
+        self._rollout, self._steps = _cached_functions(
             model.model_dump_json(),
             config.sample_time,
             self.config.model_substeps,
@@ -77,27 +82,42 @@ class LtvMpc(LinearMpc):
     def prediction_model(
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
+        """Linearised at the plan's predicted states (multiple-shooting nodes) when there is a
+        plan, else along a rollout from the measured state.
+
+        A rollout of an open-loop-unstable vehicle runs away over the 15 s horizon (measured:
+        BlueROV2 literature parameters on a lawnmower, 195-213 of 300 steps fell back with a
+        rollout); the plan's own states stay near the path, and each step's linearisation is
+        local. The offsets c_n make the affine model exact at every node.
+        """
         ny, n = self.horizon, self.model.n_thrusters
         forces = np.tile(np.reshape(disturbance, (3, 1)), (1, ny))
-        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
-        states = np.asarray(states)  # (6, ny)
+        nodes = self.linearisation_nodes
+        if nodes is None:
+            successors, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
+            successors = np.asarray(successors).T  # (ny, 6)
+            nodes = np.vstack([state, successors[:-1]])
+        else:
+            nodes = np.vstack([state, nodes[1:ny]])
+            successors, jac_x, jac_u = self._steps(nodes.T, nominal_input.T, forces)
+            successors = np.asarray(successors).T
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
-        nominal = np.vstack([state, states.T])  # (ny + 1, 6)
-        # Offsets so that the affine model reproduces the rollout exactly at the nominal point.
         c = (
-            nominal[1:]
-            - np.einsum("nij,nj->ni", A, nominal[:-1])
+            successors
+            - np.einsum("nij,nj->ni", A, nodes)
             - np.einsum("nij,nj->ni", B, nominal_input)
         )
+        nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, 6)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_rollout(
+def _cached_functions(
     model_json: str, sample_time: float, substeps: int, horizon: int, jit: bool
-) -> ca.Function:
-    """One compiled rollout per distinct model and horizon in a process (compiling takes
-    ~0.3 s; campaigns and tests build many controllers of the same vehicle)."""
+) -> tuple[ca.Function, ca.Function]:
+    """The rollout and the step mapped over the horizon, once per distinct model and horizon
+    in a process (compiling takes ~0.3 s; campaigns and tests build many controllers)."""
     model = VehicleParams.model_validate_json(model_json)
-    return linearised_rollout(model, sample_time, substeps, horizon, jit)
+    step = linearised_step(model, sample_time, substeps, jit)
+    return step.mapaccum("rollout", horizon), step.map(horizon)

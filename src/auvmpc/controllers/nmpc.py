@@ -29,9 +29,10 @@ Two ways to solve it (``config.nmpc_mode``):
   iteration scheme for nonlinear optimization in optimal feedback control"): one SQP step
   per sample from the shifted previous solution. The cost is a linear least-squares cost,
   so the Gauss-Newton Hessian is exact for it and constant. The step's QP is built from
-  the RK4 map's Jacobians at every shooting node (one generated CasADi function, mapped
-  over the horizon), condensed onto the thrusts (the shooting gaps enter as offsets), and
-  solved by the configured dense QP backend (``qp_solver``, DAQP by default). Obstacle rows
+  the RK4 map's Jacobians at every shooting node. By default (``qp_structure: sparse``) it
+  keeps the states and HPIPM solves it (solvers/sparse_rti.py: well posed for unstable
+  vehicles); ``condensed`` (and move blocking) condenses it onto the thrusts (the shooting
+  gaps enter as offsets) for the configured dense QP backend (``qp_solver``). Obstacle rows
   are kept where the linearisation point is within ``_OBSTACLE_RANGE_M`` of the disc.
   ``linearisation_iterations`` > 1 takes that many SQP steps per sample.
 
@@ -46,10 +47,11 @@ solution it keeps the multiple-shooting update, which tracks far better under mo
 (paper-disturbed, offset-free, inertia level -1, RMS after 30 s: 0.045 m, against 0.46 m
 with re-simulated states).
 
-The safety rules are LinearMpc's: the applied command is projected into the hard-limit box;
-a failed or late solve applies the previous plan's next move (FALLBACK); an active slack
-marks the step RELAXED. With ``offset_free`` the EKF of auvmpc.estimation supplies the state
-and the world-frame force the prediction model uses.
+The safety rules are the shell's (controllers/shell.py), as for every MPC: the applied
+command is projected into the hard-limit box; a failed or late solve applies the previous
+plan's next move (FALLBACK); an active slack marks the step RELAXED. With ``offset_free``
+the EKF of auvmpc.estimation supplies the state and the world-frame force the prediction
+model uses.
 """
 
 from __future__ import annotations
@@ -62,17 +64,14 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
     Observation,
     ObstacleState,
     align_heading,
-    next_planned_move,
-    project_to_limits,
+    horizontal_limits,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure, ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
+from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver, world_disturbance_dynamics
 from auvmpc.integrators import rk4
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
@@ -91,8 +90,6 @@ _DISTANCE_SMOOTHING_M2 = 1e-6
 # Quadratic part of the slack penalty (as in LinearMpc): definite in the slack; the linear
 # part (config.obstacle_slack_penalty) is what makes the penalty exact.
 _SLACK_QUADRATIC_WEIGHT = 1.0
-# A slack below this (m) is solver tolerance, not a relaxed constraint.
-_SLACK_ACTIVE_M = 1e-6
 # Where an unused obstacle slot is parked, from the vehicle (m); its rows are unbounded anyway.
 _PARKED_OBSTACLE_M = 1e4
 # IPOPT: tolerance of the accuracy reference, and its iteration cap unless
@@ -595,7 +592,7 @@ class _RealTimeIteration:
         return 2.0 * self._difference.T @ (self._R * change)
 
 
-class NonlinearMpc(Controller):
+class NonlinearMpc(ShelledController):
     """Nonlinear multiple-shooting MPC (``nmpc``): full IPOPT solve or real-time iterations."""
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
@@ -605,12 +602,14 @@ class NonlinearMpc(Controller):
         self.sample_time = config.sample_time
         self.horizon = config.prediction_horizon
         self.preview_steps = self.horizon
+        self.limits = horizontal_limits(model)
+        self.solver_time_limit_ms = config.solver_time_limit_ms
         self.program = MultipleShootingProgram(model, config)
         if config.nmpc_mode is NmpcMode.FULL:
             self._solver: _IpoptSolver | _RealTimeIteration | SparseRealTimeIteration = (
                 _IpoptSolver(self.program, config)
             )
-        elif config.sparse_qp() and self.program.n_moves == self.horizon:
+        elif config.qp_structure is QpStructure.SPARSE and self.program.n_moves == self.horizon:
             # Held thrusts would be equality rows, which an interior point handles badly
             # (HPIPM took 50 iterations without converging); move blocking keeps the
             # condensed QP, whose variables are the moves themselves.
@@ -626,33 +625,24 @@ class NonlinearMpc(Controller):
         )
         self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
 
-    @property
-    def plan(self) -> np.ndarray | None:
-        """Thrust at every step of the last good solution's horizon (ny, n), shifted once
-        per fallback since; None before the first solution."""
-        return None if self._plan is None else self._plan.copy()
-
-    # -- Controller interface ------------------------------------------------------------
-    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self._previous_thrust = np.array(initial_thrust, dtype=float)
-        self._plan: np.ndarray | None = None  # (ny, n) thrusts of the last good solution
+    # -- the back end of the safety shell -------------------------------------------------
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._guess: Iterate | None = None  # where the next solve starts (None: cold)
+        self._next_guess: Iterate | None = None
         self._solver.reset()
         if self._observer is not None:
             self._observer.reset(initial_state)
 
-    def compute(self, observation: Observation) -> ControlResult:
-        previous = self._previous_thrust
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
         disturbance = np.zeros(ND)
         if self._observer is not None:
             state, disturbance = self._observer.correct(state)
         reference = align_heading(state, observation.reference[: self.horizon + 1])
+        self._next_guess = None
         if not all(np.all(np.isfinite(a)) for a in (state, disturbance, reference)):
             # Never hand NaN to a solver (IPOPT raises on it): a failed step, not an error.
-            return self._fallback(
-                _Solution(None, 0, 0.0, "non-finite state or reference"), disturbance
-            )
+            return Proposal(plan=None, disturbance=disturbance)
         sample = self.program.sample(state, previous, reference, disturbance, observation.obstacles)
         cold = self._guess is None
         if cold:
@@ -662,68 +652,28 @@ class NonlinearMpc(Controller):
             guess = _aligned_guess(self._guess, state)
             iterations = self.config.linearisation_iterations
         solution = self._solver.solve(guess, sample, iterations, cold)
-        time_limit = self.config.solver_time_limit_ms
-        timed_out = time_limit is not None and 1e3 * solution.solve_time_s > time_limit
-        if solution.iterate is None or timed_out:
-            return self._fallback(solution, disturbance)
-
-        iterate = solution.iterate
-        plan = self.program.plan(iterate)
-        thrust, clipped = project_to_limits(plan[0], previous, self.model, self.sample_time)
-        self._plan = plan
-        self._guess = self.program.shifted(iterate, disturbance)
-        self._commit(thrust)
-        max_slack = float(iterate.slack.max(initial=0.0))
-        status = ControlStatus.OK
-        if max_slack > _SLACK_ACTIVE_M:
-            status = ControlStatus.RELAXED
-        elif clipped and np.max(np.abs(thrust - plan[0])) > 1e-6:
-            status = ControlStatus.SATURATED
-        return ControlResult(
-            thrust=thrust,
-            status=status,
-            solve_time_s=solution.solve_time_s,
-            predicted_states=iterate.states.copy(),
-            info={
-                "solver_iterations": float(solution.iterations),
-                "max_slack_m": max_slack,
-                **dict(
-                    zip(
-                        ("dist_X_hat", "dist_Y_hat", "dist_N_hat"),
-                        disturbance.tolist(),
-                        strict=True,
-                    )
-                ),
-            },
-        )
-
-    # -- pieces --------------------------------------------------------------------------
-    def _commit(self, thrust: np.ndarray) -> None:
-        """Remember the applied thrust (next rate limit) and propagate the estimator with it."""
-        self._previous_thrust = thrust
-        if self._observer is not None:
-            self._observer.predict(thrust)
-
-    def _fallback(self, solution: _Solution, disturbance: np.ndarray) -> ControlResult:
-        """Solver failed or was too slow: apply the previous plan's next move, clipped.
-
-        A late solution is not applied, but shifted it is where the next solve starts, as
-        is the last point of a solve stopped at its limits (so a solve that needs more time
-        than one sample gets it over several). After any other failure the next solve
-        starts cold: its starting point may be what made it fail.
-        """
-        previous = self._previous_thrust
-        wanted, self._plan = next_planned_move(self._plan, previous)
+        # Where the next solve starts: this solution shifted, also when the shell finds it
+        # late (a solve that needs more than one sample gets it over several), or the last
+        # point of a solve stopped at its limits; after any other failure, cold (its
+        # starting point may be what made it fail).
         resume = solution.iterate if solution.iterate is not None else solution.resume
-        self._guess = None if resume is None else self.program.shifted(resume, disturbance)
-        thrust, _ = project_to_limits(wanted, previous, self.model, self.sample_time)
-        self._commit(thrust)
-        return ControlResult(
-            thrust=thrust,
-            status=ControlStatus.FALLBACK,
+        if resume is not None:
+            self._next_guess = self.program.shifted(resume, disturbance)
+        iterate = solution.iterate
+        return Proposal(
+            plan=None if iterate is None else self.program.plan(iterate),
             solve_time_s=solution.solve_time_s,
-            info={"solver_iterations": float(solution.iterations)},
+            iterations=solution.iterations,
+            max_slack=0.0 if iterate is None else float(iterate.slack.max(initial=0.0)),
+            predicted_states=None if iterate is None else iterate.states.copy(),
+            disturbance=disturbance,
         )
+
+    def applied(self, command: np.ndarray, fell_back: bool) -> None:
+        """Propagate the estimator with the applied thrust; move the warm start on."""
+        self._guess = self._next_guess
+        if self._observer is not None:
+            self._observer.predict(command)
 
 
 def _regularisation(H: np.ndarray) -> float:

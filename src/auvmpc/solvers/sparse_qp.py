@@ -13,10 +13,11 @@ section 4), stage k = 0..ny with
     lower <= u_{k-1} + du_k <= upper                              (at move steps)
     a_r . x_{k+1} + s_k >= b_r   for the soft rows of step k + 1  (one slack per step)
 
-A held input has no variable at all (the stage has fewer inputs), so move blocking adds no
-equality rows, which an interior point handles badly. The cost is the condensed QP's term
-for term; the exact L1 penalty is on one slack per step instead of one per row (still exact:
-a feasible problem leaves every slack at zero).
+The slack enters scaled (the variable is sigma s, :func:`~auvmpc.solvers.hpipm.slack_scale`
+says why). A held input has no variable at all (the stage has fewer inputs), so
+move blocking adds no equality rows, which an interior point handles badly. The cost is the
+condensed QP's term for term; the exact L1 penalty is on one slack per step instead of one
+per row (still exact: a feasible problem leaves every slack at zero).
 """
 
 from __future__ import annotations
@@ -24,23 +25,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
+
 __all__ = ["SparseIncrementalQp", "SparseSolution"]
 
 # As in CondensedQp: keeps the move Hessian definite when R = 0; far below every real weight.
 _HESSIAN_REGULARISATION = 1e-9
 _SLACK_QUADRATIC_WEIGHT = 1.0
-# CasADi hands HPIPM every unbounded variable as a box of +-_INFINITY (solvers/sparse_rti.py).
-_INFINITY = 1e4
-_HPIPM_OPTIONS = {
-    "mode": "speed",
-    "mu0": 1e2,
-    "res_g_max": 1e-8,
-    "res_b_max": 1e-8,
-    "res_d_max": 1e-8,
-    "res_m_max": 1e-8,
-}
-_ITERATION_LIMIT = 50
-_HPIPM_SOLVED = 0
 
 
 class SparseSolution:
@@ -85,7 +76,7 @@ class SparseIncrementalQp:
         self.upper = np.broadcast_to(upper, (self.nu,)).astype(float)
         self.max_move = np.broadcast_to(max_move, (self.nu,)).astype(float)
         self.slack_penalty = slack_penalty
-        self.iteration_limit = iteration_limit or _ITERATION_LIMIT
+        self.iteration_limit = iteration_limit
         self._solvers: dict[tuple, ca.Function] = {}  # by stage-row structure
 
     # -- one sample ------------------------------------------------------------------------
@@ -109,6 +100,7 @@ class SparseIncrementalQp:
         A_mask = np.zeros((rows, n_w), dtype=bool)
         lba, uba = np.zeros(rows), np.zeros(rows)
 
+        sigma = slack_scale(self.slack_penalty)
         state_weights = self.weights.copy()
         state_targets = self.weights * reference[1:]
         if trust is not None:
@@ -140,8 +132,9 @@ class SparseIncrementalQp:
             if moving:
                 H[du, du] += _HESSIAN_REGULARISATION * np.eye(nu)
                 lbx[du], ubx[du] = -self.max_move, self.max_move
-            H[s, s] = 2.0 * _SLACK_QUADRATIC_WEIGHT
-            g[s] = self.slack_penalty
+            # The QP's variable is sigma times the slack (module docstring).
+            H[s, s] = 2.0 * _SLACK_QUADRATIC_WEIGHT / sigma**2
+            g[s] = self.slack_penalty / sigma
             lbx[s] = 0.0
 
             # Gap rows: A_k x_k + B_k p_k + B_k du_k - x_{k+1} = -c_k;  p_k + du_k - p_{k+1} = 0.
@@ -169,7 +162,7 @@ class SparseIncrementalQp:
                 A[row, p_cols] = a @ Bk
                 if moving:
                     A[row, du] = a @ Bk
-                A[row, s] = 1.0
+                A[row, s] = 1.0 / sigma
                 lba[row], uba[row] = soft.lower[r] - a @ ck, np.inf
                 A_mask[row, z:nxt] = True
                 row += 1
@@ -193,7 +186,7 @@ class SparseIncrementalQp:
         )
         stats = solver.stats()
         w = np.asarray(result["x"]).ravel()
-        if stats["return_status"] != _HPIPM_SOLVED or not np.all(np.isfinite(w)):
+        if not solved(stats) or not np.all(np.isfinite(w)):
             return SparseSolution(None, None, None, stats["iter_count"], stats["return_status"])
         states = np.array([w[columns[k] : columns[k] + nx] for k in range(ny + 1)])
         moves, slack = [], np.zeros(ny)
@@ -201,7 +194,7 @@ class SparseIncrementalQp:
             v = columns[k] + nz
             if self.is_move[k]:
                 moves.append(w[v : v + nu])
-            slack[k] = w[v + n_inputs[k] - 1]
+            slack[k] = w[v + n_inputs[k] - 1] / sigma
         return SparseSolution(
             np.concatenate(moves), slack, states, stats["iter_count"], stats["return_status"]
         )
@@ -211,20 +204,16 @@ class SparseIncrementalQp:
         the structural patterns of H and A (block positions, not values)."""
         key = (n_inputs, n_rows)
         if key not in self._solvers:
-            ny = self.horizon
-            options = {
-                "N": ny,
-                "nx": [nz] * (ny + 1),
-                "nu": [*n_inputs, 0],
-                "ng": [*n_rows, 0],
-                "inf": _INFINITY,
-                "error_on_fail": False,
-                "hpipm": {**_HPIPM_OPTIONS, "iter_max": self.iteration_limit},
-            }
             h_pattern = ca.sparsify(ca.DM(H_mask.astype(float))).sparsity()
             a_pattern = ca.sparsify(ca.DM(A_mask.astype(float))).sparsity()
-            solver = ca.conic(
-                "incremental_sparse_qp", "hpipm", {"h": h_pattern, "a": a_pattern}, options
+            solver = hpipm_solver(
+                "incremental_sparse_qp",
+                h_pattern,
+                a_pattern,
+                [nz] * (self.horizon + 1),
+                [*n_inputs, 0],
+                [*n_rows, 0],
+                self.iteration_limit,
             )
             self._solvers[key] = (solver, h_pattern, a_pattern)
         return self._solvers[key]

@@ -16,8 +16,8 @@ The QP of one Gauss-Newton SQP step around an iterate (X, F), in deltas, stage k
 
     stage state  z_k = [dX_k; dp_k]   (p_k = F_{k-1}: the previous thrust, so that the rate
                                        limit is a stage constraint)
-    stage input  v_k = [dF_k; s_k]    (s_k >= 0: one exact-penalty slack for the obstacle rows
-                                       of step k + 1)
+    stage input  v_k = [dF_k; sigma s_k] (s_k >= 0: one exact-penalty slack for the obstacle
+                                       rows of step k + 1, scaled: hpipm.slack_scale)
     dynamics     dX_{k+1} = A_k dX_k + B_k dF_k + (RK4(X_k, F_k) - X_{k+1}),
                  dp_{k+1} = dF_k + (F_k - p_{k+1})
     bounds       dz_0 = [x_hat - X_0; F_prev - p_0],  F_min <= F_k + dF_k <= F_max
@@ -40,6 +40,8 @@ import time
 import casadi as ca
 import numpy as np
 
+from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
+
 __all__ = ["SparseRealTimeIteration"]
 
 # Levenberg-Marquardt term on the thrust step (as in the condensed real-time iteration): keeps
@@ -49,13 +51,6 @@ _STEP_REGULARISATION = 1e-9
 # Quadratic part of the slack penalty (definite in the slack); the linear part is the
 # configured exact penalty.
 _SLACK_QUADRATIC_WEIGHT = 1.0
-# HPIPM: CasADi passes every unbounded variable as a box of +-_INFINITY; 1e8 (CasADi's default)
-# ruins the interior point's scaling (50 iterations without convergence on paper-obstacles),
-# 1e4 converges in ~9. No state delta or thrust bound of a real vehicle comes near it.
-_INFINITY = 1e4
-_HPIPM_OPTIONS = {"mode": "speed", "mu0": 1e2, "res_m_max": 1e-6}
-_ITERATION_LIMIT = 50
-_HPIPM_SOLVED = 0
 # Obstacle rows are kept for the predicted steps within this distance of the inflated disc
 # (m), as in the condensed real-time iteration: one SQP step cannot move the plan that far,
 # and a far row would only perturb the interior point's solution (by ~1e-7 N).
@@ -82,16 +77,15 @@ class SparseRealTimeIteration:
         self._movable[program.move_steps] = 1.0
         self._held = program.held
         H, A = self._qp_data.sparsity_out(0), self._qp_data.sparsity_out(2)
-        options = {
-            "N": N,
-            "nx": [self._stage_state] * (N + 1),
-            "nu": [self._stage_input] * N + [0],
-            "ng": [n + program.n_slots] * N + [0],
-            "inf": _INFINITY,
-            "error_on_fail": False,
-            "hpipm": {**_HPIPM_OPTIONS, "iter_max": config.qp_iteration_limit or _ITERATION_LIMIT},
-        }
-        self._qp = ca.conic("rti_sparse_qp", "hpipm", {"h": H, "a": A}, options)
+        self._qp = hpipm_solver(
+            "rti_sparse_qp",
+            H,
+            A,
+            [self._stage_state] * (N + 1),
+            [self._stage_input] * N + [0],
+            [n + program.n_slots] * N + [0],
+            config.qp_iteration_limit,
+        )
 
     def reset(self) -> None:
         """Nothing is carried between samples."""
@@ -137,13 +131,13 @@ class SparseRealTimeIteration:
                 total += int(stats["iter_count"])
                 status = f"hpipm {stats['return_status']}"
                 w = np.asarray(result["x"]).ravel()
-                if stats["return_status"] != _HPIPM_SOLVED or not np.all(np.isfinite(w)):
+                if not solved(stats) or not np.all(np.isfinite(w)):
                     return self._solution_type(None, total, time.perf_counter() - started, status)
                 stage = nz + nv
                 dz = np.stack([w[k * stage : k * stage + nz] for k in range(N + 1)], axis=1)
                 dv = np.stack([w[k * stage + nz : (k + 1) * stage] for k in range(N)], axis=1)
                 thrust = thrust + dv[:n]
-                slack = dv[n]
+                slack = dv[n] / slack_scale(program.config.obstacle_slack_penalty)
                 if cold:
                     rolled = program.rollout(sample.state, thrust, disturbance)
                     states = np.hstack([sample.state[:, None], np.asarray(rolled)])
@@ -237,16 +231,21 @@ def _build_qp_data(program) -> ca.Function:
             break
 
         # v_k = [dF_k; s_k]: thrust cost, slack penalty, bounds.
-        H_v = ca.diagcat(ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * _SLACK_QUADRATIC_WEIGHT)
+        # The slack variable is sigma s (hpipm.slack_scale says why).
+        rho = config.obstacle_slack_penalty
+        sigma = slack_scale(rho)
+        H_v = ca.diagcat(
+            ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * _SLACK_QUADRATIC_WEIGHT / sigma**2
+        )
         H_zv = ca.SX(nz, nv)
         if absolute:
-            g_v = ca.vertcat(2.0 * R * F[:, k], config.obstacle_slack_penalty)
+            g_v = ca.vertcat(2.0 * R * F[:, k], rho / sigma)
         else:
             change = F[:, k] - P[:, k]
             H_z[NX:, NX:] = ca.diag(2.0 * R)
             H_zv[NX:, :n] = ca.diag(-2.0 * R)
             g_z[NX:] = -2.0 * R * change
-            g_v = ca.vertcat(2.0 * R * change, config.obstacle_slack_penalty)
+            g_v = ca.vertcat(2.0 * R * change, rho / sigma)
         hessian_blocks.append(ca.blockcat([[H_z, H_zv], [H_zv.T, H_v]]))
         gradients += [g_z, g_v]
         lbx += [model.thrust_min - F[:, k], 0.0]
@@ -277,7 +276,7 @@ def _build_qp_data(program) -> ca.Function:
             ca.horzcat(jac_u, zeros(NX, 1)),
             ca.horzcat(eye_n, zeros(n, 1)),
             ca.horzcat(eye_n, zeros(n, 1)),
-            ca.horzcat(normal @ jac_u[0:2, :], ca.SX.ones(S, 1)),
+            ca.horzcat(normal @ jac_u[0:2, :], ca.SX.ones(S, 1) / sigma),
         )
         on_next = ca.vertcat(-ca.SX.eye(nz), zeros(n + S, nz))
         row_blocks.append((on_z, on_v, on_next))

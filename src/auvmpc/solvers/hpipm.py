@@ -1,0 +1,73 @@
+"""HPIPM (Frison and Diehl 2020), the Riccati-based interior-point QP solver for stage-wise
+(optimal-control) QPs, as shipped inside the casadi wheel: one place for its settings."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import casadi as ca
+
+__all__ = ["ITERATION_LIMIT", "hpipm_solver", "slack_scale", "solved"]
+
+# CasADi hands HPIPM every unbounded variable as a box of +-_INFINITY; 1e8 (CasADi's default)
+# ruins the interior point's scaling (50 iterations without convergence on paper-obstacles),
+# 1e4 converges in ~9. No state delta or thrust bound of a real vehicle comes near it.
+_INFINITY = 1e4
+# "robust" from mu0 = 1: on a move-blocked QP with obstacle rows (ltv-mpc, 2 moves,
+# paper-obstacles, first sample) "speed" failed from every mu0 (1, 1e2, 1e4) and "robust"
+# converged in 13 iterations to qrqp's solution within 4e-12; residuals tight enough that the
+# first move agrees with IPOPT's to 1e-5 N (tests/test_mpc.py).
+_OPTIONS = {
+    "mode": "robust",
+    "mu0": 1.0,
+    "res_g_max": 1e-8,
+    "res_b_max": 1e-8,
+    "res_d_max": 1e-8,
+    "res_m_max": 1e-8,
+}
+# Measured: at most 52 iterations on paper-obstacles (a sample where 30 obstacle rows appear);
+# 50 made that sample fall back.
+ITERATION_LIMIT = 100
+_SOLVED = 0
+
+
+def hpipm_solver(
+    name: str,
+    h_pattern: ca.Sparsity,
+    a_pattern: ca.Sparsity,
+    stage_states: Sequence[int],
+    stage_inputs: Sequence[int],
+    stage_rows: Sequence[int],
+    iteration_limit: int | None = None,
+) -> ca.Function:
+    """A CasADi conic for a QP whose variables are ordered [z_0 v_0 z_1 v_1 ... z_N] and
+    whose rows are [gaps_0 rows_0 gaps_1 rows_1 ...] (CasADi's HPIPM interface)."""
+    horizon = len(stage_states) - 1
+    options = {
+        "N": horizon,
+        "nx": list(stage_states),
+        "nu": list(stage_inputs),
+        "ng": list(stage_rows),
+        "inf": _INFINITY,
+        "error_on_fail": False,
+        "hpipm": {**_OPTIONS, "iter_max": iteration_limit or ITERATION_LIMIT},
+    }
+    return ca.conic(name, "hpipm", {"h": h_pattern, "a": a_pattern}, options)
+
+
+def slack_scale(penalty: float) -> float:
+    """The factor sigma by which an exact-penalty slack enters the QP (the variable is sigma s).
+
+    With s itself the multiplier of s >= 0 is ~penalty (1e5) while its rows are inactive and
+    the interior point needed 40-100 iterations, failing with move blocking, once obstacle
+    rows were present. With sigma = penalty every multiplier is O(1), but CasADi bounds every
+    variable by +-1e4 (_INFINITY), which then caps the slack at 0.1 m: a start inside a
+    keep-out disc became infeasible. sqrt(penalty) balances both: multipliers ~316 and room
+    for 30 m of slack at the default penalty.
+    """
+    return penalty**0.5
+
+
+def solved(stats: dict) -> bool:
+    """Whether HPIPM's last solve converged (return status 0)."""
+    return stats["return_status"] == _SOLVED
