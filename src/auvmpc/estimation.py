@@ -29,8 +29,8 @@ import scipy.linalg
 from pydantic import Field
 
 from auvmpc.config import StrictModel
-from auvmpc.integrators import rk4
-from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
+from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
+from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "AugmentedEkf",
@@ -64,16 +64,6 @@ class ObserverConfig(StrictModel):
     initial_disturbance_std: tuple[Positive, Positive, Positive] = Field(
         default=(20.0, 20.0, 2.0), description="prior uncertainty of X, Y (N) and N (N m)"
     )
-
-
-def world_disturbance_dynamics(model: VehicleParams):
-    """x' = f(x, F, d_world): the model with a world-frame force and moment added."""
-
-    def f(state, thrust, disturbance_world):
-        d_u, d_v = body_from_world(disturbance_world, state[2])
-        return dynamics(state, thrust, model, (d_u, d_v, disturbance_world[2]))
-
-    return f
 
 
 # The smallest eigenvalue a covariance may have, as a fraction of the smallest noise
@@ -199,18 +189,7 @@ class DisturbanceObserver:
     def __init__(
         self, model: VehicleParams, sample_time: float, config: ObserverConfig, substeps: int = 1
     ) -> None:
-        augmented = ca.SX.sym("z", NX + ND)
-        thrust = ca.SX.sym("F", model.n_thrusters)
-        f = world_disturbance_dynamics(model)
-        next_state = rk4(
-            lambda x, u: f(x, u, augmented[NX:]), augmented[:NX], thrust, sample_time, substeps
-        )
-        next_augmented = ca.vertcat(next_state, augmented[NX:])
-        step = ca.Function(
-            "observer_step",
-            [augmented, thrust],
-            [next_augmented, ca.jacobian(next_augmented, augmented)],
-        )
+        step = horizontal_model(model, sample_time, substeps).augmented_step
         rate = np.array(config.disturbance_rate_std) ** 2 * sample_time
         measurement = np.square(config.measurement_std)
         self._filter = AugmentedEkf(

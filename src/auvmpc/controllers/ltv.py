@@ -9,35 +9,16 @@ CasADi Jacobians, so the prediction follows the turn.
 
 from __future__ import annotations
 
-import functools
-
 import casadi as ca
 import numpy as np
 
-from auvmpc.codegen import compiled
 from auvmpc.controllers.config import ControllerConfig, QpStructure, ThrustPenalty
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
-from auvmpc.estimation import world_disturbance_dynamics
-from auvmpc.integrators import rk4
+from auvmpc.models.discrete import horizontal_model
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["LtvMpc", "linearised_rollout"]
-
-
-def linearised_step(
-    model: VehicleParams, sample_time: float, substeps: int, jit: bool = False
-) -> ca.Function:
-    """CasADi function (x (6), F (n), d (3)) -> (x+ (6), A (6, 6), B (6, n)): the one-sample
-    RK4 map under the world-frame force and moment d, and its Jacobians."""
-    state = ca.SX.sym("x", NX)
-    thrust = ca.SX.sym("F", model.n_thrusters)
-    disturbance = ca.SX.sym("d", 3)
-    f = world_disturbance_dynamics(model)
-    next_state = rk4(lambda x, u: f(x, u, disturbance), state, thrust, sample_time, substeps)
-    outputs = [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)]
-    step = ca.Function("step", [state, thrust, disturbance], outputs)
-    return compiled(step) if jit else step
 
 
 def linearised_rollout(
@@ -46,9 +27,9 @@ def linearised_rollout(
     """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
 
     X[:, i] is the state after step i of the rollout; A_i, B_i are the Jacobians of the
-    one-sample RK4 map at (X_{i-1}, F_i), built once and evaluated many times.
+    one-sample RK4 map at (X_{i-1}, F_i) (models/discrete.py builds them once per vehicle).
     """
-    return linearised_step(model, sample_time, substeps, jit).mapaccum("rollout", horizon)
+    return horizontal_model(model, sample_time, substeps, jit).linearised_rollout(horizon)
 
 
 class LtvMpc(LinearMpc):
@@ -71,13 +52,11 @@ class LtvMpc(LinearMpc):
                 slack_penalty=config.obstacle_slack_penalty,
                 iteration_limit=config.qp_iteration_limit,
             )
-        self._rollout, self._steps = _cached_functions(
-            model.model_dump_json(),
-            config.sample_time,
-            self.config.model_substeps,
-            config.prediction_horizon,
-            config.jit,
+        sampled = horizontal_model(
+            model, config.sample_time, self.config.model_substeps, config.jit
         )
+        self._rollout = sampled.linearised_rollout(config.prediction_horizon)
+        self._steps = sampled.linearised_nodes(config.prediction_horizon)
 
     def prediction_model(
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
@@ -110,14 +89,3 @@ class LtvMpc(LinearMpc):
         )
         nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, 6)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
-
-
-@functools.lru_cache(maxsize=32)
-def _cached_functions(
-    model_json: str, sample_time: float, substeps: int, horizon: int, jit: bool
-) -> tuple[ca.Function, ca.Function]:
-    """The rollout and the step mapped over the horizon, once per distinct model and horizon
-    in a process (compiling takes ~0.3 s; campaigns and tests build many controllers)."""
-    model = VehicleParams.model_validate_json(model_json)
-    step = linearised_step(model, sample_time, substeps, jit)
-    return step.mapaccum("rollout", horizon), step.map(horizon)

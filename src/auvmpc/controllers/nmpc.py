@@ -72,8 +72,8 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure, ThrustPenalty
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
 from auvmpc.controllers.shell import Proposal, ShelledController
-from auvmpc.estimation import DisturbanceObserver, world_disturbance_dynamics
-from auvmpc.integrators import rk4
+from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.discrete import horizontal_model
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 from auvmpc.vehicle import VehicleParams
 
@@ -179,19 +179,11 @@ class MultipleShootingProgram:
         self.held = np.searchsorted(self.move_steps, np.arange(ny), side="right") - 1
         self.max_move = model.thrust_rate_limit * config.sample_time
 
-        state, thrust, force = ca.SX.sym("x", NX), ca.SX.sym("F", n), ca.SX.sym("d", ND)
-        f = world_disturbance_dynamics(model)
-        next_state = rk4(
-            lambda x, u: f(x, u, force), state, thrust, config.sample_time, config.model_substeps
-        )
-        self.step = ca.Function("rk4_step", [state, thrust, force], [next_state])
-        self.rollout = self.step.mapaccum("rk4_rollout", ny)
+        sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
+        self.step = sampled.step
+        self.rollout = sampled.rollout(ny)
         # The step with its Jacobians, evaluated at every shooting node in one call.
-        self.linearised_steps = ca.Function(
-            "rk4_step_linearised",
-            [state, thrust, force],
-            [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
-        ).map(ny)
+        self.linearised_steps = sampled.linearised_nodes(ny)
 
         self.n_w = NX * (ny + 1) + n * self.n_moves + n_slots * ny
         w = ca.SX.sym("w", self.n_w)
