@@ -9,6 +9,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from auvmpc.ocp.tracking import ActuatorLimits
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
@@ -89,39 +90,6 @@ class Controller(ABC):
     @abstractmethod
     def compute(self, observation: Observation) -> ControlResult:
         """The thrust to apply over the next sample."""
-
-
-@dataclass(frozen=True)
-class ActuatorLimits:
-    """Hard limits of a set of actuators: force box and rate, per actuator."""
-
-    lower: float | np.ndarray  # N
-    upper: float | np.ndarray  # N
-    rate: float | np.ndarray  # N/s
-
-    def box(self, previous: np.ndarray, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
-        """Per-actuator [lower, upper] reachable in one sample under both hard limits."""
-        max_step = self.rate * sample_time
-        lower = np.maximum(self.lower, previous - max_step)
-        upper = np.minimum(self.upper, previous + max_step)
-        # A previous command outside the force limits (never ours) leaves an empty box:
-        # the rate limit wins, moving towards the force box as fast as it allows.
-        empty = lower > upper
-        if np.any(empty):
-            towards = np.clip(
-                np.clip(previous, self.lower, self.upper), previous - max_step, previous + max_step
-            )
-            lower = np.where(empty, towards, lower)
-            upper = np.where(empty, towards, upper)
-        return lower, upper
-
-    def project(
-        self, command: np.ndarray, previous: np.ndarray, sample_time: float
-    ) -> tuple[np.ndarray, bool]:
-        """Clip a command into the hard-limit box; also say whether it had to move."""
-        lower, upper = self.box(previous, sample_time)
-        clipped = np.clip(command, lower, upper)
-        return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
 
 
 def align_heading(state: np.ndarray, reference: np.ndarray) -> np.ndarray:

@@ -24,10 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.base import ActuatorLimits, Observation
-from auvmpc.controllers.config import ThrustPenalty
+from auvmpc.controllers.base import Observation
 from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
 from auvmpc.controllers.shell import Proposal, ShelledController
+from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
 __all__ = ["AffinePrediction", "CondensedQp", "IncrementalMpc", "SoftRows"]
@@ -69,22 +69,10 @@ class CondensedQp:
     """The condensed QP of one incremental MPC: built once, filled every sample."""
 
     def __init__(
-        self,
-        *,
-        horizon: int,
-        move_steps: tuple[int, ...],
-        stage_weight: np.ndarray,
-        terminal_weight: np.ndarray,
-        input_weight: np.ndarray,
-        penalty: ThrustPenalty,
-        limits: ActuatorLimits,
-        sample_time: float,
-        slack_penalty: float,
-        qp_solver: QpSolverName,
-        iteration_limit: int | None = None,
+        self, ocp: TrackingOcp, qp_solver: QpSolverName, iteration_limit: int | None = None
     ) -> None:
-        nu = len(input_weight)
-        ny = horizon
+        nu, ny, move_steps = ocp.n_inputs, ocp.horizon, ocp.move_steps
+        input_weight, limits = ocp.input_weight, ocp.limits
         self.horizon = ny
         self.nu = nu
         self.move_steps = np.array(move_steps)
@@ -95,10 +83,8 @@ class CondensedQp:
         for i in range(ny):
             for j in np.flatnonzero(self.move_steps <= i):
                 self.move_to_input[i, :, j * nu : (j + 1) * nu] = np.eye(nu)
-        weights = np.vstack([np.tile(stage_weight, (ny - 1, 1)), terminal_weight])  # n = 1..ny
-        self.sqrt_state_weights = np.sqrt(weights)
-        input_weight = np.asarray(input_weight, dtype=float)
-        if penalty is ThrustPenalty.ABSOLUTE:
+        self.sqrt_state_weights = np.sqrt(ocp.stage_weights())  # n = 1..ny
+        if ocp.penalty is ThrustPenalty.ABSOLUTE:
             stacked = self.move_to_input.reshape(ny * nu, self.n_moves)
             weighted = stacked * np.tile(input_weight, ny)[:, None]
             self._input_hessian = 2.0 * stacked.T @ weighted
@@ -107,13 +93,12 @@ class CondensedQp:
             self._input_hessian = 2.0 * np.diag(np.tile(input_weight, nc))
             self._input_gradient_map = np.zeros((self.n_moves, nu))
         self.limits = limits
-        self.max_move = np.broadcast_to(limits.rate * sample_time, (nu,)).astype(float)
+        self.max_move = ocp.max_move
         self._move_bound = np.tile(self.max_move, nc)  # every move, built once
         # Force bounds where the input changes (it is held in between and after the last move).
         self._input_rows = self.move_to_input[self.move_steps].reshape(nc * nu, self.n_moves)
-        self._input_lower = np.broadcast_to(limits.lower, (nu,)).astype(float)
-        self._input_upper = np.broadcast_to(limits.upper, (nu,)).astype(float)
-        self.slack_penalty = slack_penalty
+        self._input_lower, self._input_upper = ocp.input_lower, ocp.input_upper
+        self.slack_penalty = ocp.slack_penalty
         self.solver = make_qp_solver(qp_solver, iteration_limit)
 
     def condense(

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import math
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Any
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.qp import QpSolverName
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
+from auvmpc.models.discrete import HORIZONTAL
+from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
@@ -52,13 +54,6 @@ class QpStructure(StrEnum):
     CONDENSED = "condensed"  # states eliminated, dense QP (qp_solver): ill-conditioned there
 
 
-class ThrustPenalty(StrEnum):
-    """What R weights: the absolute thrust (paper's energy term) or its change per sample."""
-
-    ABSOLUTE = "absolute"
-    INCREMENT = "increment"
-
-
 class ControllerConfig(StrictModel):
     """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
 
@@ -78,8 +73,25 @@ class ControllerConfig(StrictModel):
         description="move blocking: the samples of the horizon at which the thrust may change, "
         "starting with 0 and increasing; overrides control_horizon (nc = len(move_steps))",
     )
-    Q: Weights6 = Field(default=(5, 5, 5, 1, 1, 1), description="stage weights on [x y psi u v r]")
-    S: Weights6 = Field(default=(10, 10, 10, 2, 2, 2), description="terminal weights")
+    Q: Weights6 = Field(
+        default=(5, 5, 5, 1, 1, 1),
+        description="stage weights on [x y psi u v r], as a list in that order or a mapping "
+        "by state name (names left out weigh 0), e.g. {x: 5, y: 5, psi: 5}",
+    )
+    S: Weights6 = Field(
+        default=(10, 10, 10, 2, 2, 2), description="terminal weights, as Q (list or mapping)"
+    )
+
+    @field_validator("Q", "S", mode="before")
+    @classmethod
+    def _weights_by_name(cls, value: Any) -> Any:
+        if not isinstance(value, dict):
+            return value
+        unknown = sorted(set(map(str, value)) - set(HORIZONTAL.names))
+        if unknown:
+            raise ValueError(f"unknown state names {unknown}; known {list(HORIZONTAL.names)}")
+        return tuple(value.get(name, 0.0) for name in HORIZONTAL.names)
+
     R: tuple[NonNegative, ...] = Field(
         default=(0.01,), description="thrust weights, one per thruster or one for all"
     )
@@ -180,6 +192,18 @@ class ControllerConfig(StrictModel):
             return self
         return self.model_copy(
             update={"model_substeps": stable_model_substeps(model, self.sample_time)}
+        )
+
+    def ocp(self, model: VehicleParams) -> TrackingOcp:
+        """The tracking problem this configuration poses for ``model``'s horizontal thrusters."""
+        from auvmpc.controllers.base import horizontal_limits
+
+        return TrackingOcp.from_config(
+            self,
+            model.n_thrusters,
+            horizontal_limits(model),
+            slack_penalty=self.obstacle_slack_penalty,
+            keep_out_extra=self.vehicle_radius + self.obstacle_margin,
         )
 
     def move_schedule(self) -> tuple[int, ...]:

@@ -13,10 +13,10 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.base import ActuatorLimits
 from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
 from auvmpc.estimation import AugmentedEkf
 from auvmpc.integrators import rk4
+from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
 from auvmpc.vehicle import HeaveParams, heave_dynamics
 
 __all__ = ["DepthMpc"]
@@ -39,20 +39,10 @@ class DepthMpc(IncrementalMpc):
         self.limits = ActuatorLimits(
             heave.thrust_limits[0], heave.thrust_limits[1], heave.thrust_rate_limit
         )
-        weights = np.broadcast_to(np.asarray(config.R, dtype=float), (heave.thruster_count,))
-        self.qp = CondensedQp(
-            horizon=config.prediction_horizon,
-            move_steps=config.move_schedule(),
-            stage_weight=np.array(config.Q, dtype=float),
-            terminal_weight=np.array(config.S, dtype=float),
-            input_weight=np.array(weights),
-            penalty=config.thrust_penalty,
-            limits=self.limits,
-            sample_time=config.sample_time,
-            slack_penalty=config.depth_slack_penalty,
-            qp_solver=config.qp_solver,
-            iteration_limit=config.qp_iteration_limit,
+        self.ocp = TrackingOcp.from_config(
+            config, heave.thruster_count, self.limits, slack_penalty=config.depth_slack_penalty
         )
+        self.qp = CondensedQp(self.ocp, config.qp_solver, config.qp_iteration_limit)
         self.solver_time_limit_ms = config.solver_time_limit_ms
         self.trust_region_weights = None  # the heave model is nearly linear
         state = ca.SX.sym("x", NX)

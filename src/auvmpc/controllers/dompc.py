@@ -38,11 +38,12 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.base import Observation, align_heading, horizontal_limits
-from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.controllers.base import Observation, align_heading
+from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.integrators import rk4
+from auvmpc.ocp.tracking import ThrustPenalty
 from auvmpc.vehicle import VehicleParams, dynamics
 
 __all__ = ["DoMpcController"]
@@ -104,23 +105,23 @@ class DoMpcController(ShelledController):
         self._do_mpc = do_mpc
         self.model = model
         self.config = config
-        self.sample_time = config.sample_time
-        self.horizon = config.prediction_horizon
+        self.ocp = config.ocp(model)
+        self.sample_time = self.ocp.sample_time
+        self.horizon = self.ocp.horizon
         self.preview_steps = self.horizon
-        self.limits = horizontal_limits(model)
+        self.limits = self.ocp.limits
         self.solver_time_limit_ms = config.solver_time_limit_ms
         # g_k: 1 where a move is free (0..nc-1, or the blocking steps), 0 where F is held.
         self._gates = np.zeros(self.horizon + 1)
-        self._gates[list(config.move_schedule())] = 1.0
-        self._max_move = model.thrust_rate_limit * config.sample_time
-        self._reach_extra = config.vehicle_radius + config.obstacle_margin
+        self._gates[list(self.ocp.move_steps)] = 1.0
+        self._reach_extra = self.ocp.keep_out_extra
         self._build(obstacle_slots)
         self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
 
     # -- the do-mpc problem --------------------------------------------------------------
     def _build(self, slots: int) -> None:
         """Model, objective, bounds and constraints in do-mpc's terms; IPOPT set up once."""
-        do_mpc, p, cfg = self._do_mpc, self.model, self.config
+        do_mpc, p, cfg, ocp = self._do_mpc, self.model, self.config, self.ocp
         n = p.n_thrusters
         model = do_mpc.model.Model("discrete", "SX")
         state = model.set_variable("_x", "state", (NX, 1))
@@ -133,7 +134,7 @@ class DoMpcController(ShelledController):
         thrust = previous + gate * move
         model.set_rhs(
             "state",
-            rk4(lambda x, f: dynamics(x, f, p), state, thrust, cfg.sample_time, cfg.model_substeps),
+            rk4(lambda x, f: dynamics(x, f, p), state, thrust, ocp.sample_time, cfg.model_substeps),
         )
         model.set_rhs("F_prev", thrust)
         model.setup()
@@ -141,7 +142,7 @@ class DoMpcController(ShelledController):
         mpc = do_mpc.controller.MPC(model)
         mpc.set_param(
             n_horizon=self.horizon,
-            t_step=cfg.sample_time,
+            t_step=ocp.sample_time,
             n_robust=0,
             use_terminal_bounds=True,  # the F_prev bounds hold at the last stage too (F_{ny-1})
             store_full_solution=False,
@@ -150,21 +151,20 @@ class DoMpcController(ShelledController):
             nlpsol_opts={"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0},
         )
         error = model.x["state"] - model.tvp["reference"]
-        thrust_weights = np.array(cfg.thrust_weights(n), dtype=float)
         dF, F = model.u["dF"], model.x["F_prev"] + model.tvp["gate"] * model.u["dF"]
-        penalised = F if cfg.thrust_penalty is ThrustPenalty.ABSOLUTE else dF
+        penalised = F if ocp.penalty is ThrustPenalty.ABSOLUTE else dF
         lterm = (
-            ca.mtimes([error.T, ca.diag(ca.DM(cfg.Q)), error])
-            + ca.mtimes([penalised.T, ca.diag(ca.DM(thrust_weights)), penalised])
+            ca.mtimes([error.T, ca.diag(ca.DM(ocp.stage_weight)), error])
+            + ca.mtimes([penalised.T, ca.diag(ca.DM(ocp.input_weight)), penalised])
             + _HELD_MOVE_WEIGHT * (1 - model.tvp["gate"]) * ca.sumsqr(dF)
         )
-        mterm = ca.mtimes([error.T, ca.diag(ca.DM(cfg.S)), error])
+        mterm = ca.mtimes([error.T, ca.diag(ca.DM(ocp.terminal_weight)), error])
         mpc.set_objective(lterm=lterm, mterm=mterm)
         mpc.set_rterm(dF=0.0)  # R weights F (or dF) in lterm already; do-mpc's move term stays 0
-        mpc.bounds["lower", "_u", "dF"] = -self._max_move
-        mpc.bounds["upper", "_u", "dF"] = self._max_move
-        mpc.bounds["lower", "_x", "F_prev"] = p.thrust_min
-        mpc.bounds["upper", "_x", "F_prev"] = p.thrust_max
+        mpc.bounds["lower", "_u", "dF"] = -ocp.max_move
+        mpc.bounds["upper", "_u", "dF"] = ocp.max_move
+        mpc.bounds["lower", "_x", "F_prev"] = ocp.input_lower
+        mpc.bounds["upper", "_x", "F_prev"] = ocp.input_upper
         position = model.x["state"][:2]
         for slot in range(slots):
             cx, cy, reach = (model.tvp["obstacles"][3 * slot + i] for i in range(3))
@@ -176,7 +176,7 @@ class DoMpcController(ShelledController):
                 reach - distance,
                 ub=0.0,
                 soft_constraint=True,
-                penalty_term_cons=cfg.obstacle_slack_penalty,
+                penalty_term_cons=ocp.slack_penalty,
             )
         tvp = mpc.get_tvp_template()
         mpc.set_tvp_fun(lambda t_now: tvp)  # filled in place before every make_step

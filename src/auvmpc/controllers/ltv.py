@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.config import ControllerConfig, QpStructure, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, QpStructure
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
@@ -39,19 +39,7 @@ class LtvMpc(LinearMpc):
         super().__init__(model, config)
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
         if config.qp_structure is QpStructure.SPARSE:
-            self.sparse_qp = SparseIncrementalQp(
-                horizon=config.prediction_horizon,
-                move_steps=config.move_schedule(),
-                stage_weight=np.array(config.Q, dtype=float),
-                terminal_weight=np.array(config.S, dtype=float),
-                input_weight=np.array(config.thrust_weights(model.n_thrusters), dtype=float),
-                absolute_input_penalty=config.thrust_penalty is ThrustPenalty.ABSOLUTE,
-                lower=model.thrust_min,
-                upper=model.thrust_max,
-                max_move=model.thrust_rate_limit * config.sample_time,
-                slack_penalty=config.obstacle_slack_penalty,
-                iteration_limit=config.qp_iteration_limit,
-            )
+            self.sparse_qp = SparseIncrementalQp(self.ocp, config.qp_iteration_limit)
         sampled = horizontal_model(
             model, config.sample_time, self.config.model_substeps, config.jit
         )

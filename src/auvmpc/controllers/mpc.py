@@ -25,7 +25,6 @@ from auvmpc.controllers.base import (
     Observation,
     ObstacleState,
     align_heading,
-    horizontal_limits,
 )
 from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
 from auvmpc.controllers.config import ControllerConfig
@@ -64,20 +63,9 @@ class LinearMpc(IncrementalMpc):
         self.sample_time = config.sample_time
         self.horizon = config.prediction_horizon
         self.preview_steps = self.horizon
-        self.limits = horizontal_limits(model)
-        self.qp = CondensedQp(
-            horizon=config.prediction_horizon,
-            move_steps=config.move_schedule(),
-            stage_weight=np.array(config.Q, dtype=float),
-            terminal_weight=np.array(config.S, dtype=float),
-            input_weight=np.array(config.thrust_weights(model.n_thrusters), dtype=float),
-            penalty=config.thrust_penalty,
-            limits=self.limits,
-            sample_time=config.sample_time,
-            slack_penalty=config.obstacle_slack_penalty,
-            qp_solver=config.qp_solver,
-            iteration_limit=config.qp_iteration_limit,
-        )
+        self.ocp = config.ocp(model)
+        self.limits = self.ocp.limits
+        self.qp = CondensedQp(self.ocp, config.qp_solver, config.qp_iteration_limit)
         self.linearisation_iterations = config.linearisation_iterations
         self.solver_time_limit_ms = config.solver_time_limit_ms
         self._observer = (
@@ -156,7 +144,7 @@ class LinearMpc(IncrementalMpc):
         side_sign = np.sign(left[closest] @ radial[closest]) or 1.0
         side = side_sign * left
         normals = _clamp_towards(radial, side, _MAX_NORMAL_ANGLE_FROM_SIDE)
-        reach = obstacle.radius + self.config.vehicle_radius + self.config.obstacle_margin
+        reach = obstacle.radius + self.ocp.keep_out_extra
         offsets = np.einsum("nk,nk->n", normals, centres) + reach
         return normals, offsets
 

@@ -69,11 +69,12 @@ from auvmpc.controllers.base import (
     align_heading,
     horizontal_limits,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure, ThrustPenalty
+from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
 from auvmpc.controllers.qp import QpProblem, make_qp_solver
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.ocp.tracking import ThrustPenalty
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 from auvmpc.vehicle import VehicleParams
 
@@ -172,12 +173,13 @@ class MultipleShootingProgram:
         n, ny = model.n_thrusters, config.prediction_horizon
         self.model, self.config = model, config
         self.n_thrusters, self.horizon, self.n_slots = n, ny, n_slots
-        self.sample_time = config.sample_time
-        self.move_steps = np.array(config.move_schedule())
-        self.n_moves = len(self.move_steps)
-        # held[i]: the move whose thrust acts at step i.
-        self.held = np.searchsorted(self.move_steps, np.arange(ny), side="right") - 1
-        self.max_move = model.thrust_rate_limit * config.sample_time
+        self.ocp = ocp = config.ocp(model)
+        self.sample_time = ocp.sample_time
+        self.move_steps = np.array(ocp.move_steps)
+        self.n_moves = ocp.n_moves
+        self.held = ocp.held  # held[i]: the move whose thrust acts at step i
+        # Per stacked thrust change (move by move): the largest change in one sample (N).
+        self.max_change = np.tile(ocp.max_move, self.n_moves)
 
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self.step = sampled.step
@@ -209,16 +211,16 @@ class MultipleShootingProgram:
         self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
         g = ca.vertcat(*gaps, *changes, *clearances)
 
-        Q, S, R = np.diag(config.Q), np.diag(config.S), np.diag(config.thrust_weights(n))
+        Q, S, R = np.diag(ocp.stage_weight), np.diag(ocp.terminal_weight), np.diag(ocp.input_weight)
         cost = 0
         for i in range(1, ny + 1):
             error = X[:, i] - reference[:, i - 1]
             cost += ca.bilin(S if i == ny else Q, error, error)
-        if config.thrust_penalty is ThrustPenalty.ABSOLUTE:
+        if ocp.penalty is ThrustPenalty.ABSOLUTE:
             cost += sum(ca.bilin(R, F, F) for F in thrust_at)
         else:
             cost += sum(ca.bilin(R, dF, dF) for dF in changes)
-        cost += config.obstacle_slack_penalty * ca.sum1(ca.vec(slack))
+        cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
         cost += _SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)
         self.w, self.p, self.cost, self.g = w, p, cost, g
 
@@ -254,14 +256,13 @@ class MultipleShootingProgram:
         lbw, ubw = np.full(self.n_w, -np.inf), np.full(self.n_w, np.inf)
         lbw[:NX] = ubw[:NX] = sample.state
         thrust = slice(NX * (self.horizon + 1), NX * (self.horizon + 1) + self.n_changes)
-        lbw[thrust], ubw[thrust] = self.model.thrust_min, self.model.thrust_max
+        lbw[thrust] = np.tile(self.ocp.input_lower, self.n_moves)
+        ubw[thrust] = np.tile(self.ocp.input_upper, self.n_moves)
         lbw[thrust.stop :] = 0.0
         lbg, ubg = np.zeros(self.n_gaps), np.zeros(self.n_gaps)
         obstacle_lower = np.where(np.tile(sample.used, self.horizon), 0.0, -np.inf)
-        lbg = np.concatenate([lbg, np.full(self.n_changes, -self.max_move), obstacle_lower])
-        ubg = np.concatenate(
-            [ubg, np.full(self.n_changes, self.max_move), np.full(obstacle_lower.size, np.inf)]
-        )
+        lbg = np.concatenate([lbg, -self.max_change, obstacle_lower])
+        ubg = np.concatenate([ubg, self.max_change, np.full(obstacle_lower.size, np.inf)])
         return lbw, ubw, lbg, ubg
 
     # -- numeric pieces ------------------------------------------------------------------
@@ -278,7 +279,7 @@ class MultipleShootingProgram:
         slots[:, 0:2] = state[:2] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
         nearest = sorted(obstacles, key=lambda o: float(np.linalg.norm(o.center - state[:2])))
-        extra = self.config.vehicle_radius + self.config.obstacle_margin
+        extra = self.ocp.keep_out_extra
         for o, obstacle in enumerate(nearest[: self.n_slots]):
             slots[o] = [*obstacle.center, *obstacle.velocity, obstacle.radius + extra]
             used[o] = True
@@ -441,10 +442,10 @@ class _RealTimeIteration:
         self._selection = np.zeros((ny, n, nc * n))
         for i, j in enumerate(program.held):
             self._selection[i, :, j * n : (j + 1) * n] = np.eye(n)
-        weights = np.vstack([np.tile(config.Q, (ny - 1, 1)), config.S])  # rows n = 1..ny
-        self._sqrt_weights = np.sqrt(weights)
-        R = np.array(config.thrust_weights(n), dtype=float)
-        self._absolute = config.thrust_penalty is ThrustPenalty.ABSOLUTE
+        ocp = program.ocp
+        self._sqrt_weights = np.sqrt(ocp.stage_weights())  # rows n = 1..ny
+        R = ocp.input_weight
+        self._absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
         if self._absolute:
             # sum_i |F_i|_R^2 with F_i = E_i U: each move's weight counts the steps it is held.
             counts = np.bincount(program.held, minlength=nc)
@@ -510,18 +511,21 @@ class _RealTimeIteration:
         H[:n_thrust, :n_thrust] += _regularisation(H[:n_thrust, :n_thrust]) * np.eye(n_thrust)
         f[:n_thrust] = 2.0 * weighted.T @ error + self._thrust_gradient(iterate, sample)
         thrust = iterate.thrust.ravel()
-        bound_lower = np.concatenate([program.model.thrust_min - thrust, np.zeros(n_slack)])
-        bound_upper = np.concatenate([program.model.thrust_max - thrust, np.full(n_slack, np.inf)])
+        lower_thrust = np.tile(program.ocp.input_lower, nc)
+        upper_thrust = np.tile(program.ocp.input_upper, nc)
+        bound_lower = np.concatenate([lower_thrust - thrust, np.zeros(n_slack)])
+        bound_upper = np.concatenate([upper_thrust - thrust, np.full(n_slack, np.inf)])
 
         # Rate rows: U_0 - F_prev and U_j - U_{j-1} within +-max_move.
         change = np.concatenate([thrust[:n] - sample.previous, thrust[n:] - thrust[:-n]])
         rate_rows = np.zeros((n_thrust, nz))
         rate_rows[:, :n_thrust] = np.eye(n_thrust) - np.eye(n_thrust, k=-n)
-        rows, lower, upper = [rate_rows], [-program.max_move - change], [program.max_move - change]
+        max_change = program.max_change
+        rows, lower, upper = [rate_rows], [-max_change - change], [max_change - change]
         if n_slack:
             slack = np.arange(n_thrust, nz)
             H[slack, slack] = 2.0 * _SLACK_QUADRATIC_WEIGHT
-            f[slack] = program.config.obstacle_slack_penalty
+            f[slack] = program.ocp.slack_penalty
             normals = normal[steps, slot_index]  # (rows, 2)
             block = np.zeros((n_slack, nz))
             block[:, :n_thrust] = np.einsum("rk,rkj->rj", normals, sensitivity[steps + 1, :2, :])

@@ -25,6 +25,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
 
 __all__ = ["SparseIncrementalQp", "SparseSolution"]
@@ -49,33 +50,18 @@ class SparseSolution:
 class SparseIncrementalQp:
     """Builds and solves the sparse QP of one incremental MPC sample (module docstring)."""
 
-    def __init__(
-        self,
-        *,
-        horizon: int,
-        move_steps,
-        stage_weight,
-        terminal_weight,
-        input_weight,
-        absolute_input_penalty: bool,
-        lower,
-        upper,
-        max_move,
-        slack_penalty: float,
-        iteration_limit: int | None = None,
-    ) -> None:
-        self.horizon = horizon
-        self.move_steps = np.asarray(move_steps)
-        self.is_move = np.zeros(horizon, dtype=bool)
+    def __init__(self, ocp: TrackingOcp, iteration_limit: int | None = None) -> None:
+        self.horizon = ocp.horizon
+        self.move_steps = np.asarray(ocp.move_steps)
+        self.is_move = np.zeros(ocp.horizon, dtype=bool)
         self.is_move[self.move_steps] = True
-        self.weights = np.vstack([np.tile(stage_weight, (horizon - 1, 1)), terminal_weight])
-        self.R = np.asarray(input_weight, dtype=float)
-        self.nu = len(self.R)
-        self.absolute = absolute_input_penalty
-        self.lower = np.broadcast_to(lower, (self.nu,)).astype(float)
-        self.upper = np.broadcast_to(upper, (self.nu,)).astype(float)
-        self.max_move = np.broadcast_to(max_move, (self.nu,)).astype(float)
-        self.slack_penalty = slack_penalty
+        self.weights = ocp.stage_weights()
+        self.R = ocp.input_weight
+        self.nu = ocp.n_inputs
+        self.absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
+        self.lower, self.upper = ocp.input_lower, ocp.input_upper
+        self.max_move = ocp.max_move
+        self.slack_penalty = ocp.slack_penalty
         self.iteration_limit = iteration_limit
         self._solvers: dict[tuple, ca.Function] = {}  # by stage-row structure
 

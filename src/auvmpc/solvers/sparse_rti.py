@@ -137,7 +137,7 @@ class SparseRealTimeIteration:
                 dz = np.stack([w[k * stage : k * stage + nz] for k in range(N + 1)], axis=1)
                 dv = np.stack([w[k * stage + nz : (k + 1) * stage] for k in range(N)], axis=1)
                 thrust = thrust + dv[:n]
-                slack = dv[n] / slack_scale(program.config.obstacle_slack_penalty)
+                slack = dv[n] / slack_scale(program.ocp.slack_penalty)
                 if cold:
                     rolled = program.rollout(sample.state, thrust, disturbance)
                     states = np.hstack([sample.state[:, None], np.asarray(rolled)])
@@ -177,10 +177,9 @@ def _qp_data_function(model_json: str, config_json: str, n_slots: int):
 def _build_qp_data(program) -> ca.Function:
     """(iterate, sample data) -> (H, g, A, lba, uba, lbx, ubx) of the sparse QP, assembled
     from stage blocks (H is block diagonal; stage k's rows touch z_k, v_k and z_{k+1})."""
-    from auvmpc.controllers.config import ThrustPenalty
     from auvmpc.controllers.nmpc import _DISTANCE_SMOOTHING_M2, _SLOT_FIELDS
+    from auvmpc.ocp.tracking import ThrustPenalty
 
-    config, model = program.config, program.model
     n, N, S, NX = program.n_thrusters, program.horizon, program.n_slots, 6
     nz, nv = NX + n, n + 1
     stage = nz + nv
@@ -204,10 +203,10 @@ def _build_qp_data(program) -> ca.Function:
         [next_state, ca.jacobian(next_state, xs), ca.jacobian(next_state, us)],
     )
 
-    Q, S_terminal = np.asarray(config.Q, float), np.asarray(config.S, float)
-    R = np.asarray(config.thrust_weights(n), float)
-    absolute = config.thrust_penalty is ThrustPenalty.ABSOLUTE
-    max_move = program.max_move
+    ocp = program.ocp
+    Q, S_terminal, R = ocp.stage_weight, ocp.terminal_weight, ocp.input_weight
+    absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
+    max_move = ca.DM(ocp.max_move)
     eye_n, zeros = ca.SX.eye(n), ca.SX
 
     hessian_blocks, gradients, row_blocks = [], [], []
@@ -232,7 +231,7 @@ def _build_qp_data(program) -> ca.Function:
 
         # v_k = [dF_k; s_k]: thrust cost, slack penalty, bounds.
         # The slack variable is sigma s (hpipm.slack_scale says why).
-        rho = config.obstacle_slack_penalty
+        rho = ocp.slack_penalty
         sigma = slack_scale(rho)
         H_v = ca.diagcat(
             ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * _SLACK_QUADRATIC_WEIGHT / sigma**2
@@ -248,8 +247,8 @@ def _build_qp_data(program) -> ca.Function:
             g_v = ca.vertcat(2.0 * R * change, rho / sigma)
         hessian_blocks.append(ca.blockcat([[H_z, H_zv], [H_zv.T, H_v]]))
         gradients += [g_z, g_v]
-        lbx += [model.thrust_min - F[:, k], 0.0]
-        ubx += [model.thrust_max - F[:, k], np.inf]
+        lbx += [ocp.input_lower - F[:, k], 0.0]
+        ubx += [ocp.input_upper - F[:, k], np.inf]
 
         # Stage rows in HPIPM's order: gaps (A_k z_k + B_k v_k - z_{k+1} = -gap_k), then
         # this stage's constraints (rate rows, obstacle rows of step k + 1).
