@@ -64,6 +64,7 @@ class SparseIncrementalQp:
         self.slack_penalty = ocp.slack_penalty
         self.iteration_limit = iteration_limit
         self._solvers: dict[tuple, ca.Function] = {}  # by stage-row structure
+        self._row_capacity = 1  # soft rows per step the structure has room for
 
     # -- one sample ------------------------------------------------------------------------
     def solve(self, state, previous, prediction, reference, soft, trust=None) -> SparseSolution:
@@ -73,12 +74,19 @@ class SparseIncrementalQp:
         nx = len(state)
         nz = nx + nu
         soft_at = [np.flatnonzero(soft.steps == k + 1) for k in range(ny)]
+        # A fixed number of soft rows per step (unused ones unbounded), so that the QP's
+        # structure, and HPIPM's set-up, stay the same while obstacles come and go (a new
+        # structure cost 10-40 ms of set-up whenever an obstacle row appeared).
+        self._row_capacity = max(self._row_capacity, *(len(rows) for rows in soft_at))
+        capacity = self._row_capacity
         n_inputs = [(nu if self.is_move[k] else 0) + 1 for k in range(ny)]
-        n_rows = [(nu if self.is_move[k] else 0) + len(soft_at[k]) for k in range(ny)]
+        n_rows = [(nu if self.is_move[k] else 0) + capacity for k in range(ny)]
         columns = np.cumsum([0] + [nz + n_inputs[k] for k in range(ny)])  # z_k starts
         n_w = columns[-1] + nz
         H = np.zeros((n_w, n_w))
-        H_mask = np.zeros((n_w, n_w), dtype=bool)
+        # Structural patterns: what the stage blocks can hold, whatever the values (each
+        # nonzero passed costs conversion time, so the diagonal blocks are marked diagonal).
+        H_mask = np.eye(n_w, dtype=bool)
         g = np.zeros(n_w)
         lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
         rows = sum(nz + n_rows[k] for k in range(ny))
@@ -98,7 +106,6 @@ class SparseIncrementalQp:
         row = 0
         for k in range(ny):
             z, v = columns[k], columns[k] + nz
-            H_mask[z : columns[k + 1], z : columns[k + 1]] = True  # stage k's [z_k; v_k] block
             x_cols, p_cols = slice(z, z + nx), slice(z + nx, z + nz)
             moving = self.is_move[k]
             du = slice(v, v + nu) if moving else slice(v, v)
@@ -113,6 +120,7 @@ class SparseIncrementalQp:
                     H[du, du] += np.diag(2.0 * self.R)
                     H[p_cols, du] += np.diag(2.0 * self.R)
                     H[du, p_cols] += np.diag(2.0 * self.R)
+                    H_mask[p_cols, du] = H_mask[du, p_cols] = np.eye(nu, dtype=bool)
             elif moving:
                 H[du, du] += np.diag(2.0 * self.R)
             if moving:
@@ -133,14 +141,18 @@ class SparseIncrementalQp:
                 A[row + nx : row + nz, du] = np.eye(nu)
             A[row : row + nz, nxt : nxt + nz] = -np.eye(nz)
             lba[row : row + nx] = uba[row : row + nx] = -ck
-            A_mask[row : row + nz, z : nxt + nz] = True
+            identity = np.eye(nu, dtype=bool)
+            A_mask[row : row + nx, z:nxt] = True  # A_k, B_k (twice), slack column unused
+            A_mask[row : row + nx, s] = False
+            A_mask[row + nx : row + nz, p_cols] = identity
+            A_mask[row + nx : row + nz, du] = identity if moving else False
             A_mask[row : row + nz, nxt : nxt + nz] = np.eye(nz, dtype=bool)
             row += nz
             if moving:  # force limits on the new input
                 A[row : row + nu, p_cols] = np.eye(nu)
                 A[row : row + nu, du] = np.eye(nu)
                 lba[row : row + nu], uba[row : row + nu] = self.lower, self.upper
-                A_mask[row : row + nu, z:nxt] = True
+                A_mask[row : row + nu, p_cols] = A_mask[row : row + nu, du] = identity
                 row += nu
             for r in soft_at[k]:  # a . (A_k x_k + B_k u_k + c_k) + s_k >= b
                 a = soft.coefficients[r]
@@ -150,8 +162,11 @@ class SparseIncrementalQp:
                     A[row, du] = a @ Bk
                 A[row, s] = 1.0 / sigma
                 lba[row], uba[row] = soft.lower[r] - a @ ck, np.inf
-                A_mask[row, z:nxt] = True
                 row += 1
+            unused = capacity - len(soft_at[k])
+            lba[row : row + unused], uba[row : row + unused] = -np.inf, np.inf
+            A_mask[row - len(soft_at[k]) : row + unused, z:nxt] = True
+            row += unused
 
         if any(np.isnan(a).any() for a in (H, g, A, lba, uba)):
             # A diverged linearisation: never hand NaN to the solver (CasADi raises on it).
