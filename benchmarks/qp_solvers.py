@@ -41,9 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.qp import QpProblem, QpSolver, QpSolverName, make_qp_solver
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
+from auvmpc.solvers.dense_qp import QpProblem, QpSolver, QpSolverName, make_qp_solver
 
 SCENARIO = "paper-obstacles"
 # Case name -> scenario overrides. DAQP is forced in the recording run so the recorded

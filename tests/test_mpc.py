@@ -34,12 +34,12 @@ from auvmpc.controllers.mpc import (
     rk4_discretize,
     sdc_matrix,
 )
-from auvmpc.controllers.qp import QpResult, QpSolver
 from auvmpc.integrators import rk4, rk4_step
 from auvmpc.metrics import position_error
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
+from auvmpc.solvers.dense_qp import QpResult, QpSolver
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp, SparseSolution
 from auvmpc.vehicle import VehicleParams, dynamics, load_vehicle
 from tests.conftest import random_limit_case

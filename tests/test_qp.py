@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.optimize import Bounds, LinearConstraint, minimize
 
-from auvmpc.controllers.qp import QpProblem, QpResult, QpSolver, QpSolverName, make_qp_solver
+from auvmpc.solvers.dense_qp import QpProblem, QpResult, QpSolver, QpSolverName, make_qp_solver
 
 # proxsuite is an optional backend (not among the core dependencies).
 INSTALLED = [

@@ -14,6 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
+from auvmpc.controllers.registry import build_controller
 from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.errors import ConfigError, RunFailed
@@ -108,28 +109,7 @@ class DepthRunResult(_Finished):
 
 def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
     """The scenario's controller, built on the nominal (controller-side) vehicle model."""
-    config = scenario.controller.with_model_substeps(model)
-    if config.type is ControllerType.BASELINE:
-        from auvmpc.controllers.baseline import BaselineController
-
-        return BaselineController(model, config.sample_time, config.baseline)
-    if config.type is ControllerType.MPC:
-        from auvmpc.controllers.mpc import PaperMpc
-
-        return PaperMpc(model, config)
-    if config.type is ControllerType.LTV_MPC:
-        from auvmpc.controllers.ltv import LtvMpc
-
-        return LtvMpc(model, config)
-    if config.type is ControllerType.NMPC:
-        from auvmpc.controllers.nmpc import NonlinearMpc
-
-        return NonlinearMpc(model, config)
-    if config.type is ControllerType.DO_MPC:
-        from auvmpc.controllers.dompc import DoMpcController
-
-        return DoMpcController(model, config, obstacle_slots=len(scenario.obstacles))
-    raise NotImplementedError(config.type)  # unreachable: the enum lists only built controllers
+    return build_controller(scenario.controller, model, obstacle_count=len(scenario.obstacles))
 
 
 def simulate(

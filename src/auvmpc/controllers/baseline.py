@@ -185,6 +185,10 @@ class BaselineController(ShelledController):
         """Integral state ``[X, Y, N]``: world-frame force (N) and yaw moment (N m), a copy."""
         return np.array([*self._force_integral, self._moment_integral])
 
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
+        return cls(model, config.sample_time, config.baseline)
+
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         """Clear the integrators and remember ``initial_thrust`` as F(-1) for the rate limit.
 

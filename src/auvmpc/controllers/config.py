@@ -10,11 +10,11 @@ from pydantic import Field, field_validator, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
-from auvmpc.controllers.qp import QpSolverName
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.models.discrete import HORIZONTAL
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
+from auvmpc.solvers.dense_qp import QpSolverName
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [

@@ -13,10 +13,11 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
+from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import AugmentedEkf
 from auvmpc.integrators import rk4
 from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
+from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 from auvmpc.vehicle import HeaveParams, heave_dynamics
 
 __all__ = ["DepthMpc"]

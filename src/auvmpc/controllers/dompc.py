@@ -204,6 +204,10 @@ class DoMpcController(ShelledController):
         self._needs_guess = True
 
     # -- Controller interface ------------------------------------------------------------
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> DoMpcController:
+        return cls(model, config, obstacle_slots=obstacle_count)
+
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._needs_guess = True
         self._mpc.reset_history()

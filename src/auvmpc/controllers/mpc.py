@@ -26,9 +26,10 @@ from auvmpc.controllers.base import (
     ObstacleState,
     align_heading,
 )
-from auvmpc.controllers.condensed import AffinePrediction, CondensedQp, IncrementalMpc, SoftRows
 from auvmpc.controllers.config import ControllerConfig
+from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 from auvmpc.vehicle import VehicleParams, body_from_world
 
 __all__ = [

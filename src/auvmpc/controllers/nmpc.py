@@ -70,11 +70,11 @@ from auvmpc.controllers.base import (
     horizontal_limits,
 )
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
-from auvmpc.controllers.qp import QpProblem, make_qp_solver
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.solvers.dense_qp import QpProblem, make_qp_solver
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 from auvmpc.vehicle import VehicleParams
 

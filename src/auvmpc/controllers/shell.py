@@ -71,6 +71,11 @@ class ShelledController(Controller):
     limits: ActuatorLimits
     solver_time_limit_ms: float | None = None
 
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> ShelledController:
+        """Built from a vehicle and a ``ControllerConfig`` (controllers/registry.py)."""
+        return cls(model, config)
+
     @abstractmethod
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         """A plan from this sample on, given the last applied command ``previous``."""

@@ -1,6 +1,6 @@
 """The incremental MPC's QP in sparse (stage-wise) form, solved by HPIPM's Riccati IPM.
 
-:class:`~auvmpc.controllers.condensed.CondensedQp` eliminates the states; along an
+:class:`~auvmpc.solvers.condensed_qp.CondensedQp` eliminates the states; along an
 open-loop-unstable linearisation the condensed Hessian carries the growing products of the
 A_n and becomes numerically indefinite (condition ~1e17, tests/test_mpc.py). This form
 keeps the states: its data are the one-step matrices A_n, B_n, bounded for any vehicle, and

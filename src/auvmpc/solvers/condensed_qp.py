@@ -1,4 +1,4 @@
-"""The incremental linear MPC, condensed to a small dense QP, for any plant.
+"""The incremental linear MPC's QP, condensed to a small dense QP, for any plant.
 
 The paper augments the state with the previous input, ``X(k) = [x(k); u(k-1)]``,
 and optimises the moves ``du``. We keep exactly that problem but eliminate the
@@ -11,26 +11,20 @@ affine in ``z``: ``x_n = x_free_n + S_n z``. The cost
 
 (or R on the moves) becomes ``0.5 z'Hz + f'z``; every move is bounded by rate*Te,
 every input by its force limits, and soft state constraints get one exact-penalty
-slack each. :class:`IncrementalMpc` runs this every sample for a plant that
-supplies its prediction model; the horizontal controllers (mpc.py, ltv.py) and the
-depth controller (depth_mpc.py) are such plants.
+slack each. :class:`~auvmpc.controllers.incremental.IncrementalMpc` runs this every sample
+for a plant that supplies its prediction model.
 """
 
 from __future__ import annotations
 
-import time
-from abc import abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.base import Observation
-from auvmpc.controllers.qp import QpProblem, QpSolverName, make_qp_solver
-from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
-from auvmpc.solvers.sparse_qp import SparseIncrementalQp
+from auvmpc.solvers.dense_qp import QpProblem, QpSolverName, make_qp_solver
 
-__all__ = ["AffinePrediction", "CondensedQp", "IncrementalMpc", "SoftRows"]
+__all__ = ["AffinePrediction", "CondensedQp", "SoftRows"]
 
 # Keeps H positive definite when R = 0 (DAQP needs it); far below every real weight.
 _HESSIAN_REGULARISATION = 1e-9
@@ -206,114 +200,3 @@ class CondensedQp:
         shifted = np.vstack([plan[1:], plan[-1:]])[self.move_steps]  # (nc, nu)
         moves = np.diff(np.vstack([previous, shifted]), axis=0)
         return np.clip(moves, -self.max_move, self.max_move).ravel()
-
-
-class IncrementalMpc(ShelledController):
-    """One sample of an incremental MPC, for any plant, inside the safety shell.
-
-    Subclasses supply the plant-specific parts: the estimator, the reference
-    alignment, the prediction model and the soft state constraints. This class
-    owns the solve loop (condensed or sparse QP); the shell owns the hard limits, the
-    fallback and the plan.
-    """
-
-    qp: CondensedQp
-    linearisation_iterations: int = 1
-    trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
-    sparse_qp: SparseIncrementalQp | None = None  # set: solve the sparse form instead
-    # The plan's predicted states (ny + 1, nx), shifted to this sample and aligned to the
-    # measured heading, or None: where a plant that linearises along the plan may do so.
-    linearisation_nodes: np.ndarray | None = None
-
-    # -- plant-specific hooks --------------------------------------------------------
-    @abstractmethod
-    def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(state the prediction starts from, disturbance estimate) from a measurement."""
-
-    @abstractmethod
-    def prediction_model(
-        self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
-    ) -> AffinePrediction:
-        """Affine model over the horizon around ``nominal_input`` (ny, nu)."""
-
-    def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
-        return np.asarray(reference, dtype=float)
-
-    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
-        return SoftRows.empty(nominal.shape[1])
-
-    def after_command(self, command: np.ndarray) -> None:
-        """Called with every applied command (estimators propagate here)."""
-
-    # -- the loop ----------------------------------------------------------------------
-    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self._predicted: np.ndarray | None = None  # (ny + 1, nx) states of the last plan
-        self._proposed: np.ndarray | None = None  # the states of this sample's proposal
-
-    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
-        qp = self.qp
-        state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
-        reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
-        moves = qp.shifted_moves(self._plan, previous)
-        self.linearisation_nodes = (
-            self.aligned_reference(state, _shifted(self._predicted))
-            if self._predicted is not None
-            else None
-        )
-        started = time.perf_counter()
-        iterations, max_slack, predicted = 0, 0.0, None
-        for _ in range(self.linearisation_iterations):
-            # Each pass re-linearises (model and soft rows) around the last plan.
-            prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
-            nominal = prediction.nominal
-            free = sensitivity = None
-            if nominal is None or self.sparse_qp is None:
-                free, sensitivity = qp.condense(state, previous, prediction)
-            if nominal is None:
-                nominal = free + sensitivity @ moves
-            soft = self.soft_rows(nominal, reference, observation)
-            trust = None
-            if prediction.nominal is not None and self.trust_region_weights is not None:
-                trust = (self.trust_region_weights, prediction.nominal)
-            if self.sparse_qp is not None:
-                solution = self.sparse_qp.solve(state, previous, prediction, reference, soft, trust)
-                iterations += int(solution.iterations)
-                solved, new_moves = solution.moves is not None, solution.moves
-                if solved:
-                    max_slack = float(solution.slack.max(initial=0.0))
-                    predicted = solution.states
-            else:
-                problem = qp.problem(free, sensitivity, reference, previous, soft)
-                if trust is not None:
-                    weights, nominal_states = trust
-                    qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
-                result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
-                iterations += int(result.iterations)
-                solved = result.z is not None
-                if solved:
-                    new_moves = result.z[: qp.n_moves]
-                    max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
-                    predicted = free + sensitivity @ new_moves
-            if not solved:
-                break
-            moves = new_moves
-            self.linearisation_nodes = predicted
-        self._proposed = predicted if solved else None
-        return Proposal(
-            plan=qp.plan(moves, previous) if solved else None,
-            solve_time_s=time.perf_counter() - started,
-            iterations=iterations,
-            max_slack=max_slack,
-            predicted_states=predicted,
-            disturbance=disturbance,
-        )
-
-    def applied(self, command: np.ndarray, fell_back: bool) -> None:
-        # After a fallback the next sample linearises afresh.
-        self._predicted = None if fell_back else self._proposed
-        self.after_command(command)
-
-
-def _shifted(states: np.ndarray) -> np.ndarray:
-    """A predicted trajectory one sample on (the last state repeated)."""
-    return np.vstack([states[1:], states[-1:]])

@@ -1,0 +1,133 @@
+"""The incremental MPC loop, for any plant, inside the safety shell.
+
+The paper augments the state with the previous input and optimises the moves. Every
+sample :class:`IncrementalMpc` estimates the state, linearises the plant's model (its
+``prediction_model``) around the plan, adds the plant's soft constraints, and solves the
+QP, condensed (solvers/condensed_qp.py) or sparse (solvers/sparse_qp.py); the horizontal
+controllers (mpc.py, ltv.py) and the depth controller (depth_mpc.py) are such plants.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import abstractmethod
+
+import numpy as np
+
+from auvmpc.controllers.base import Observation
+from auvmpc.controllers.shell import Proposal, ShelledController
+from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
+from auvmpc.solvers.sparse_qp import SparseIncrementalQp
+
+__all__ = ["IncrementalMpc"]
+
+
+class IncrementalMpc(ShelledController):
+    """One sample of an incremental MPC, for any plant, inside the safety shell.
+
+    Subclasses supply the plant-specific parts: the estimator, the reference
+    alignment, the prediction model and the soft state constraints. This class
+    owns the solve loop (condensed or sparse QP); the shell owns the hard limits, the
+    fallback and the plan.
+    """
+
+    qp: CondensedQp
+    linearisation_iterations: int = 1
+    trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
+    sparse_qp: SparseIncrementalQp | None = None  # set: solve the sparse form instead
+    # The plan's predicted states (ny + 1, nx), shifted to this sample and aligned to the
+    # measured heading, or None: where a plant that linearises along the plan may do so.
+    linearisation_nodes: np.ndarray | None = None
+
+    # -- plant-specific hooks --------------------------------------------------------
+    @abstractmethod
+    def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(state the prediction starts from, disturbance estimate) from a measurement."""
+
+    @abstractmethod
+    def prediction_model(
+        self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
+    ) -> AffinePrediction:
+        """Affine model over the horizon around ``nominal_input`` (ny, nu)."""
+
+    def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        return np.asarray(reference, dtype=float)
+
+    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
+        return SoftRows.empty(nominal.shape[1])
+
+    def after_command(self, command: np.ndarray) -> None:
+        """Called with every applied command (estimators propagate here)."""
+
+    # -- the loop ----------------------------------------------------------------------
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._predicted: np.ndarray | None = None  # (ny + 1, nx) states of the last plan
+        self._proposed: np.ndarray | None = None  # the states of this sample's proposal
+
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
+        qp = self.qp
+        state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
+        reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
+        moves = qp.shifted_moves(self._plan, previous)
+        self.linearisation_nodes = (
+            self.aligned_reference(state, _shifted(self._predicted))
+            if self._predicted is not None
+            else None
+        )
+        started = time.perf_counter()
+        iterations, max_slack, predicted = 0, 0.0, None
+        for _ in range(self.linearisation_iterations):
+            # Each pass re-linearises (model and soft rows) around the last plan.
+            prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
+            nominal = prediction.nominal
+            free = sensitivity = None
+            if nominal is None or self.sparse_qp is None:
+                free, sensitivity = qp.condense(state, previous, prediction)
+            if nominal is None:
+                nominal = free + sensitivity @ moves
+            soft = self.soft_rows(nominal, reference, observation)
+            trust = None
+            if prediction.nominal is not None and self.trust_region_weights is not None:
+                trust = (self.trust_region_weights, prediction.nominal)
+            if self.sparse_qp is not None:
+                solution = self.sparse_qp.solve(state, previous, prediction, reference, soft, trust)
+                iterations += int(solution.iterations)
+                solved, new_moves = solution.moves is not None, solution.moves
+                if solved:
+                    max_slack = float(solution.slack.max(initial=0.0))
+                    predicted = solution.states
+            else:
+                problem = qp.problem(free, sensitivity, reference, previous, soft)
+                if trust is not None:
+                    weights, nominal_states = trust
+                    qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
+                result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
+                iterations += int(result.iterations)
+                solved = result.z is not None
+                if solved:
+                    new_moves = result.z[: qp.n_moves]
+                    max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
+                    predicted = free + sensitivity @ new_moves
+            if not solved:
+                break
+            moves = new_moves
+            self.linearisation_nodes = predicted
+        self._proposed = predicted if solved else None
+        return Proposal(
+            plan=qp.plan(moves, previous) if solved else None,
+            solve_time_s=time.perf_counter() - started,
+            iterations=iterations,
+            max_slack=max_slack,
+            predicted_states=predicted,
+            disturbance=disturbance,
+        )
+
+    def applied(self, command: np.ndarray, fell_back: bool) -> None:
+        # After a fallback the next sample linearises afresh.
+        self._predicted = None if fell_back else self._proposed
+        self.after_command(command)
+
+
+def _shifted(states: np.ndarray) -> np.ndarray:
+    """A predicted trajectory one sample on (the last state repeated)."""
+    return np.vstack([states[1:], states[-1:]])

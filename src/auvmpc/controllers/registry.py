@@ -1,0 +1,32 @@
+"""Which class implements each controller type: adding a controller is its module plus a line
+here (and its name in ``ControllerType``)."""
+
+from __future__ import annotations
+
+import importlib
+
+from auvmpc.controllers.config import ControllerConfig, ControllerType
+from auvmpc.controllers.shell import ShelledController
+from auvmpc.vehicle import VehicleParams
+
+__all__ = ["REGISTRY", "build_controller"]
+
+# Imported only when used: do-mpc is an optional extra, and CasADi set-up is not free.
+REGISTRY: dict[ControllerType, tuple[str, str]] = {
+    ControllerType.BASELINE: ("auvmpc.controllers.baseline", "BaselineController"),
+    ControllerType.MPC: ("auvmpc.controllers.mpc", "PaperMpc"),
+    ControllerType.LTV_MPC: ("auvmpc.controllers.ltv", "LtvMpc"),
+    ControllerType.NMPC: ("auvmpc.controllers.nmpc", "NonlinearMpc"),
+    ControllerType.DO_MPC: ("auvmpc.controllers.dompc", "DoMpcController"),
+}
+
+
+def build_controller(
+    config: ControllerConfig, model: VehicleParams, obstacle_count: int = 0
+) -> ShelledController:
+    """The configured controller on the nominal (controller-side) vehicle model."""
+    module, name = REGISTRY[config.type]
+    controller_class = getattr(importlib.import_module(module), name)
+    return controller_class.from_config(
+        model, config.with_model_substeps(model), obstacle_count=obstacle_count
+    )
