@@ -23,6 +23,7 @@ import pandas as pd
 import yaml
 from matplotlib.figure import Figure
 
+import auvmpc  # noqa: E402 -- the package names the public API once (re-exported lazily)
 from auvmpc.controllers.base import Controller
 from auvmpc.depth import DepthLog
 from auvmpc.errors import ConfigError
@@ -30,17 +31,7 @@ from auvmpc.log import SimLog
 from auvmpc.runner import DepthRunResult, RunResult, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
 
-__all__ = [
-    "build_controller",
-    "controller_overrides",
-    "figures",
-    "load_run",
-    "load_scenario",
-    "log_dataframe",
-    "override",
-    "save_run",
-    "simulate",
-]
+__all__ = list(auvmpc._API)
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 Scenario = ResolvedScenario | ResolvedDepthScenario
