@@ -414,13 +414,13 @@ def test_ltv_first_move_where_the_linearisation_is_unstable(control_horizon):
     unstable. Over 15 s the move sensitivities reach 2.8e7, the condensed Hessian's
     eigenvalues span -1.4 .. 1.6e17 (numerically indefinite) and DAQP hits its 10000-iteration
     limit; OSQP reports "solved" with zero moves. The non-condensed OCP is well posed: IPOPT
-    returns 2.5 N per thruster (the full rate step down), and so does ltv-mpc's sparse QP
+    returns 2.5 N per thruster (the full rate step down), and so does ltv-mpc by default: it
+    finds the condensed Hessian ill-conditioned and solves the sparse QP
     (solvers/sparse_qp.py), which never forms those products.
     """
     t0 = 10.0
     model = load_vehicle("jmse2210")
-    config = _config("ltv-mpc", control_horizon=control_horizon, qp_structure="sparse")
-    controller = LtvMpc(model, config)
+    controller = LtvMpc(model, _config("ltv-mpc", control_horizon=control_horizon))
     reference = _oval_preview(t0)
     state = reference[0] + np.array([0.0, 0.0, 0.0, -0.1, 0.0, 0.0])
     previous = np.full(4, 5.0)

@@ -48,8 +48,9 @@ class NmpcMode(StrEnum):
 
 
 class QpStructure(StrEnum):
-    """How the real-time iteration poses its QP (docs/performance.md has the comparison)."""
+    """How ltv-mpc and the real-time nmpc pose their QP (docs/performance.md compares them)."""
 
+    AUTO = "auto"  # ltv-mpc: condensed while well conditioned, else sparse; nmpc: sparse
     SPARSE = "sparse"  # states kept, Riccati IPM (HPIPM): well posed for unstable vehicles
     CONDENSED = "condensed"  # states eliminated, dense QP (qp_solver): ill-conditioned there
 
@@ -113,10 +114,12 @@ class ControllerConfig(StrictModel):
         default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
     )
     qp_structure: QpStructure = Field(
-        default=QpStructure.SPARSE,
+        default=QpStructure.AUTO,
         description="nmpc real-time and ltv-mpc: sparse QP solved by HPIPM (stays well posed "
-        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver; nmpc with move "
-        "blocking always uses the condensed QP",
+        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver (faster when "
+        "well posed); auto: ltv-mpc solves the condensed QP while its Hessian's condition "
+        "number is below 1e10 and the sparse one otherwise or when the condensed one fails, "
+        "nmpc the sparse one; nmpc with move blocking always uses the condensed QP",
     )
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
         default=None,

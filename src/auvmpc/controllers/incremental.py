@@ -34,7 +34,8 @@ class IncrementalMpc(ShelledController):
     qp: CondensedQp
     linearisation_iterations: int = 1
     trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
-    sparse_qp: SparseIncrementalQp | None = None  # set: solve the sparse form instead
+    sparse_qp: SparseIncrementalQp | None = None  # set: the sparse form is available
+    sparse_only: bool = False  # True: always the sparse form; False: condensed when well posed
     # The plan's predicted states (ny + 1, nx), shifted to this sample and aligned to the
     # measured heading, or None: where a plant that linearises along the plan may do so.
     linearisation_nodes: np.ndarray | None = None
@@ -81,7 +82,7 @@ class IncrementalMpc(ShelledController):
             prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
             nominal = prediction.nominal
             free = sensitivity = None
-            if nominal is None or self.sparse_qp is None:
+            if nominal is None or not self.sparse_only:
                 free, sensitivity = qp.condense(state, previous, prediction)
             if nominal is None:
                 nominal = free + sensitivity @ moves
@@ -89,25 +90,31 @@ class IncrementalMpc(ShelledController):
             trust = None
             if prediction.nominal is not None and self.trust_region_weights is not None:
                 trust = (self.trust_region_weights, prediction.nominal)
-            if self.sparse_qp is not None:
+            solved = False
+            if not self.sparse_only:
+                problem = qp.problem(free, sensitivity, reference, previous, soft)
+                if trust is not None:
+                    weights, nominal_states = trust
+                    qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
+                # With a sparse form at hand, an ill-conditioned condensed QP goes to it at
+                # once; a well-conditioned one that fails anyway goes to it after the failure.
+                if self.sparse_qp is None or well_conditioned(
+                    problem.H[: qp.n_moves, : qp.n_moves]
+                ):
+                    result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
+                    iterations += int(result.iterations)
+                    solved = result.z is not None
+                    if solved:
+                        new_moves = result.z[: qp.n_moves]
+                        max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
+                        predicted = free + sensitivity @ new_moves
+            if not solved and self.sparse_qp is not None:
                 solution = self.sparse_qp.solve(state, previous, prediction, reference, soft, trust)
                 iterations += int(solution.iterations)
                 solved, new_moves = solution.moves is not None, solution.moves
                 if solved:
                     max_slack = float(solution.slack.max(initial=0.0))
                     predicted = solution.states
-            else:
-                problem = qp.problem(free, sensitivity, reference, previous, soft)
-                if trust is not None:
-                    weights, nominal_states = trust
-                    qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
-                result = qp.solver.solve(problem, np.concatenate([moves, np.zeros(len(soft))]))
-                iterations += int(result.iterations)
-                solved = result.z is not None
-                if solved:
-                    new_moves = result.z[: qp.n_moves]
-                    max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
-                    predicted = free + sensitivity @ new_moves
             if not solved:
                 break
             moves = new_moves
@@ -131,3 +138,19 @@ class IncrementalMpc(ShelledController):
 def _shifted(states: np.ndarray) -> np.ndarray:
     """A predicted trajectory one sample on (the last state repeated)."""
     return np.vstack([states[1:], states[-1:]])
+
+
+# Condition number of the condensed Hessian above which the sparse form is used instead
+# (solution error grows like condition x machine epsilon: 1e10 leaves ~1e-6 relative). Along
+# an open-loop-unstable linearisation it reaches 1e17 and DAQP fails (docs/performance.md).
+_CONDITION_LIMIT = 1e10
+
+
+def well_conditioned(hessian: np.ndarray) -> bool:
+    """Whether a positive definite matrix's condition number is below _CONDITION_LIMIT,
+    estimated from its Cholesky factor (the square of its diagonal's spread)."""
+    try:
+        diagonal = np.abs(np.diag(np.linalg.cholesky(hessian)))
+    except np.linalg.LinAlgError:
+        return False
+    return float((diagonal.max() / diagonal.min()) ** 2) < _CONDITION_LIMIT

@@ -605,7 +605,10 @@ class NonlinearMpc(ShelledController):
             self._solver: _IpoptSolver | _RealTimeIteration | SparseRealTimeIteration = (
                 _IpoptSolver(self.program, config)
             )
-        elif config.qp_structure is QpStructure.SPARSE and self.program.n_moves == self.horizon:
+        elif (
+            config.qp_structure is not QpStructure.CONDENSED
+            and self.program.n_moves == self.horizon
+        ):
             # Held thrusts would be equality rows, which an interior point handles badly
             # (HPIPM took 50 iterations without converging); move blocking keeps the
             # condensed QP, whose variables are the moves themselves.
