@@ -19,10 +19,15 @@ from auvmpc.controllers.base import (
     feasible_thrust_box,
 )
 from auvmpc.controllers.baseline import BaselineConfig, BaselineController
-from auvmpc.disturbances import DisturbanceConfig, SensorNoise, SensorNoiseConfig, WorldDisturbance
-from auvmpc.metrics import compute_metrics
+from auvmpc.environment.disturbances import (
+    DisturbanceConfig,
+    SensorNoise,
+    SensorNoiseConfig,
+    WorldDisturbance,
+)
 from auvmpc.references import CircleConfig, PaperOvalConfig, make_reference
-from auvmpc.sim import closed_loop
+from auvmpc.sim.loop import closed_loop
+from auvmpc.sim.metrics import compute_metrics
 from auvmpc.vehicle import VehicleParams, scaled
 from tests.conftest import PAPER_INITIAL_STATE
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, wave_number
 from auvmpc.errors import ConfigError
 from auvmpc.runner import simulate, write_run
 from auvmpc.scenario import load_scenario
 from auvmpc.vehicle import heave_dynamics, load_vehicle
-from auvmpc.waves import GRAVITY, WaveConfig, WaveField, wave_number
 
 # Issue 5: replaying the logged thrust reproduces the logged depth in calm water to 1 mm.
 DEPTH_REPLAY_TOL_M = 1e-3

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS, stable_model_substeps
-from auvmpc.disturbances import DisturbanceConfig, WorldDisturbance
+from auvmpc.environment.disturbances import DisturbanceConfig, WorldDisturbance
 from auvmpc.estimation import (
     AugmentedEkf,
     DisturbanceObserver,
@@ -17,7 +17,7 @@ from auvmpc.estimation import (
 )
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
-from auvmpc.sim import plant_step
+from auvmpc.sim.loop import plant_step
 from auvmpc.vehicle import load_vehicle
 
 # The filter's estimate of a constant 11.2 N current after 40 s of excitation: the random

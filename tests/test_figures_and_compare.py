@@ -14,8 +14,8 @@ import pytest
 from matplotlib.figure import Figure
 
 from auvmpc import plots
-from auvmpc.log import SimLog
 from auvmpc.scenario import load_scenario
+from auvmpc.sim.log import SimLog
 from auvmpc.vehicle import load_vehicle
 from tests.test_cli import run_cli
 

@@ -7,9 +7,9 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from auvmpc.disturbances import DisturbanceConfig, WaveForceConfig, WorldDisturbance
+from auvmpc.environment.disturbances import DisturbanceConfig, WaveForceConfig, WorldDisturbance
 from auvmpc.integrators import rk4, rk4_step_time_varying
-from auvmpc.sim import plant_step
+from auvmpc.sim.loop import plant_step
 from auvmpc.vehicle import body_from_world, dynamics
 from tests.conftest import PLANT_VS_SOLVE_IVP_TOL
 

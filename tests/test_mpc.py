@@ -35,10 +35,10 @@ from auvmpc.controllers.mpc import (
     sdc_matrix,
 )
 from auvmpc.integrators import rk4, rk4_step
-from auvmpc.metrics import position_error
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
+from auvmpc.sim.metrics import position_error
 from auvmpc.solvers.dense_qp import QpResult, QpSolver
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp, SparseSolution
 from auvmpc.vehicle import VehicleParams, dynamics, load_vehicle

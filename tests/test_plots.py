@@ -12,9 +12,9 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, StepPatch
 
 from auvmpc import plots
-from auvmpc.log import SimLog
-from auvmpc.metrics import heading_error, position_error
-from auvmpc.obstacles import ObstacleConfig, clearance
+from auvmpc.environment.obstacles import ObstacleConfig, clearance
+from auvmpc.sim.log import SimLog
+from auvmpc.sim.metrics import heading_error, position_error
 from auvmpc.vehicle import load_vehicle
 
 matplotlib.use("Agg")  # tests may pick a backend; the library never does

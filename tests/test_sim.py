@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation
-from auvmpc.disturbances import (
+from auvmpc.environment.disturbances import (
     DisturbanceConfig,
     GaussMarkovConfig,
     SensorNoise,
@@ -16,12 +16,12 @@ from auvmpc.disturbances import (
     WaveForceConfig,
     WorldDisturbance,
 )
-from auvmpc.metrics import compute_metrics
-from auvmpc.obstacles import ObstacleConfig
+from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.references import LineConfig, make_reference
 from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
-from auvmpc.sim import closed_loop
+from auvmpc.sim.loop import closed_loop
+from auvmpc.sim.metrics import compute_metrics
 
 NOISY = [
     "sensing.std=[0.05, 0.05, 0.01, 0.02, 0.02, 0.005]",

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.log import SimLog
-from auvmpc.metrics import compute_metrics, longest_run
-from auvmpc.verdict import (
+from auvmpc.sim.log import SimLog
+from auvmpc.sim.metrics import compute_metrics, longest_run
+from auvmpc.sim.verdict import (
     DEGRADED_HEADING_RAD,
     LOST_FALLBACK_S,
     characteristic_length_m,

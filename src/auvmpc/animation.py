@@ -25,9 +25,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
+from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError
-from auvmpc.log import SimLog
-from auvmpc.obstacles import ObstacleConfig
 from auvmpc.plots import (
     ACTUAL_STYLE,
     OBSTACLE_EDGE,
@@ -37,6 +36,7 @@ from auvmpc.plots import (
     run_title,
 )
 from auvmpc.scenario import Scenario
+from auvmpc.sim.log import SimLog
 from auvmpc.vehicle import VehicleParams
 
 __all__ = ["AnimationFormat", "AnimationSettings", "animate_run", "ffmpeg_path", "frame_rows"]

@@ -27,9 +27,9 @@ import auvmpc  # noqa: E402 -- the package names the public API once (re-exporte
 from auvmpc.controllers.base import Controller
 from auvmpc.depth import DepthLog
 from auvmpc.errors import ConfigError
-from auvmpc.log import SimLog
 from auvmpc.runner import DepthRunResult, RunResult, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
+from auvmpc.sim.log import SimLog
 
 __all__ = list(auvmpc._API)
 

@@ -59,7 +59,7 @@ DEFAULT_CONTROLLERS = (
 ) + (("do-mpc", "do-mpc-blocked") if find_spec("do_mpc") is not None else ())  # fmt: skip
 DEFAULT_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 
-# The per-step solve statistics, computed as auvmpc.metrics does (numpy's linear percentile).
+# The per-step solve statistics, computed as auvmpc.sim.metrics does (numpy's linear percentile).
 SOLVE_STATS = {"solve_ms_median": 50.0, "solve_ms_p99": 99.0}
 PACKAGES = ("numpy", "scipy", "casadi", "daqp", "osqp", "do-mpc")
 

@@ -539,7 +539,7 @@ def schema(
 
 
 def warn_if_not_ok(metrics: dict) -> None:
-    """One line on stderr when the run's verdict is not ok (auvmpc.verdict)."""
+    """One line on stderr when the run's verdict is not ok (auvmpc.sim.verdict)."""
     verdict = metrics.get("verdict")
     if verdict is not None and verdict != "ok":
         errors.print(

@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from auvmpc.errors import ConfigError
-from auvmpc.log import SimLog
 from auvmpc.scenario import Scenario
+from auvmpc.sim.log import SimLog
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [

@@ -21,11 +21,11 @@ from pydantic import Field, model_validator
 from auvmpc.config import StrictModel
 from auvmpc.controllers.base import ControlStatus, Observation
 from auvmpc.controllers.config import ThrustPenalty
+from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, WaveType, wave_number
 from auvmpc.errors import FieldError
 from auvmpc.integrators import rk4_step_time_varying
 from auvmpc.solvers.dense_qp import QpSolverName
 from auvmpc.vehicle import HeaveParams, VehicleParams, heave_dynamics
-from auvmpc.waves import GRAVITY, WaveConfig, WaveField, WaveType, wave_number
 
 __all__ = [
     "DepthScenario",

@@ -25,9 +25,9 @@ from matplotlib.patches import Circle
 from numpy.typing import ArrayLike
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.log import SimLog
-from auvmpc.metrics import LIMIT_TOLERANCE_N, heading_error, position_error, thrust_increments
-from auvmpc.obstacles import ObstacleConfig
+from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.sim.log import SimLog
+from auvmpc.sim.metrics import LIMIT_TOLERANCE_N, heading_error, position_error, thrust_increments
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [

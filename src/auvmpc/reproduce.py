@@ -14,10 +14,10 @@ import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.depth import STEP_METRIC_KEYS
-from auvmpc.log import SimLog
 from auvmpc.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
 from auvmpc.runner import fill_run_folder, simulate
 from auvmpc.scenario import load_scenario
+from auvmpc.sim.log import SimLog
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
 

@@ -2,7 +2,7 @@
 
 For tools that must work on every kind of log (horizontal, depth, later 6-DOF) and on
 columns added later: the bag export, the Python API. ``runner.read_run`` gives the
-horizontal log as a :class:`~auvmpc.log.SimLog` instead.
+horizontal log as a :class:`~auvmpc.sim.log.SimLog` instead.
 """
 
 from __future__ import annotations

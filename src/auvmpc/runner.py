@@ -16,10 +16,8 @@ from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.registry import build_controller
 from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
-from auvmpc.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.errors import ConfigError, RunFailed
-from auvmpc.log import SimLog
-from auvmpc.metrics import compute_metrics
 from auvmpc.outputs import OutputKind, atomic_write_text, staged_folder
 from auvmpc.provenance import Stopwatch
 from auvmpc.references import make_reference
@@ -30,7 +28,9 @@ from auvmpc.scenario import (
     Scenario,
     scenario_to_dict,
 )
-from auvmpc.sim import closed_loop
+from auvmpc.sim.log import SimLog
+from auvmpc.sim.loop import closed_loop
+from auvmpc.sim.metrics import compute_metrics
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [

@@ -24,9 +24,9 @@ from auvmpc.config import (
 )
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.depth import DepthScenario, resolve_heave
-from auvmpc.disturbances import DisturbanceConfig, SensorNoiseConfig
+from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
+from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
-from auvmpc.obstacles import ObstacleConfig
 from auvmpc.references import ReferenceConfig
 from auvmpc.vehicle import VehicleParams, check_plant_scale, load_vehicle, scaled
 

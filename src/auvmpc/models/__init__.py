@@ -1,0 +1,1 @@
+"""Sampled vehicle models and their compiled functions."""

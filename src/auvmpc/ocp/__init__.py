@@ -1,0 +1,1 @@
+"""The tracking optimal control problem, stated once."""

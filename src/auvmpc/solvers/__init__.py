@@ -1,0 +1,1 @@
+"""Ways to solve the tracking problem's QPs: condensed (dense) and sparse (stage-wise)."""

@@ -7,9 +7,9 @@ import math
 import numpy as np
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.log import SimLog
+from auvmpc.sim.log import SimLog
+from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 from auvmpc.vehicle import VehicleParams
-from auvmpc.verdict import RunFacts, judge, relative_heading_turns
 
 __all__ = ["compute_metrics", "position_error", "heading_error", "LIMIT_TOLERANCE_N"]
 
@@ -44,7 +44,7 @@ def compute_metrics(
 
     ``limits`` supplies the hard thrust and rate limits the log is checked against
     (the controller's nominal vehicle: the limits are the hardware's) and the vehicle
-    size the verdict scales with (``auvmpc.verdict``).
+    size the verdict scales with (``auvmpc.sim.verdict``).
     """
     error = position_error(log)
     heading = heading_error(log)

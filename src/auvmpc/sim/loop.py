@@ -9,11 +9,11 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from auvmpc.controllers.base import Controller, Observation
-from auvmpc.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.integrators import rk4_step_time_varying
-from auvmpc.log import SimLog
-from auvmpc.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.references import Reference
+from auvmpc.sim.log import SimLog
 from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
 __all__ = ["closed_loop", "plant_step"]

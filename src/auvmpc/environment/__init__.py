@@ -1,0 +1,1 @@
+"""What the vehicle meets: currents and forces, waves, obstacles, sensor noise."""

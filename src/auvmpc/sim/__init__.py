@@ -1,0 +1,1 @@
+"""The closed loop, its log (time-major arrays), metrics and the run verdict."""
