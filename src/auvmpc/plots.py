@@ -151,12 +151,7 @@ def figure_trajectory(
             label=label,
             zorder=5,
         )
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.grid(True, alpha=0.4)
-    _draw_current_arrow(ax, log.disturbance_world)
-    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+    _finish_trajectory_axes(ax, log.disturbance_world)
     return figure
 
 
@@ -656,6 +651,16 @@ def _annotate_below(
     )
 
 
+def _finish_trajectory_axes(ax, disturbance_world: np.ndarray) -> None:
+    """Equal axes in metres, grid, the current's arrow and the legend of a trajectory plot."""
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, alpha=0.4)
+    _draw_current_arrow(ax, disturbance_world)
+    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+
+
 def _draw_current_arrow(ax: Axes, disturbance_world: np.ndarray) -> None:
     """The mean world-frame current force as an arrow in the top-left corner, with its size.
 
@@ -778,12 +783,7 @@ def figure_compare_trajectory(
             markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
     ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
             label="end of each run")  # fmt: skip
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.grid(True, alpha=0.4)
-    _draw_current_arrow(ax, first.disturbance_world)
-    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+    _finish_trajectory_axes(ax, first.disturbance_world)
     return figure
 
 
