@@ -60,6 +60,7 @@ def test_paper_obstacles_bag_reads_back_as_the_log(monkeypatch, capsys, tmp_path
         "/thrust": "std_msgs/msg/Float64MultiArray",
         **{f"/thrusters/{name}": "geometry_msgs/msg/WrenchStamped" for name in thrusters},
         "/disturbance/true": "geometry_msgs/msg/WrenchStamped",
+        "/disturbance/estimate": "geometry_msgs/msg/WrenchStamped",
         "/obstacles": "visualization_msgs/msg/MarkerArray",
     }
     rows = len(log)
@@ -72,7 +73,11 @@ def test_paper_obstacles_bag_reads_back_as_the_log(monkeypatch, capsys, tmp_path
     ):
         assert len(messages[topic]) == rows, topic
     # Commands exist on rows 0..N-1 (the last row has none, interfaces.md).
-    for topic in ("/thrust", *(f"/thrusters/{name}" for name in thrusters)):
+    for topic in (
+        "/thrust",
+        *(f"/thrusters/{name}" for name in thrusters),
+        "/disturbance/estimate",
+    ):
         assert len(messages[topic]) == rows - 1, topic
 
     stamps = np.array([stamp for stamp, _ in messages["/odom"]]) * 1e-9

@@ -166,7 +166,9 @@ def _messages(tables: RunTables, m: _Messages) -> Iterator[tuple[str, str, int, 
         disturbance = _disturbance(row, "")
         if disturbance is not None:
             yield "/disturbance/true", wrench, ns, m.wrench(t, WORLD_FRAME, *disturbance)
-        if has_estimate:
+        if has_estimate and row[[f"dist_{a}_hat" for a in "XYN"]].notna().all():
+            # Like the commands: what the controller assumed over [t_k, t_k+1), none on the
+            # last row.
             estimate = _disturbance(row, "_hat")
             yield "/disturbance/estimate", wrench, ns, m.wrench(t, WORLD_FRAME, *estimate)
         if obstacles:

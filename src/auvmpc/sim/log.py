@@ -17,10 +17,13 @@ import numpy as np
 
 from auvmpc.vehicle import STATE_NAMES
 
-__all__ = ["SimLog", "REFERENCE_NAMES"]
+__all__ = ["ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
 
 REFERENCE_NAMES = tuple(f"{name}_ref" for name in STATE_NAMES)
 DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
+# The world force and moment the controller's prediction used at sample k (its estimate with
+# offset-free tracking, zero without), the shell's ``info`` keys.
+ESTIMATE_NAMES = ("dist_X_hat", "dist_Y_hat", "dist_N_hat")
 
 
 @dataclass
@@ -32,6 +35,7 @@ class SimLog:
     reference: np.ndarray  # (N+1, 6)
     thrust: np.ndarray  # (N, n) applied over [t_k, t_k+1)
     solve_ms: np.ndarray  # (N,) wall time of the controller call
+    disturbance_estimate: np.ndarray  # (N, 3) what the controller assumed over [t_k, t_k+1)
     status: list[str]  # (N,) ControlStatus values
     disturbance_world: np.ndarray  # (N+1, 3) world force [X, Y, N] at t_k
     clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
@@ -46,6 +50,7 @@ class SimLog:
             reference=np.zeros((steps + 1, 6)),
             thrust=np.zeros((steps, n_thrusters)),
             solve_ms=np.zeros(steps),
+            disturbance_estimate=np.zeros((steps, 3)),
             status=[""] * steps,
             disturbance_world=np.zeros((steps + 1, 3)),
             clearance_m=np.full(steps + 1, math.inf),
@@ -65,7 +70,7 @@ class SimLog:
         thrusters = [f"F{i + 1}" for i in range(self.n_thrusters)]
         return [
             "t", *STATE_NAMES, *REFERENCE_NAMES, *thrusters, "solve_ms", "status",
-            *DISTURBANCE_NAMES, "clearance_m",
+            *DISTURBANCE_NAMES, "clearance_m", *ESTIMATE_NAMES,
         ]  # fmt: skip
 
     def to_csv_text(self) -> str:
@@ -85,6 +90,11 @@ class SimLog:
                     self.status[k] if applied else "",
                     *(_num(v) for v in self.disturbance_world[k]),
                     _num(self.clearance_m[k]) if math.isfinite(self.clearance_m[k]) else "",
+                    *(
+                        (_num(v) for v in self.disturbance_estimate[k])
+                        if applied
+                        else [""] * len(ESTIMATE_NAMES)
+                    ),
                 ]
             )
         return buffer.getvalue()
@@ -113,6 +123,8 @@ class SimLog:
                 log.thrust[k] = [float(row[name]) for name in thrust_names]
                 log.solve_ms[k] = float(row["solve_ms"])
                 log.status[k] = row["status"]
+                if ESTIMATE_NAMES[0] in row:  # logs written before these columns have none
+                    log.disturbance_estimate[k] = [float(row[name]) for name in ESTIMATE_NAMES]
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log

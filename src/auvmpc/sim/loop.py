@@ -13,7 +13,7 @@ from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.integrators import rk4_step_time_varying
 from auvmpc.references import Reference
-from auvmpc.sim.log import SimLog
+from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
 from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
 __all__ = ["closed_loop", "plant_step"]
@@ -99,6 +99,7 @@ def closed_loop(
             raise RuntimeError(f"controller returned an invalid command at k={k}: {thrust!r}")
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
+        log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
         state = plant_step(plant, state, thrust, t, sample_time, disturbance, substeps)
         disturbance.advance()
         if on_step is not None:
