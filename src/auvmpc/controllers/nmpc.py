@@ -591,7 +591,9 @@ class _RealTimeIteration:
 class NonlinearMpc(ShelledController):
     """Nonlinear multiple-shooting MPC (``nmpc``): full IPOPT solve or real-time iterations."""
 
-    def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+    def __init__(
+        self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = MAX_OBSTACLES
+    ) -> None:
         config = config.with_model_substeps(model)
         self.model = model
         self.config = config
@@ -600,7 +602,7 @@ class NonlinearMpc(ShelledController):
         self.preview_steps = self.horizon
         self.limits = horizontal_limits(model)
         self.solver_time_limit_ms = config.solver_time_limit_ms
-        self.program = MultipleShootingProgram(model, config)
+        self.program = MultipleShootingProgram(model, config, obstacle_slots)
         if config.nmpc_mode is NmpcMode.FULL:
             self._solver: _IpoptSolver | _RealTimeIteration | SparseRealTimeIteration = (
                 _IpoptSolver(self.program, config)
@@ -623,6 +625,12 @@ class NonlinearMpc(ShelledController):
             else None
         )
         self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
+
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> NonlinearMpc:
+        """Room for the scenario's obstacles (at least one slot, at most MAX_OBSTACLES): every
+        unused slot is rows and variables each solve carries."""
+        return cls(model, config, obstacle_slots=max(1, min(MAX_OBSTACLES, obstacle_count)))
 
     # -- the back end of the safety shell -------------------------------------------------
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:

@@ -120,7 +120,9 @@ class SparseRealTimeIteration:
                     near.T.astype(float),
                     self._movable,
                 )
-                if any(np.any(np.isnan(np.asarray(d.nonzeros()))) for d in data):
+                # The bounds carry the shooting gaps, the first to go non-finite (and the ones
+                # CasADi refuses); a NaN elsewhere shows in HPIPM's status or its solution.
+                if any(np.isnan(np.asarray(data[i])).any() for i in (1, 3, 4)):
                     # A diverged iterate: never hand NaN to the solver (CasADi raises on it).
                     return self._solution_type(
                         None, total, time.perf_counter() - started, "non-finite QP data"
