@@ -34,13 +34,20 @@ inside the casadi wheel) solves it.
 
 from __future__ import annotations
 
-import functools
 import time
 
 import casadi as ca
 import numpy as np
 
+from auvmpc.ocp.tracking import ThrustPenalty
 from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
+from auvmpc.solvers.multiple_shooting import (
+    DISTANCE_SMOOTHING_M2,
+    SLOT_FIELDS,
+    Iterate,
+    MultipleShootingProgram,
+    Solution,
+)
 
 __all__ = ["SparseRealTimeIteration"]
 
@@ -61,16 +68,10 @@ class SparseRealTimeIteration:
     """Gauss-Newton SQP steps on a :class:`MultipleShootingProgram`, each one sparse QP."""
 
     def __init__(self, program) -> None:
-        from auvmpc.controllers.nmpc import _Solution  # the controller's result record
-
-        self._solution_type = _Solution
+        self._solution_type = Solution
         self.program = program
         config = program.config
-        self._qp_data, dims = _qp_data_function(
-            program.model.model_dump_json(),
-            config.model_dump_json(),
-            program.n_slots,
-        )
+        self._qp_data, dims = _qp_data_function(program)
         self._stage_state, self._stage_input = dims
         n, N = program.n_thrusters, program.horizon
         self._movable = np.zeros(N)
@@ -93,8 +94,6 @@ class SparseRealTimeIteration:
     def solve(self, guess, sample, iterations: int, cold: bool):
         """``iterations`` SQP steps from ``guess``; on a cold start the states are re-simulated
         from x_hat under the new thrusts after each step (module docstring of nmpc)."""
-        from auvmpc.controllers.nmpc import Iterate
-
         program = self.program
         nz, nv, N = self._stage_state, self._stage_input, program.horizon
         n = program.n_thrusters
@@ -155,33 +154,32 @@ class SparseRealTimeIteration:
         return self._solution_type(iterate, total, time.perf_counter() - started, status)
 
 
-@functools.lru_cache(maxsize=16)
-def _qp_data_function(model_json: str, config_json: str, n_slots: int):
+# QP-data functions by (vehicle, configuration, slots): campaign runs of one vehicle reuse
+# one; the oldest is dropped past _CACHE_SIZE.
+_CACHE: dict[tuple[str, str, int], tuple[ca.Function, tuple[int, int]]] = {}
+_CACHE_SIZE = 16
+
+
+def _qp_data_function(program: MultipleShootingProgram):
     """The sparse QP's data as one CasADi function, built once per vehicle and configuration
-    in a process (campaign runs reuse it).
+    in a process.
 
     It is evaluated by CasADi's virtual machine (0.3 ms on paper-obstacles): compiling the
     whole expanded horizon with the C compiler took 30-60 s per configuration, longer than a
     run. Compiling one stage and mapping it over the horizon is the next step.
     """
-    from auvmpc.controllers.config import ControllerConfig
-    from auvmpc.controllers.nmpc import MultipleShootingProgram
-    from auvmpc.vehicle import VehicleParams
-
-    model = VehicleParams.model_validate_json(model_json)
-    config = ControllerConfig.model_validate_json(config_json)
-    program = MultipleShootingProgram(model, config, n_slots)
-    function = _build_qp_data(program)
-    dims = (6 + program.n_thrusters, program.n_thrusters + 1)
-    return function, dims
+    key = (program.model.model_dump_json(), program.config.model_dump_json(), program.n_slots)
+    if key not in _CACHE:
+        if len(_CACHE) >= _CACHE_SIZE:
+            _CACHE.pop(next(iter(_CACHE)))
+        dims = (6 + program.n_thrusters, program.n_thrusters + 1)
+        _CACHE[key] = (_build_qp_data(program), dims)
+    return _CACHE[key]
 
 
 def _build_qp_data(program) -> ca.Function:
     """(iterate, sample data) -> (H, g, A, lba, uba, lbx, ubx) of the sparse QP, assembled
     from stage blocks (H is block diagonal; stage k's rows touch z_k, v_k and z_{k+1})."""
-    from auvmpc.controllers.nmpc import _DISTANCE_SMOOTHING_M2, _SLOT_FIELDS
-    from auvmpc.ocp.tracking import ThrustPenalty
-
     n, N, S, NX = program.n_thrusters, program.horizon, program.n_slots, 6
     nz, nv = NX + n, n + 1
     stage = nz + nv
@@ -193,7 +191,7 @@ def _build_qp_data(program) -> ca.Function:
     previous = ca.SX.sym("F_prev", n)
     reference = ca.SX.sym("ref", NX, N)  # column k: r_{k+1}
     force = ca.SX.sym("d_world", 3)
-    slots = ca.SX.sym("slots", _SLOT_FIELDS, S)
+    slots = ca.SX.sym("slots", SLOT_FIELDS, S)
     near = ca.SX.sym("near", S, N)  # 1 where slot o's row of step k + 1 is kept
     movable = ca.SX.sym("movable", N)
 
@@ -262,7 +260,7 @@ def _build_qp_data(program) -> ca.Function:
         t = (k + 1) * program.sample_time
         for o in range(S):
             offset = X[0:2, k + 1] - (slots[0:2, o] + t * slots[2:4, o])
-            distance = ca.sqrt(ca.sumsqr(offset) + _DISTANCE_SMOOTHING_M2)
+            distance = ca.sqrt(ca.sumsqr(offset) + DISTANCE_SMOOTHING_M2)
             normals.append((offset / distance).T)
             distances.append(distance)
         normal = ca.vertcat(*normals) if S else ca.SX(0, 2)

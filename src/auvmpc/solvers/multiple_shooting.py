@@ -1,0 +1,237 @@
+"""The nonlinear tracking program in multiple-shooting form, built once per configuration.
+
+The decision variables are the states X_0..X_ny and the thrusts at the move steps; the thrust
+is held between moves. A keep-out disc is an exact constraint in distance form with a slack
+in metres; obstacles fill ``MAX_OBSTACLES`` slots (the nearest ones when there are more) and
+an empty slot's rows have no lower bound, so the program is built once, as expanded SX, with
+all that changes between samples passed as parameters and bounds. IPOPT (solvers/ipopt.py)
+and the real-time iterations (solvers/condensed_rti.py, solvers/sparse_rti.py) solve it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.models.discrete import horizontal_model
+from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.vehicle import VehicleParams
+
+if TYPE_CHECKING:  # read, never imported at run time: solvers sit below controllers
+    from auvmpc.controllers.base import ObstacleState
+    from auvmpc.controllers.config import ControllerConfig
+
+__all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "Sample", "Solution"]
+
+NX, ND = 6, 3
+# Obstacle slots in the program (built once): the nearest this many visible obstacles count.
+MAX_OBSTACLES = 8
+# Per slot: centre x, y now (m), velocity x, y (m/s), reach = radius + vehicle radius + margin.
+SLOT_FIELDS = 5
+# Smooths the distance at an obstacle's centre, sqrt(d^2 + eps) (m^2): differentiable
+# everywhere, and the constraint moves by at most sqrt(eps) = 1 mm (only at the centre).
+DISTANCE_SMOOTHING_M2 = 1e-6
+# Quadratic part of the slack penalty (as in LinearMpc): definite in the slack; the linear
+# part (config.obstacle_slack_penalty) is what makes the penalty exact.
+SLACK_QUADRATIC_WEIGHT = 1.0
+# Where an unused obstacle slot is parked, from the vehicle (m); its rows are unbounded anyway.
+_PARKED_OBSTACLE_M = 1e4
+
+
+@dataclass
+class Iterate:
+    """A primal point of the program: the plan and its predicted states."""
+
+    states: np.ndarray  # (ny + 1, 6): X_0..X_ny
+    thrust: np.ndarray  # (nc, n): the thrust set at each move step
+    slack: np.ndarray  # (ny, slots): s_{o,n} for n = 1..ny
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What one sample's program depends on besides the iterate."""
+
+    state: np.ndarray  # (6,) X_0
+    previous: np.ndarray  # (n,) F_{-1}
+    reference: np.ndarray  # (ny + 1, 6) aligned
+    disturbance: np.ndarray  # (3,) world force and moment
+    slots: np.ndarray  # (slots, 5) obstacle data, parked where unused
+    used: np.ndarray  # (slots,) bool
+
+
+@dataclass
+class Solution:
+    iterate: Iterate | None  # None: no usable solution
+    iterations: int
+    solve_time_s: float
+    status: str
+    resume: Iterate | None = None  # an unfinished solve's last point, worth continuing from
+
+
+class MultipleShootingProgram:
+    """The NLP ``min J(w, p) s.t. lbg <= g(w, p) <= ubg, lbw <= w <= ubw``, built once.
+
+    ``w`` stacks the states X_0..X_ny (6 each), the thrusts at the move steps (n each) and one
+    slack per predicted step and obstacle slot. ``p`` stacks the last applied thrust (n), the
+    aligned reference rows 1..ny (6 each), the world-frame force and moment (3) and the
+    obstacle slots (5 each). ``g`` stacks the shooting gaps X_{n+1} - RK4(X_n, F_n) (6 per
+    step), the thrust changes at the move steps (n each) and, per step and slot, the distance
+    to the obstacle minus its reach plus the slack.
+    """
+
+    def __init__(
+        self, model: VehicleParams, config: ControllerConfig, n_slots: int = MAX_OBSTACLES
+    ):
+        config = config.with_model_substeps(model)
+        n, ny = model.n_thrusters, config.prediction_horizon
+        self.model, self.config = model, config
+        self.n_thrusters, self.horizon, self.n_slots = n, ny, n_slots
+        self.ocp = ocp = config.ocp(model)
+        self.sample_time = ocp.sample_time
+        self.move_steps = np.array(ocp.move_steps)
+        self.n_moves = ocp.n_moves
+        self.held = ocp.held  # held[i]: the move whose thrust acts at step i
+        # Per stacked thrust change (move by move): the largest change in one sample (N).
+        self.max_change = np.tile(ocp.max_move, self.n_moves)
+
+        sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
+        self.step = sampled.step
+        self.rollout = sampled.rollout(ny)
+        # The step with its Jacobians, evaluated at every shooting node in one call.
+        self.linearised_steps = sampled.linearised_nodes(ny)
+
+        self.n_w = NX * (ny + 1) + n * self.n_moves + n_slots * ny
+        w = ca.SX.sym("w", self.n_w)
+        X = ca.reshape(w[: NX * (ny + 1)], NX, ny + 1)  # column i: X_i
+        U = ca.reshape(w[NX * (ny + 1) : NX * (ny + 1) + n * self.n_moves], n, self.n_moves)
+        # column i: the slacks of step i + 1
+        slack = ca.reshape(w[NX * (ny + 1) + n * self.n_moves :], n_slots, ny)
+        previous = ca.SX.sym("F_prev", n)
+        reference = ca.SX.sym("ref", NX, ny)  # column i: r_{i+1}
+        disturbance = ca.SX.sym("d_world", ND)
+        slots = ca.SX.sym("obstacles", SLOT_FIELDS, n_slots)
+        p = ca.vertcat(previous, ca.vec(reference), disturbance, ca.vec(slots))
+
+        thrust_at = [U[:, int(j)] for j in self.held]
+        gaps = [X[:, i + 1] - self.step(X[:, i], thrust_at[i], disturbance) for i in range(ny)]
+        changes = [U[:, 0] - previous] + [U[:, j] - U[:, j - 1] for j in range(1, self.n_moves)]
+        clearances = []
+        for i in range(1, ny + 1):
+            for o in range(n_slots):
+                centre = slots[0:2, o] + (i * config.sample_time) * slots[2:4, o]
+                distance = ca.sqrt(ca.sumsqr(X[0:2, i] - centre) + DISTANCE_SMOOTHING_M2)
+                clearances.append(distance - slots[4, o] + slack[o, i - 1])
+        self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
+        g = ca.vertcat(*gaps, *changes, *clearances)
+
+        Q, S, R = np.diag(ocp.stage_weight), np.diag(ocp.terminal_weight), np.diag(ocp.input_weight)
+        cost = 0
+        for i in range(1, ny + 1):
+            error = X[:, i] - reference[:, i - 1]
+            cost += ca.bilin(S if i == ny else Q, error, error)
+        if ocp.penalty is ThrustPenalty.ABSOLUTE:
+            cost += sum(ca.bilin(R, F, F) for F in thrust_at)
+        else:
+            cost += sum(ca.bilin(R, dF, dF) for dF in changes)
+        cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
+        cost += SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)
+        self.w, self.p, self.cost, self.g = w, p, cost, g
+
+    # -- packing -------------------------------------------------------------------------
+    def pack(self, iterate: Iterate) -> np.ndarray:
+        """w from an iterate (the states column by column, as ``w`` stacks them)."""
+        return np.concatenate(
+            [iterate.states.ravel(), iterate.thrust.ravel(), iterate.slack.ravel()]
+        )
+
+    def unpack(self, w: np.ndarray) -> Iterate:
+        n, ny = self.n_thrusters, self.horizon
+        states_end = NX * (ny + 1)
+        thrust_end = states_end + n * self.n_moves
+        return Iterate(
+            states=w[:states_end].reshape(ny + 1, NX),
+            thrust=w[states_end:thrust_end].reshape(self.n_moves, n),
+            slack=w[thrust_end:].reshape(ny, self.n_slots),
+        )
+
+    def parameters(self, sample: Sample) -> np.ndarray:
+        return np.concatenate(
+            [
+                sample.previous,
+                sample.reference[1:].ravel(),
+                sample.disturbance,
+                sample.slots.ravel(),
+            ]
+        )
+
+    def bounds(self, sample: Sample) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """lbw, ubw, lbg, ubg: X_0 fixed, thrust box, rate box, obstacles of the used slots."""
+        lbw, ubw = np.full(self.n_w, -np.inf), np.full(self.n_w, np.inf)
+        lbw[:NX] = ubw[:NX] = sample.state
+        thrust = slice(NX * (self.horizon + 1), NX * (self.horizon + 1) + self.n_changes)
+        lbw[thrust] = np.tile(self.ocp.input_lower, self.n_moves)
+        ubw[thrust] = np.tile(self.ocp.input_upper, self.n_moves)
+        lbw[thrust.stop :] = 0.0
+        lbg, ubg = np.zeros(self.n_gaps), np.zeros(self.n_gaps)
+        obstacle_lower = np.where(np.tile(sample.used, self.horizon), 0.0, -np.inf)
+        lbg = np.concatenate([lbg, -self.max_change, obstacle_lower])
+        ubg = np.concatenate([ubg, self.max_change, np.full(obstacle_lower.size, np.inf)])
+        return lbw, ubw, lbg, ubg
+
+    # -- numeric pieces ------------------------------------------------------------------
+    def sample(
+        self,
+        state: np.ndarray,
+        previous: np.ndarray,
+        reference: np.ndarray,
+        disturbance: np.ndarray,
+        obstacles: tuple[ObstacleState, ...],
+    ) -> Sample:
+        """The sample's data; the nearest obstacles fill the slots, the rest are parked."""
+        slots = np.zeros((self.n_slots, SLOT_FIELDS))
+        slots[:, 0:2] = state[:2] + _PARKED_OBSTACLE_M
+        used = np.zeros(self.n_slots, dtype=bool)
+        nearest = sorted(obstacles, key=lambda o: float(np.linalg.norm(o.center - state[:2])))
+        extra = self.ocp.keep_out_extra
+        for o, obstacle in enumerate(nearest[: self.n_slots]):
+            slots[o] = [*obstacle.center, *obstacle.velocity, obstacle.radius + extra]
+            used[o] = True
+        return Sample(state, previous, reference, disturbance, slots, used)
+
+    def plan(self, iterate: Iterate) -> np.ndarray:
+        """Thrust at every step of the horizon (ny, n)."""
+        return iterate.thrust[self.held]
+
+    def shifted(self, iterate: Iterate, disturbance: np.ndarray) -> Iterate:
+        """The iterate one sample on: states, plan and slacks advanced by one step.
+
+        The new terminal state is the model's step from the old one under the last thrust;
+        the thrusts at the move steps are read from the plan shifted by one sample.
+        """
+        plan = self.plan(iterate)
+        terminal = np.asarray(self.step(iterate.states[-1], plan[-1], disturbance)).ravel()
+        return Iterate(
+            states=np.vstack([iterate.states[1:], terminal]),
+            thrust=np.vstack([plan[1:], plan[-1:]])[self.move_steps],
+            slack=np.vstack([iterate.slack[1:], iterate.slack[-1:]]),
+        )
+
+    def reference_guess(self, sample: Sample) -> Iterate:
+        """A guess without a previous solution: the states on the reference (multiple
+        shooting need not start from a trajectory), the last thrust held, no slack."""
+        return Iterate(
+            states=np.vstack([sample.state, sample.reference[1:]]),
+            thrust=np.tile(sample.previous, (self.n_moves, 1)),
+            slack=np.zeros((self.horizon, self.n_slots)),
+        )
+
+    def clearances(self, states: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+        """Distance minus reach (ny, slots) at steps 1..ny, and its gradient in p (ny, slots, 2)."""
+        steps = self.sample_time * np.arange(1, self.horizon + 1)
+        centres = sample.slots[None, :, 0:2] + steps[:, None, None] * sample.slots[None, :, 2:4]
+        offset = states[1:, None, :2] - centres
+        distance = np.sqrt(np.einsum("nok,nok->no", offset, offset) + DISTANCE_SMOOTHING_M2)
+        return distance - sample.slots[None, :, 4], offset / distance[:, :, None]
