@@ -86,12 +86,7 @@ class ControllerConfig(StrictModel):
     @field_validator("Q", "S", mode="before")
     @classmethod
     def _weights_by_name(cls, value: Any) -> Any:
-        if not isinstance(value, dict):
-            return value
-        unknown = sorted(set(map(str, value)) - set(HORIZONTAL.names))
-        if unknown:
-            raise ValueError(f"unknown state names {unknown}; known {list(HORIZONTAL.names)}")
-        return tuple(value.get(name, 0.0) for name in HORIZONTAL.names)
+        return tuple(HORIZONTAL.vector(value)) if isinstance(value, dict) else value
 
     R: tuple[NonNegative, ...] = Field(
         default=(0.01,), description="thrust weights, one per thruster or one for all"

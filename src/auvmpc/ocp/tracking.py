@@ -18,7 +18,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ActuatorLimits", "ThrustPenalty", "TrackingOcp"]
+__all__ = ["SLACK_QUADRATIC_WEIGHT", "ActuatorLimits", "ThrustPenalty", "TrackingOcp"]
+
+# The soft constraints' cost is penalty * s + SLACK_QUADRATIC_WEIGHT * s^2: the linear part
+# makes the penalty exact, the quadratic part makes every QP definite in the slack.
+SLACK_QUADRATIC_WEIGHT = 1.0
 
 
 class ThrustPenalty(StrEnum):

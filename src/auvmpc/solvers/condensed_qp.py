@@ -21,16 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
+from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpProblem, QpSolverName, make_qp_solver
 
-__all__ = ["AffinePrediction", "CondensedQp", "SoftRows"]
+__all__ = ["AffinePrediction", "CondensedQp", "SoftRows", "add_soft_rows"]
 
 # Keeps H positive definite when R = 0 (DAQP needs it); far below every real weight.
 _HESSIAN_REGULARISATION = 1e-9
-# Quadratic part of the slack penalty: makes H definite in the slack; the linear
-# part (the configured penalty) is what makes the penalty exact.
-_SLACK_QUADRATIC_WEIGHT = 1.0
 
 
 @dataclass
@@ -57,6 +54,25 @@ class SoftRows:
 
     def __len__(self) -> int:
         return len(self.steps)
+
+
+def add_soft_rows(
+    H: np.ndarray, f: np.ndarray, coefficients: np.ndarray, lower: np.ndarray, penalty: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``coefficients . z + s_r >= lower`` with one slack each, the slacks being the last
+    ``len(lower)`` variables of a dense QP: their cost goes into ``H`` and ``f`` (in place),
+    the rows and their lower bounds are returned.
+
+    One slack per row: an exact L1 penalty relaxes only the rows that must be.
+    """
+    n_rows, n_free = coefficients.shape
+    slack = np.arange(n_free, n_free + n_rows)
+    H[slack, slack] = 2.0 * SLACK_QUADRATIC_WEIGHT
+    f[slack] = penalty
+    block = np.zeros((n_rows, n_free + n_rows))
+    block[:, :n_free] = coefficients
+    block[:, slack] = np.eye(n_rows)
+    return block, lower
 
 
 class CondensedQp:
@@ -142,15 +158,15 @@ class CondensedQp:
         lower = [np.tile(self._input_lower - previous, nc)]
         upper = [np.tile(self._input_upper - previous, nc)]
         if n_slack:
-            # One slack per row: an exact L1 penalty relaxes only the rows that must be.
-            slack = np.arange(n_moves, nz)
-            H[slack, slack] = 2.0 * _SLACK_QUADRATIC_WEIGHT
-            f[slack] = self.slack_penalty
-            block = np.zeros((n_slack, nz))
-            block[:, :n_moves] = np.einsum("rk,rkj->rj", soft.coefficients, sensitivity[soft.steps])
-            block[:, slack] = np.eye(n_slack)
+            block, bound = add_soft_rows(
+                H,
+                f,
+                np.einsum("rk,rkj->rj", soft.coefficients, sensitivity[soft.steps]),
+                soft.lower - np.einsum("rk,rk->r", soft.coefficients, free[soft.steps]),
+                self.slack_penalty,
+            )
             rows.append(block)
-            lower.append(soft.lower - np.einsum("rk,rk->r", soft.coefficients, free[soft.steps]))
+            lower.append(bound)
             upper.append(np.full(n_slack, np.inf))
         return QpProblem(
             H=H,

@@ -11,10 +11,10 @@ import time
 import numpy as np
 
 from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.solvers.condensed_qp import add_soft_rows
 from auvmpc.solvers.dense_qp import QpProblem, make_qp_solver
 from auvmpc.solvers.multiple_shooting import (
     NX,
-    SLACK_QUADRATIC_WEIGHT,
     Iterate,
     MultipleShootingProgram,
     Sample,
@@ -136,17 +136,16 @@ class CondensedRealTimeIteration:
         max_change = program.max_change
         rows, lower, upper = [rate_rows], [-max_change - change], [max_change - change]
         if n_slack:
-            slack = np.arange(n_thrust, nz)
-            H[slack, slack] = 2.0 * SLACK_QUADRATIC_WEIGHT
-            f[slack] = program.ocp.slack_penalty
             normals = normal[steps, slot_index]  # (rows, 2)
-            block = np.zeros((n_slack, nz))
-            block[:, :n_thrust] = np.einsum("rk,rkj->rj", normals, sensitivity[steps + 1, :2, :])
-            block[:, slack] = np.eye(n_slack)
-            rows.append(block)
-            lower.append(
-                -clearance[steps, slot_index] - np.einsum("rk,rk->r", normals, free[steps + 1, :2])
+            block, bound = add_soft_rows(
+                H,
+                f,
+                np.einsum("rk,rkj->rj", normals, sensitivity[steps + 1, :2, :]),
+                -clearance[steps, slot_index] - np.einsum("rk,rk->r", normals, free[steps + 1, :2]),
+                program.ocp.slack_penalty,
             )
+            rows.append(block)
+            lower.append(bound)
             upper.append(np.full(n_slack, np.inf))
         problem = QpProblem(
             H=H,

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 from auvmpc.vehicle import VehicleParams
 
 if TYPE_CHECKING:  # read, never imported at run time: solvers sit below controllers
@@ -34,9 +34,6 @@ SLOT_FIELDS = 5
 # Smooths the distance at an obstacle's centre, sqrt(d^2 + eps) (m^2): differentiable
 # everywhere, and the constraint moves by at most sqrt(eps) = 1 mm (only at the centre).
 DISTANCE_SMOOTHING_M2 = 1e-6
-# Quadratic part of the slack penalty (as in LinearMpc): definite in the slack; the linear
-# part (config.obstacle_slack_penalty) is what makes the penalty exact.
-SLACK_QUADRATIC_WEIGHT = 1.0
 # Where an unused obstacle slot is parked, from the vehicle (m); its rows are unbounded anyway.
 _PARKED_OBSTACLE_M = 1e4
 

@@ -25,14 +25,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
+from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty, TrackingOcp
 from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
 
 __all__ = ["SparseIncrementalQp", "SparseSolution"]
 
 # As in CondensedQp: keeps the move Hessian definite when R = 0; far below every real weight.
 _HESSIAN_REGULARISATION = 1e-9
-_SLACK_QUADRATIC_WEIGHT = 1.0
 
 
 class SparseSolution:
@@ -127,7 +126,7 @@ class SparseIncrementalQp:
                 H[du, du] += _HESSIAN_REGULARISATION * np.eye(nu)
                 lbx[du], ubx[du] = -self.max_move, self.max_move
             # The QP's variable is sigma times the slack (module docstring).
-            H[s, s] = 2.0 * _SLACK_QUADRATIC_WEIGHT / sigma**2
+            H[s, s] = 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
             g[s] = self.slack_penalty / sigma
             lbx[s] = 0.0
 

@@ -39,7 +39,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
 from auvmpc.solvers.multiple_shooting import (
     DISTANCE_SMOOTHING_M2,
@@ -55,9 +55,6 @@ __all__ = ["SparseRealTimeIteration"]
 # the stage Hessian definite when R = 0; it penalises the step, not the iterate, so the fixed
 # point is unchanged.
 _STEP_REGULARISATION = 1e-9
-# Quadratic part of the slack penalty (definite in the slack); the linear part is the
-# configured exact penalty.
-_SLACK_QUADRATIC_WEIGHT = 1.0
 # Obstacle rows are kept for the predicted steps within this distance of the inflated disc
 # (m), as in the condensed real-time iteration: one SQP step cannot move the plan that far,
 # and a far row would only perturb the interior point's solution (by ~1e-7 N).
@@ -68,7 +65,6 @@ class SparseRealTimeIteration:
     """Gauss-Newton SQP steps on a :class:`MultipleShootingProgram`, each one sparse QP."""
 
     def __init__(self, program) -> None:
-        self._solution_type = Solution
         self.program = program
         config = program.config
         self._qp_data, dims = _qp_data_function(program)
@@ -76,7 +72,6 @@ class SparseRealTimeIteration:
         n, N = program.n_thrusters, program.horizon
         self._movable = np.zeros(N)
         self._movable[program.move_steps] = 1.0
-        self._held = program.held
         H, A = self._qp_data.sparsity_out(0), self._qp_data.sparsity_out(2)
         self._qp = hpipm_solver(
             "rti_sparse_qp",
@@ -123,7 +118,7 @@ class SparseRealTimeIteration:
                 # CasADi refuses); a NaN elsewhere shows in HPIPM's status or its solution.
                 if any(np.isnan(np.asarray(data[i])).any() for i in (1, 3, 4)):
                     # A diverged iterate: never hand NaN to the solver (CasADi raises on it).
-                    return self._solution_type(
+                    return Solution(
                         None, total, time.perf_counter() - started, "non-finite QP data"
                     )
                 H, g, A, lba, uba, lbx, ubx = data
@@ -133,7 +128,7 @@ class SparseRealTimeIteration:
                 status = f"hpipm {stats['return_status']}"
                 w = np.asarray(result["x"]).ravel()
                 if not solved(stats) or not np.all(np.isfinite(w)):
-                    return self._solution_type(None, total, time.perf_counter() - started, status)
+                    return Solution(None, total, time.perf_counter() - started, status)
                 stage = nz + nv
                 dz = np.stack([w[k * stage : k * stage + nz] for k in range(N + 1)], axis=1)
                 dv = np.stack([w[k * stage + nz : (k + 1) * stage] for k in range(N)], axis=1)
@@ -145,13 +140,11 @@ class SparseRealTimeIteration:
                 else:
                     states = states + dz[:6]
                 if not np.all(np.isfinite(states)):
-                    return self._solution_type(
-                        None, total, time.perf_counter() - started, "non-finite states"
-                    )
+                    return Solution(None, total, time.perf_counter() - started, "non-finite states")
         slacks = np.zeros((N, program.n_slots))
         slacks[:, 0] = np.maximum(slack, 0.0)
         iterate = Iterate(states.T.copy(), thrust.T[program.move_steps].copy(), slacks)
-        return self._solution_type(iterate, total, time.perf_counter() - started, status)
+        return Solution(iterate, total, time.perf_counter() - started, status)
 
 
 # QP-data functions by (vehicle, configuration, slots): campaign runs of one vehicle reuse
@@ -234,7 +227,7 @@ def _build_qp_data(program) -> ca.Function:
         rho = ocp.slack_penalty
         sigma = slack_scale(rho)
         H_v = ca.diagcat(
-            ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * _SLACK_QUADRATIC_WEIGHT / sigma**2
+            ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
         )
         H_zv = ca.SX(nz, nv)
         if absolute:
