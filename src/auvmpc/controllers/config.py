@@ -134,8 +134,9 @@ class ControllerConfig(StrictModel):
     )
     jit: bool = Field(
         default=True,
-        description="compile the CasADi model functions with the system C compiler "
-        "(ltv-mpc); falls back to interpreted evaluation when there is none",
+        description="compile the CasADi model functions (ltv-mpc) and the real-time "
+        "iteration's QP step (nmpc) with the system C compiler; falls back to interpreted "
+        "evaluation when there is none",
     )
     linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
         default=1,

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import casadi as ca
 
-__all__ = ["ITERATION_LIMIT", "hpipm_solver", "slack_scale", "solved"]
+__all__ = ["ITERATION_LIMIT", "hpipm_settings", "hpipm_solver", "slack_scale", "solved"]
 
 # CasADi hands HPIPM every unbounded variable as a box of +-_INFINITY; 1e8 (CasADi's default)
 # ruins the interior point's scaling (50 iterations without convergence on paper-obstacles),
@@ -17,13 +17,16 @@ _INFINITY = 1e4
 # paper-obstacles, first sample) "speed" failed from every mu0 (1, 1e2, 1e4) and "robust"
 # converged in 13 iterations to qrqp's solution within 4e-12; residuals tight enough that the
 # first move agrees with IPOPT's to 1e-5 N (tests/test_mpc.py).
+_MU0 = 1.0
+_TOLERANCE = 1e-8
+_ROBUST = 3.0  # enum hpipm_mode (hpipm_common.h): SPEED_ABS, SPEED, BALANCE, ROBUST
 _OPTIONS = {
     "mode": "robust",
-    "mu0": 1.0,
-    "res_g_max": 1e-8,
-    "res_b_max": 1e-8,
-    "res_d_max": 1e-8,
-    "res_m_max": 1e-8,
+    "mu0": _MU0,
+    "res_g_max": _TOLERANCE,
+    "res_b_max": _TOLERANCE,
+    "res_d_max": _TOLERANCE,
+    "res_m_max": _TOLERANCE,
 }
 # Measured: at most 52 iterations on paper-obstacles (a sample where 30 obstacle rows appear);
 # 50 made that sample fall back.
@@ -53,6 +56,12 @@ def hpipm_solver(
         "hpipm": {**_OPTIONS, "iter_max": iteration_limit or ITERATION_LIMIT},
     }
     return ca.conic(name, "hpipm", {"h": h_pattern, "a": a_pattern}, options)
+
+
+def hpipm_settings(iteration_limit: int | None = None) -> tuple[float, ...]:
+    """The same settings for the compiled HPIPM driver (solvers/hpipm_ocp_step.c): iteration
+    limit, mu0, tolerance on every residual, the bound standing for infinity, the mode."""
+    return (float(iteration_limit or ITERATION_LIMIT), _MU0, _TOLERANCE, _INFINITY, _ROBUST)
 
 
 def slack_scale(penalty: float) -> float:

@@ -28,19 +28,23 @@ The QP of one Gauss-Newton SQP step around an iterate (X, F), in deltas, stage k
     cost         the program's cost (Gauss-Newton: its Hessian is exact and constant) plus
                  rho s_k + s_k^2, and a tiny Levenberg-Marquardt term on dF.
 
-All matrices of that QP are one CasADi function of (iterate, sample data); HPIPM (shipped
-inside the casadi wheel) solves it.
+The stage data are two CasADi functions (:class:`StageQp`). By default they are compiled to
+C together with a small HPIPM driver, so that one SQP step (linearisation, QP, solve) is one
+call (solvers/compiled_qp_step.py); without a C compiler CasADi evaluates them and solves
+the assembled QP through its HPIPM interface (:class:`CasadiQpStep`): the same QP, slower.
 """
 
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
-from auvmpc.solvers.hpipm import hpipm_solver, slack_scale, solved
+from auvmpc.solvers.compiled_qp_step import compiled_qp_step
+from auvmpc.solvers.hpipm import hpipm_settings, hpipm_solver, slack_scale
 from auvmpc.solvers.multiple_shooting import (
     DISTANCE_SMOOTHING_M2,
     SLOT_FIELDS,
@@ -49,7 +53,7 @@ from auvmpc.solvers.multiple_shooting import (
     Solution,
 )
 
-__all__ = ["SparseRealTimeIteration"]
+__all__ = ["CasadiQpStep", "SparseRealTimeIteration", "StageQp", "stage_qp"]
 
 # Levenberg-Marquardt term on the thrust step (as in the condensed real-time iteration): keeps
 # the stage Hessian definite when R = 0; it penalises the step, not the iterate, so the fixed
@@ -59,29 +63,32 @@ _STEP_REGULARISATION = 1e-9
 # (m), as in the condensed real-time iteration: one SQP step cannot move the plan that far,
 # and a far row would only perturb the interior point's solution (by ~1e-7 N).
 _OBSTACLE_RANGE_M = 5.0
+_SOLVED, _NOT_FINITE = 0, -1
 
 
 class SparseRealTimeIteration:
     """Gauss-Newton SQP steps on a :class:`MultipleShootingProgram`, each one sparse QP."""
 
-    def __init__(self, program) -> None:
+    def __init__(self, program: MultipleShootingProgram, compiled: bool | None = None) -> None:
+        """``compiled``: None (default) compiles where a C compiler is present and the
+        configuration's ``jit`` allows, False never (CasADi evaluates the same QP), True
+        requires it (RuntimeError without)."""
         self.program = program
-        config = program.config
-        self._qp_data, dims = _qp_data_function(program)
-        self._stage_state, self._stage_input = dims
-        n, N = program.n_thrusters, program.horizon
-        self._movable = np.zeros(N)
-        self._movable[program.move_steps] = 1.0
-        H, A = self._qp_data.sparsity_out(0), self._qp_data.sparsity_out(2)
-        self._qp = hpipm_solver(
-            "rti_sparse_qp",
-            H,
-            A,
-            [self._stage_state] * (N + 1),
-            [self._stage_input] * N + [0],
-            [n + program.n_slots] * N + [0],
-            config.qp_iteration_limit,
-        )
+        N, n, slots = program.horizon, program.n_thrusters, program.n_slots
+        qp = stage_qp(program)
+        limit = program.config.qp_iteration_limit
+        step = None
+        if compiled or (compiled is None and program.config.jit):
+            step = compiled_qp_step(qp.stage, qp.terminal, N, n, slots, hpipm_settings(limit))
+            if step is None and compiled:
+                raise RuntimeError("no C compiler, or no HPIPM in the casadi wheel")
+        self.compiled = step is not None
+        self._step = step if step is not None else CasadiQpStep(qp, N, n, slots, limit)
+        movable = np.zeros(N)
+        movable[program.move_steps] = 1.0
+        weights = np.tile(program.ocp.stage_weight, (N, 1))
+        weights[0] = 0.0  # X_0 is fixed: no cost
+        self._movable, self._weights = movable, weights
 
     def reset(self) -> None:
         """Nothing is carried between samples."""
@@ -90,218 +97,264 @@ class SparseRealTimeIteration:
         """``iterations`` SQP steps from ``guess``; on a cold start the states are re-simulated
         from x_hat under the new thrusts after each step (module docstring of nmpc)."""
         program = self.program
-        nz, nv, N = self._stage_state, self._stage_input, program.horizon
-        n = program.n_thrusters
+        n, N = program.n_thrusters, program.horizon
         started = time.perf_counter()
-        states = guess.states.T.copy()  # (6, N + 1)
-        thrust = program.plan(guess).T.copy()  # (n, N): the thrust at every step
-        disturbance = np.tile(sample.disturbance[:, None], (1, N))
+        states = np.ascontiguousarray(guess.states, dtype=float)  # (N + 1, 6)
+        thrust = np.ascontiguousarray(program.plan(guess), dtype=float)  # (N, n)
+        fixed = (
+            np.ascontiguousarray(sample.state, dtype=float),
+            np.ascontiguousarray(sample.previous, dtype=float),
+            np.ascontiguousarray(sample.reference, dtype=float),
+            self._weights,
+            np.ascontiguousarray(sample.disturbance, dtype=float),
+            np.ascontiguousarray(sample.slots, dtype=float),
+            sample.used.astype(float),
+            self._movable,
+        )
         total, status, slack = 0, "not run", np.zeros(N)
         with np.errstate(over="ignore", invalid="ignore"):
             for _ in range(iterations):
-                previous = np.hstack([sample.previous[:, None], thrust])
-                clearance, _ = program.clearances(states.T, sample)
-                near = (clearance < _OBSTACLE_RANGE_M) & sample.used[None, :]
-                data = self._qp_data(
-                    states,
-                    previous,
-                    thrust,
-                    sample.state,
-                    sample.previous,
-                    sample.reference[1:].T,
-                    sample.disturbance,
-                    sample.slots.T,
-                    near.T.astype(float),
-                    self._movable,
-                )
-                # The bounds carry the shooting gaps, the first to go non-finite (and the ones
-                # CasADi refuses); a NaN elsewhere shows in HPIPM's status or its solution.
-                if any(np.isnan(np.asarray(data[i])).any() for i in (1, 3, 4)):
-                    # A diverged iterate: never hand NaN to the solver (CasADi raises on it).
+                previous = np.vstack([sample.previous, thrust])
+                code, used_iterations = self._step(states, previous, thrust, *fixed)
+                total += used_iterations
+                if code == _NOT_FINITE:
+                    # A diverged iterate: never hand NaN to the solver.
                     return Solution(
                         None, total, time.perf_counter() - started, "non-finite QP data"
                     )
-                H, g, A, lba, uba, lbx, ubx = data
-                result = self._qp(h=H, g=g, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-                stats = self._qp.stats()
-                total += int(stats["iter_count"])
-                status = f"hpipm {stats['return_status']}"
-                w = np.asarray(result["x"]).ravel()
-                if not solved(stats) or not np.all(np.isfinite(w)):
+                status = f"hpipm {code}"
+                dz, dv = self._step.dz, self._step.dv
+                if code != _SOLVED or not (np.isfinite(dz).all() and np.isfinite(dv).all()):
                     return Solution(None, total, time.perf_counter() - started, status)
-                stage = nz + nv
-                dz = np.stack([w[k * stage : k * stage + nz] for k in range(N + 1)], axis=1)
-                dv = np.stack([w[k * stage + nz : (k + 1) * stage] for k in range(N)], axis=1)
-                thrust = thrust + dv[:n]
-                slack = dv[n] / slack_scale(program.ocp.slack_penalty)
+                thrust = thrust + dv[:, :n]
+                slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
                 if cold:
-                    rolled = program.rollout(sample.state, thrust, disturbance)
-                    states = np.hstack([sample.state[:, None], np.asarray(rolled)])
+                    disturbance = np.tile(sample.disturbance[:, None], (1, N))
+                    rolled = program.rollout(sample.state, thrust.T, disturbance)
+                    states = np.vstack([sample.state, np.asarray(rolled).T])
                 else:
-                    states = states + dz[:6]
+                    states = states + dz[:, :6]
                 if not np.all(np.isfinite(states)):
                     return Solution(None, total, time.perf_counter() - started, "non-finite states")
         slacks = np.zeros((N, program.n_slots))
         slacks[:, 0] = np.maximum(slack, 0.0)
-        iterate = Iterate(states.T.copy(), thrust.T[program.move_steps].copy(), slacks)
+        iterate = Iterate(states.copy(), thrust[program.move_steps].copy(), slacks)
         return Solution(iterate, total, time.perf_counter() - started, status)
 
 
-# QP-data functions by (vehicle, configuration, slots): campaign runs of one vehicle reuse
-# one; the oldest is dropped past _CACHE_SIZE.
-_CACHE: dict[tuple[str, str, int], tuple[ca.Function, tuple[int, int]]] = {}
+class StageQp(NamedTuple):
+    """The sparse QP of one SQP step, stage by stage, in HPIPM's form (Frison and Diehl 2020):
+
+        z_{k+1} = A_k z_k + B_k v_k + b_k
+        cost_k  = 1/2 [v; z]' [R S; S' Q] [v; z] + r' v + q' z
+        lbu <= v_k <= ubu,   lg <= C_k z_k + D_k v_k <= ug
+
+    ``stage`` maps (X_k, X_{k+1}, P_k, P_{k+1}, F_k, r_k, W_k, d, slots, used, movable_k,
+    k + 1) to (A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu), every matrix dense and
+    column-major; ``terminal`` maps (X_N, r_N) to (Q, q) of the last stage. Both are
+    expanded SX, so the same functions are evaluated by CasADi or compiled to C.
+    """
+
+    stage: ca.Function
+    terminal: ca.Function
+    states: int  # nz
+    inputs: int  # nv
+    rows: int  # ng of stages 0..N-1
+
+
+# Stage QPs by (vehicle, configuration, slots): campaign runs of one vehicle reuse one; the
+# oldest is dropped past _CACHE_SIZE.
+_CACHE: dict[tuple[str, str, int], StageQp] = {}
 _CACHE_SIZE = 16
 
 
-def _qp_data_function(program: MultipleShootingProgram):
-    """The sparse QP's data as one CasADi function, built once per vehicle and configuration
-    in a process.
-
-    It is evaluated by CasADi's virtual machine (0.3 ms on paper-obstacles): compiling the
-    whole expanded horizon with the C compiler took 30-60 s per configuration, longer than a
-    run. Compiling one stage and mapping it over the horizon is the next step.
-    """
+def stage_qp(program: MultipleShootingProgram) -> StageQp:
+    """The program's stage QP functions, built once per vehicle and configuration."""
     key = (program.model.model_dump_json(), program.config.model_dump_json(), program.n_slots)
     if key not in _CACHE:
         if len(_CACHE) >= _CACHE_SIZE:
             _CACHE.pop(next(iter(_CACHE)))
-        dims = (6 + program.n_thrusters, program.n_thrusters + 1)
-        _CACHE[key] = (_build_qp_data(program), dims)
+        _CACHE[key] = _build_stage_qp(program)
     return _CACHE[key]
 
 
-def _build_qp_data(program) -> ca.Function:
-    """(iterate, sample data) -> (H, g, A, lba, uba, lbx, ubx) of the sparse QP, assembled
-    from stage blocks (H is block diagonal; stage k's rows touch z_k, v_k and z_{k+1})."""
-    n, N, S, NX = program.n_thrusters, program.horizon, program.n_slots, 6
-    nz, nv = NX + n, n + 1
-    stage = nz + nv
+def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
+    n, S, NX = program.n_thrusters, program.n_slots, 6
+    nz, nv, ng = NX + n, n + 1, n + S
+    ocp = program.ocp
+    R_weight = ocp.input_weight
+    rho = ocp.slack_penalty
+    sigma = slack_scale(rho)  # the slack variable is sigma s (hpipm.slack_scale says why)
 
-    X = ca.SX.sym("X", NX, N + 1)
-    P = ca.SX.sym("P", n, N + 1)  # P[:, k] = F_{k-1} of the iterate
-    F = ca.SX.sym("F", n, N)
-    x_hat = ca.SX.sym("x_hat", NX)
-    previous = ca.SX.sym("F_prev", n)
-    reference = ca.SX.sym("ref", NX, N)  # column k: r_{k+1}
+    X, X_next = ca.SX.sym("X", NX), ca.SX.sym("X_next", NX)
+    P, P_next = ca.SX.sym("P", n), ca.SX.sym("P_next", n)  # P_k = F_{k-1} of the iterate
+    F = ca.SX.sym("F", n)
+    reference, weight = ca.SX.sym("r", NX), ca.SX.sym("W", NX)
     force = ca.SX.sym("d_world", 3)
     slots = ca.SX.sym("slots", SLOT_FIELDS, S)
-    near = ca.SX.sym("near", S, N)  # 1 where slot o's row of step k + 1 is kept
-    movable = ca.SX.sym("movable", N)
+    used = ca.SX.sym("used", S)
+    movable = ca.SX.sym("movable")
+    step_index = ca.SX.sym("step")  # k + 1: the step whose obstacle rows this stage carries
 
-    xs, us = ca.SX.sym("xs", NX), ca.SX.sym("us", n)
-    next_state = program.step(xs, us, force)
-    linearised = ca.Function(
-        "linearised",
-        [xs, us, force],
-        [next_state, ca.jacobian(next_state, xs), ca.jacobian(next_state, us)],
-    )
+    # Cost of z_k = [dX_k; dp_k] and v_k = [dF_k; sigma s_k].
+    Q = ca.SX(nz, nz)
+    Q[:NX, :NX] = ca.diag(2.0 * weight)
+    q = ca.vertcat(2.0 * weight * (X - reference), ca.SX.zeros(n))
+    R = ca.SX(nv, nv)
+    R[:n, :n] = ca.diag(2.0 * R_weight + _STEP_REGULARISATION)
+    R[n, n] = 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
+    S_cross = ca.SX(nv, nz)
+    if ocp.penalty is ThrustPenalty.ABSOLUTE:
+        r = ca.vertcat(2.0 * R_weight * F, rho / sigma)
+    else:  # R weights the change F_k - P_k, and P_k moves with dp_k
+        change = F - P
+        Q[NX:, NX:] = ca.diag(2.0 * R_weight)
+        S_cross[:n, NX:] = ca.diag(-2.0 * R_weight)
+        q[NX:] = -2.0 * R_weight * change
+        r = ca.vertcat(2.0 * R_weight * change, rho / sigma)
 
-    ocp = program.ocp
-    Q, S_terminal, R = ocp.stage_weight, ocp.terminal_weight, ocp.input_weight
-    absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
+    # Dynamics: dX_{k+1} = A dX_k + B dF_k + gap, dp_{k+1} = dF_k + (F_k - P_{k+1}).
+    successor = program.step(X, F, force)
+    A = ca.diagcat(ca.jacobian(successor, X), ca.SX(n, n))
+    B = ca.SX(nz, nv)
+    B[:NX, :n] = ca.jacobian(successor, F)
+    B[NX:, :n] = ca.SX.eye(n)
+    gap = successor - X_next
+    b = ca.vertcat(gap, F - P_next)
+
+    # Rows: the rate |(F + dF) - (P + dp)| <= movable * max_move, then per obstacle slot the
+    # half-plane tangent to its inflated disc at X_{k+1}, n . (p_{k+1} + dp_{k+1} - c) + s >=
+    # reach, through the linearised dynamics; kept for the used slots within
+    # _OBSTACLE_RANGE_M of the disc.
+    change = F - P
     max_move = ca.DM(ocp.max_move)
-    eye_n, zeros = ca.SX.eye(n), ca.SX
+    t = step_index * program.sample_time
+    C_rows = [ca.horzcat(ca.SX(n, NX), -ca.SX.eye(n))]
+    D_rows = [ca.horzcat(ca.SX.eye(n), ca.SX(n, 1))]
+    lower, upper = [-movable * max_move - change], [movable * max_move - change]
+    for o in range(S):
+        offset = X_next[0:2] - (slots[0:2, o] + t * slots[2:4, o])
+        distance = ca.sqrt(ca.sumsqr(offset) + DISTANCE_SMOOTHING_M2)
+        normal = (offset / distance).T
+        C_rows.append(ca.horzcat(normal @ A[0:2, :NX], ca.SX(1, n)))
+        D_rows.append(ca.horzcat(normal @ B[0:2, :n], ca.SX(1, 1) + 1.0 / sigma))
+        near = ca.logic_and(used[o] > 0.5, distance - slots[4, o] < _OBSTACLE_RANGE_M)
+        lower.append(ca.if_else(near, slots[4, o] - distance - normal @ gap[0:2], -ca.inf))
+        upper.append(ca.inf)
+    lbu = ca.vertcat(ocp.input_lower - F, 0.0)
+    ubu = ca.vertcat(ocp.input_upper - F, ca.inf)
 
-    hessian_blocks, gradients, row_blocks = [], [], []
-    lbx, ubx, lba, uba = [], [], [], []
-    for k in range(N + 1):
-        # z_k = [dX_k; dp_k]: the state cost (none on the fixed X_0) and bounds.
-        W = np.zeros(NX) if k == 0 else (S_terminal if k == N else Q)
-        state_gradient = ca.SX.zeros(NX) if k == 0 else 2.0 * W * (X[:, k] - reference[:, k - 1])
-        H_z = ca.diagcat(ca.diag(2.0 * W), ca.SX(n, n))
-        g_z = ca.vertcat(state_gradient, ca.SX.zeros(n))
-        if k == 0:
-            fixed = ca.vertcat(x_hat - X[:, 0], previous - P[:, 0])
-            lbx.append(fixed)
-            ubx.append(fixed)
-        else:
-            lbx.append(-np.inf * np.ones(nz))
-            ubx.append(np.inf * np.ones(nz))
-        if k == N:
-            hessian_blocks.append(H_z)
-            gradients.append(g_z)
-            break
-
-        # v_k = [dF_k; s_k]: thrust cost, slack penalty, bounds.
-        # The slack variable is sigma s (hpipm.slack_scale says why).
-        rho = ocp.slack_penalty
-        sigma = slack_scale(rho)
-        H_v = ca.diagcat(
-            ca.diag(2.0 * R + _STEP_REGULARISATION), 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
-        )
-        H_zv = ca.SX(nz, nv)
-        if absolute:
-            g_v = ca.vertcat(2.0 * R * F[:, k], rho / sigma)
-        else:
-            change = F[:, k] - P[:, k]
-            H_z[NX:, NX:] = ca.diag(2.0 * R)
-            H_zv[NX:, :n] = ca.diag(-2.0 * R)
-            g_z[NX:] = -2.0 * R * change
-            g_v = ca.vertcat(2.0 * R * change, rho / sigma)
-        hessian_blocks.append(ca.blockcat([[H_z, H_zv], [H_zv.T, H_v]]))
-        gradients += [g_z, g_v]
-        lbx += [ocp.input_lower - F[:, k], 0.0]
-        ubx += [ocp.input_upper - F[:, k], np.inf]
-
-        # Stage rows in HPIPM's order: gaps (A_k z_k + B_k v_k - z_{k+1} = -gap_k), then
-        # this stage's constraints (rate rows, obstacle rows of step k + 1).
-        successor, jac_x, jac_u = linearised(X[:, k], F[:, k], force)
-        gap = successor - X[:, k + 1]
-        held_gap = F[:, k] - P[:, k + 1]
-        change = F[:, k] - P[:, k]
-        normals, distances = [], []
-        t = (k + 1) * program.sample_time
-        for o in range(S):
-            offset = X[0:2, k + 1] - (slots[0:2, o] + t * slots[2:4, o])
-            distance = ca.sqrt(ca.sumsqr(offset) + DISTANCE_SMOOTHING_M2)
-            normals.append((offset / distance).T)
-            distances.append(distance)
-        normal = ca.vertcat(*normals) if S else ca.SX(0, 2)
-        # Columns [z_k | v_k | z_{k+1}].
-        on_z = ca.vertcat(
-            ca.horzcat(jac_x, zeros(NX, n)),
-            zeros(n, nz),
-            ca.horzcat(zeros(n, NX), -eye_n),
-            ca.horzcat(normal @ jac_x[0:2, :], zeros(S, n)),
-        )
-        on_v = ca.vertcat(
-            ca.horzcat(jac_u, zeros(NX, 1)),
-            ca.horzcat(eye_n, zeros(n, 1)),
-            ca.horzcat(eye_n, zeros(n, 1)),
-            ca.horzcat(normal @ jac_u[0:2, :], ca.SX.ones(S, 1) / sigma),
-        )
-        on_next = ca.vertcat(-ca.SX.eye(nz), zeros(n + S, nz))
-        row_blocks.append((on_z, on_v, on_next))
-        obstacle_lower = [
-            ca.if_else(
-                near[o, k] > 0.5, slots[4, o] - distances[o] - normals[o] @ gap[0:2], -np.inf
-            )
-            for o in range(S)
-        ]
-        lba += [-gap, -held_gap, -movable[k] * max_move - change, *obstacle_lower]
-        uba += [-gap, -held_gap, movable[k] * max_move - change, *([np.inf] * S)]
-
-    n_w = (N + 1) * nz + N * nv
-    rows = []
-    for k, (on_z, on_v, on_next) in enumerate(row_blocks):
-        left, right = k * stage, n_w - (k + 1) * stage - nz
-        rows.append(
-            ca.horzcat(zeros(on_z.size1(), left), on_z, on_v, on_next, zeros(on_z.size1(), right))
-        )
-    inputs = [X, P, F, x_hat, previous, reference, force, slots, near, movable]
-    names = ["X", "P", "F", "x_hat", "F_prev", "ref", "d_world", "slots", "near", "movable"]
-    return ca.Function(
-        "rti_sparse_qp_data",
-        inputs,
+    dense = [ca.densify(e) for e in (A, B, b, Q, S_cross, R, q, r)]
+    dense += [ca.densify(ca.vertcat(*C_rows)), ca.densify(ca.vertcat(*D_rows))]
+    dense += [ca.densify(e) for e in (ca.vertcat(*lower), ca.vertcat(*upper), lbu, ubu)]
+    stage = ca.Function(
+        "rti_stage",
+        [X, X_next, P, P_next, F, reference, weight, force, slots, used, movable, step_index],
+        dense,
         [
-            ca.diagcat(*hessian_blocks),
-            ca.vertcat(*gradients),
-            ca.vertcat(*rows),
-            ca.vertcat(*lba),
-            ca.vertcat(*uba),
-            ca.vertcat(*lbx),
-            ca.vertcat(*ubx),
-        ],
-        names,
-        ["H", "g", "A", "lba", "uba", "lbx", "ubx"],
+            "X",
+            "X_next",
+            "P",
+            "P_next",
+            "F",
+            "ref",
+            "W",
+            "d_world",
+            "slots",
+            "used",
+            "movable",
+            "step",
+        ],  # fmt: skip
+        ["A", "B", "b", "Q", "S", "R", "q", "r", "C", "D", "lg", "ug", "lbu", "ubu"],
     )
+    terminal_weight = ocp.terminal_weight
+    Q_N = ca.SX(nz, nz)
+    Q_N[:NX, :NX] = ca.diag(2.0 * terminal_weight)
+    q_N = ca.vertcat(2.0 * terminal_weight * (X - reference), ca.SX.zeros(n))
+    terminal = ca.Function(
+        "rti_terminal", [X, reference], [ca.densify(Q_N), ca.densify(q_N)], ["X", "ref"], ["Q", "q"]
+    )
+    return StageQp(stage, terminal, nz, nv, ng)
+
+
+class CasadiQpStep:
+    """The same QP step as :class:`~auvmpc.solvers.compiled_qp_step.CompiledQpStep`, without a
+    C compiler: the stage functions assembled into one sparse QP (variables [z_0 v_0 z_1 ...
+    z_N], rows [gaps_0 rows_0 gaps_1 ...]), evaluated by CasADi's virtual machine and solved
+    by HPIPM through CasADi's interface."""
+
+    def __init__(self, qp: StageQp, horizon: int, thrusters: int, slots: int,
+                 iteration_limit: int | None) -> None:  # fmt: skip
+        N, n, NX = horizon, thrusters, 6
+        nz, nv = qp.states, qp.inputs
+        X, P = ca.SX.sym("X", NX, N + 1), ca.SX.sym("P", n, N + 1)
+        F, reference = ca.SX.sym("F", n, N), ca.SX.sym("ref", NX, N + 1)
+        weight = ca.SX.sym("W", NX, N)
+        x_hat, previous = ca.SX.sym("x_hat", NX), ca.SX.sym("F_prev", n)
+        force, slot_data = ca.SX.sym("d_world", 3), ca.SX.sym("slots", SLOT_FIELDS, slots)
+        used, movable = ca.SX.sym("used", slots), ca.SX.sym("movable", N)
+
+        n_w = (N + 1) * nz + N * nv
+        hessian, gradient, rows, lba, uba = [], [], [], [], []
+        lbx = [x_hat - X[:, 0], previous - P[:, 0]]
+        ubx = list(lbx)
+        for k in range(N):
+            A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu = qp.stage(
+                X[:, k], X[:, k + 1], P[:, k], P[:, k + 1], F[:, k], reference[:, k],
+                weight[:, k], force, slot_data, used, movable[k], k + 1,
+            )  # fmt: skip
+            hessian.append(ca.blockcat([[Q, S.T], [S, R]]))
+            gradient += [q, r]
+            if k > 0:
+                lbx.append(-np.inf * np.ones(nz))
+                ubx.append(np.inf * np.ones(nz))
+            lbx.append(lbu)
+            ubx.append(ubu)
+            left, right = k * (nz + nv), n_w - (k + 1) * (nz + nv) - nz
+            block = ca.vertcat(
+                ca.horzcat(A, B, -ca.SX.eye(nz)), ca.horzcat(C, D, ca.SX(C.size1(), nz))
+            )
+            rows.append(ca.horzcat(ca.SX(block.size1(), left), block, ca.SX(block.size1(), right)))
+            lba += [-b, lg]
+            uba += [-b, ug]
+        Q_N, q_N = qp.terminal(X[:, N], reference[:, N])
+        hessian.append(Q_N)
+        gradient.append(q_N)
+        lbx.append(-np.inf * np.ones(nz))
+        ubx.append(np.inf * np.ones(nz))
+        self._data = ca.Function(
+            "rti_sparse_qp_data",
+            [X, P, F, x_hat, previous, reference, weight, force, slot_data, used, movable],
+            [ca.diagcat(*hessian), ca.vertcat(*gradient), ca.vertcat(*rows),
+             ca.vertcat(*lba), ca.vertcat(*uba), ca.vertcat(*lbx), ca.vertcat(*ubx)],
+        )  # fmt: skip
+        self._qp = hpipm_solver(
+            "rti_sparse_qp",
+            self._data.sparsity_out(0),
+            self._data.sparsity_out(2),
+            [nz] * (N + 1),
+            [nv] * N + [0],
+            [qp.rows] * N + [0],
+            iteration_limit,
+        )
+        self._sizes = (N, nz, nv)
+        self.dz = np.zeros((N + 1, nz))
+        self.dv = np.zeros((N, nv))
+
+    def __call__(self, X, P, F, x_hat, previous, reference, weight, force, slots, used, movable):
+        """The arguments of CompiledQpStep, in its (row-major) layout -> (status, iterations)."""
+        N, nz, nv = self._sizes
+        H, g, A, lba, uba, lbx, ubx = self._data(
+            X.T, P.T, F.T, x_hat, previous, reference.T, weight.T, force, slots.T, used, movable
+        )
+        # The bounds carry the shooting gaps, the first to go non-finite (and the ones CasADi
+        # refuses); a NaN elsewhere shows in HPIPM's status or its solution.
+        if any(np.isnan(np.asarray(v)).any() for v in (g, lba, uba, lbx, ubx)):
+            return _NOT_FINITE, 0
+        result = self._qp(h=H, g=g, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+        stats = self._qp.stats()
+        w = np.asarray(result["x"]).ravel()
+        stage = nz + nv
+        self.dz[:] = np.stack([w[k * stage : k * stage + nz] for k in range(N + 1)])
+        self.dv[:] = np.stack([w[k * stage + nz : (k + 1) * stage] for k in range(N)])
+        return int(stats["return_status"]), int(stats["iter_count"])

@@ -1,0 +1,242 @@
+/* One sparse QP step of auvmpc's real-time iteration, in one call from Python.
+ *
+ * The stage data come from CasADi-generated code (rti_stage, rti_terminal: see
+ * solvers/sparse_rti.py, StageQp, for the QP); HPIPM, linked from the casadi wheel, solves the
+ * QP. Everything HPIPM needs is allocated once per controller (auvmpc_rti_create): through
+ * CasADi's interface the QP's set-up and memory were allocated and freed on every call, about
+ * five times the cost of the interior point itself.
+ *
+ * Memory layout of the arguments (row-major, one stage per row): X (N+1, 6) the iterate's
+ * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
+ * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N).
+ * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [dF; sigma s].
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <hpipm_common.h>
+#include <hpipm_d_ocp_qp.h>
+#include <hpipm_d_ocp_qp_dim.h>
+#include <hpipm_d_ocp_qp_ipm.h>
+#include <hpipm_d_ocp_qp_sol.h>
+
+#include "rti_qp_data.h"
+
+#define NX 6
+#define N_STAGE_OUT 14
+#define NOT_FINITE (-1)
+
+enum { OUT_A, OUT_B, OUT_b, OUT_Q, OUT_S, OUT_R, OUT_q, OUT_r, OUT_C, OUT_D, OUT_lg, OUT_ug,
+       OUT_lbu, OUT_ubu };
+
+typedef struct {
+    int N, n, S, nz, nv, ng;
+    double inf;
+    struct d_ocp_qp_dim dim;
+    struct d_ocp_qp qp;
+    struct d_ocp_qp_sol sol;
+    struct d_ocp_qp_ipm_arg arg;
+    struct d_ocp_qp_ipm_ws ws;
+    void *hpipm_memory[5];
+    double *out[N_STAGE_OUT]; /* one stage's data, reused for every stage */
+    int out_size[N_STAGE_OUT];
+    double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
+    int *index;   /* 0, 1, ..., max(nz, nv) - 1: every bound is on every variable */
+    const casadi_real **arg_work;
+    casadi_real **res_work;
+    casadi_int *iw;
+    casadi_real *w;
+} Step;
+
+static void *allocate(void **slot, hpipm_size_t size) {
+    *slot = calloc(1, size);
+    return *slot;
+}
+
+void auvmpc_rti_free(void *handle) {
+    Step *s = (Step *) handle;
+    if (!s) return;
+    for (int i = 0; i < 5; ++i) free(s->hpipm_memory[i]);
+    for (int i = 0; i < N_STAGE_OUT; ++i) free(s->out[i]);
+    free(s->fixed);
+    free(s->index);
+    free(s->arg_work);
+    free(s->res_work);
+    free(s->iw);
+    free(s->w);
+    free(s);
+}
+
+/* settings: iteration limit, mu0, tolerance (stationarity, equality, inequality,
+ * complementarity), the bound standing for infinity, HPIPM's mode. NULL when memory runs
+ * out. */
+void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
+    Step *s = (Step *) calloc(1, sizeof(Step));
+    if (!s) return NULL;
+    s->N = N;
+    s->n = n;
+    s->S = S;
+    s->nz = NX + n;
+    s->nv = n + 1;
+    s->ng = n + S;
+    s->inf = settings[3];
+
+    int *nx = calloc(N + 1, sizeof(int)), *nu = calloc(N + 1, sizeof(int));
+    int *nbx = calloc(N + 1, sizeof(int)), *nbu = calloc(N + 1, sizeof(int));
+    int *ng = calloc(N + 1, sizeof(int)), *ns = calloc(N + 1, sizeof(int));
+    int ok = nx && nu && nbx && nbu && ng && ns;
+    if (ok) {
+        for (int k = 0; k <= N; ++k) {
+            nx[k] = s->nz;
+            nu[k] = k < N ? s->nv : 0;
+            nbu[k] = nu[k];
+            ng[k] = k < N ? s->ng : 0;
+        }
+        nbx[0] = s->nz; /* z_0 fixed by its bounds */
+        ok = allocate(&s->hpipm_memory[0], d_ocp_qp_dim_memsize(N)) != NULL;
+    }
+    if (ok) {
+        d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[0]);
+        d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, ng, ns, &s->dim);
+        ok = allocate(&s->hpipm_memory[1], d_ocp_qp_memsize(&s->dim))
+             && allocate(&s->hpipm_memory[2], d_ocp_qp_sol_memsize(&s->dim))
+             && allocate(&s->hpipm_memory[3], d_ocp_qp_ipm_arg_memsize(&s->dim));
+    }
+    free(nx); free(nu); free(nbx); free(nbu); free(ng); free(ns);
+    if (!ok) {
+        auvmpc_rti_free(s);
+        return NULL;
+    }
+    d_ocp_qp_create(&s->dim, &s->qp, s->hpipm_memory[1]);
+    d_ocp_qp_sol_create(&s->dim, &s->sol, s->hpipm_memory[2]);
+    d_ocp_qp_ipm_arg_create(&s->dim, &s->arg, s->hpipm_memory[3]);
+    d_ocp_qp_ipm_arg_set_default((enum hpipm_mode) (int) settings[4], &s->arg);
+    int iteration_limit = (int) settings[0];
+    double mu0 = settings[1], tolerance = settings[2];
+    d_ocp_qp_ipm_arg_set_iter_max(&iteration_limit, &s->arg);
+    d_ocp_qp_ipm_arg_set_mu0(&mu0, &s->arg);
+    d_ocp_qp_ipm_arg_set_tol_stat(&tolerance, &s->arg);
+    d_ocp_qp_ipm_arg_set_tol_eq(&tolerance, &s->arg);
+    d_ocp_qp_ipm_arg_set_tol_ineq(&tolerance, &s->arg);
+    d_ocp_qp_ipm_arg_set_tol_comp(&tolerance, &s->arg);
+    if (!allocate(&s->hpipm_memory[4], d_ocp_qp_ipm_ws_memsize(&s->dim, &s->arg))) {
+        auvmpc_rti_free(s);
+        return NULL;
+    }
+    d_ocp_qp_ipm_ws_create(&s->dim, &s->arg, &s->ws, s->hpipm_memory[4]);
+
+    for (int i = 0; i < N_STAGE_OUT; ++i) {
+        s->out_size[i] = (int) rti_stage_sparsity_out(i)[0] * (int) rti_stage_sparsity_out(i)[1];
+        s->out[i] = calloc(s->out_size[i] > 0 ? s->out_size[i] : 1, sizeof(double));
+        if (!s->out[i]) ok = 0;
+    }
+    int width = s->nz > s->nv ? s->nz : s->nv;
+    s->fixed = calloc(s->nz, sizeof(double));
+    s->index = calloc(width, sizeof(int));
+    casadi_int sz_arg, sz_res, sz_iw, sz_w, t_arg, t_res, t_iw, t_w;
+    rti_stage_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+    rti_terminal_work(&t_arg, &t_res, &t_iw, &t_w);
+    if (t_arg > sz_arg) sz_arg = t_arg;
+    if (t_res > sz_res) sz_res = t_res;
+    if (t_iw > sz_iw) sz_iw = t_iw;
+    if (t_w > sz_w) sz_w = t_w;
+    s->arg_work = calloc(sz_arg + 1, sizeof(casadi_real *));
+    s->res_work = calloc(sz_res + 1, sizeof(casadi_real *));
+    s->iw = calloc(sz_iw + 1, sizeof(casadi_int));
+    s->w = calloc(sz_w + 1, sizeof(casadi_real));
+    if (!ok || !s->fixed || !s->index || !s->arg_work || !s->res_work || !s->iw || !s->w) {
+        auvmpc_rti_free(s);
+        return NULL;
+    }
+    for (int i = 0; i < width; ++i) s->index[i] = i;
+    d_ocp_qp_set_idxbx(0, s->index, &s->qp);
+    for (int k = 0; k < N; ++k) d_ocp_qp_set_idxbu(k, s->index, &s->qp);
+    return s;
+}
+
+static int all_finite(const double *v, int size) {
+    for (int i = 0; i < size; ++i)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+/* Bounds of +-inf (no bound) become +-s->inf, as CasADi's HPIPM interface does; NaN is kept
+ * (and refused by the caller). */
+static void clip(double *v, int size, double inf) {
+    for (int i = 0; i < size; ++i) {
+        if (v[i] > inf) v[i] = inf;
+        if (v[i] < -inf) v[i] = -inf;
+    }
+}
+
+static int has_nan(const double *v, int size) {
+    for (int i = 0; i < size; ++i)
+        if (v[i] != v[i]) return 1;
+    return 0;
+}
+
+/* The HPIPM status (0: solved), or NOT_FINITE when the QP data are not finite. */
+int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
+                    const double *x_hat, const double *F_prev, const double *ref,
+                    const double *W, const double *d, const double *slots, const double *used,
+                    const double *movable, double *dz, double *dv, int *iterations) {
+    Step *s = (Step *) handle;
+    const int N = s->N, n = s->n, nz = s->nz, nv = s->nv;
+    *iterations = 0;
+    for (int k = 0; k < N; ++k) {
+        double step_index = k + 1;
+        const casadi_real *in[12] = {X + NX * k, X + NX * (k + 1), P + n * k, P + n * (k + 1),
+                                     F + n * k, ref + NX * k, W + NX * k, d, slots, used,
+                                     movable + k, &step_index};
+        memcpy(s->arg_work, in, sizeof(in));
+        memcpy(s->res_work, s->out, sizeof(s->out));
+        if (rti_stage(s->arg_work, s->res_work, s->iw, s->w, 0)) return NOT_FINITE;
+        /* The gaps and gradients go non-finite first on a diverged iterate. */
+        if (!all_finite(s->out[OUT_b], s->out_size[OUT_b]) || !all_finite(s->out[OUT_q], nz)
+            || !all_finite(s->out[OUT_r], nv))
+            return NOT_FINITE;
+        for (int i = 0; i < N_STAGE_OUT; ++i)
+            if (has_nan(s->out[i], s->out_size[i])) return NOT_FINITE;
+        clip(s->out[OUT_lg], s->ng, s->inf);
+        clip(s->out[OUT_ug], s->ng, s->inf);
+        clip(s->out[OUT_lbu], nv, s->inf);
+        clip(s->out[OUT_ubu], nv, s->inf);
+        d_ocp_qp_set_A(k, s->out[OUT_A], &s->qp);
+        d_ocp_qp_set_B(k, s->out[OUT_B], &s->qp);
+        d_ocp_qp_set_b(k, s->out[OUT_b], &s->qp);
+        d_ocp_qp_set_Q(k, s->out[OUT_Q], &s->qp);
+        d_ocp_qp_set_S(k, s->out[OUT_S], &s->qp);
+        d_ocp_qp_set_R(k, s->out[OUT_R], &s->qp);
+        d_ocp_qp_set_q(k, s->out[OUT_q], &s->qp);
+        d_ocp_qp_set_r(k, s->out[OUT_r], &s->qp);
+        d_ocp_qp_set_C(k, s->out[OUT_C], &s->qp);
+        d_ocp_qp_set_D(k, s->out[OUT_D], &s->qp);
+        d_ocp_qp_set_lg(k, s->out[OUT_lg], &s->qp);
+        d_ocp_qp_set_ug(k, s->out[OUT_ug], &s->qp);
+        d_ocp_qp_set_lbu(k, s->out[OUT_lbu], &s->qp);
+        d_ocp_qp_set_ubu(k, s->out[OUT_ubu], &s->qp);
+    }
+    const casadi_real *in[2] = {X + NX * N, ref + NX * N};
+    memcpy(s->arg_work, in, sizeof(in));
+    s->res_work[0] = s->out[OUT_Q];
+    s->res_work[1] = s->out[OUT_q];
+    if (rti_terminal(s->arg_work, s->res_work, s->iw, s->w, 0)) return NOT_FINITE;
+    if (!all_finite(s->out[OUT_q], nz)) return NOT_FINITE;
+    d_ocp_qp_set_Q(N, s->out[OUT_Q], &s->qp);
+    d_ocp_qp_set_q(N, s->out[OUT_q], &s->qp);
+
+    for (int i = 0; i < NX; ++i) s->fixed[i] = x_hat[i] - X[i];
+    for (int i = 0; i < n; ++i) s->fixed[NX + i] = F_prev[i] - P[i];
+    if (!all_finite(s->fixed, nz)) return NOT_FINITE;
+    d_ocp_qp_set_lbx(0, s->fixed, &s->qp);
+    d_ocp_qp_set_ubx(0, s->fixed, &s->qp);
+
+    d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg, &s->ws);
+    int status;
+    d_ocp_qp_ipm_get_status(&s->ws, &status);
+    d_ocp_qp_ipm_get_iter(&s->ws, iterations);
+    for (int k = 0; k <= N; ++k) d_ocp_qp_sol_get_x(k, &s->sol, dz + nz * k);
+    for (int k = 0; k < N; ++k) d_ocp_qp_sol_get_u(k, &s->sol, dv + nv * k);
+    return status;
+}

@@ -1,0 +1,119 @@
+"""The real-time iteration's QP step compiled to C (solvers/compiled_qp_step.py) against the
+same stage functions evaluated by CasADi and solved through CasADi's HPIPM interface: an
+independent assembly of the same QP, on vehicles from 2 to 4 thrusters and 15 kg to 1.9 t."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import auvmpc.solvers.compiled_qp_step as compiled_qp_step
+from auvmpc.controllers.base import ObstacleState
+from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.solvers.multiple_shooting import MultipleShootingProgram
+from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
+from auvmpc.vehicle import load_vehicle
+
+pytestmark = pytest.mark.skipif(
+    compiled_qp_step.compiler() is None, reason="no C compiler on this machine"
+)
+
+# Both solve the same QP to HPIPM's residual tolerance (1e-8) from different formulations of
+# the unbounded variables (CasADi boxes them at +-1e4, the driver leaves them free), so their
+# steps differ by the interior point's stopping error, relative to the step's size: measured
+# up to 1.1e-5 of max |step| over these cases (the predicted states of a 30-step horizon
+# amplify the residual); 1e-4 leaves room for other round-off, and is far below what a
+# formulation error gives (a wrong sign or transposed block moves the step by O(1)).
+SAME_STEP_RTOL = 1e-4
+
+CASES = [
+    ("jmse2210", ThrustPenalty.ABSOLUTE, 2),
+    ("bluerov2-heavy", ThrustPenalty.INCREMENT, 1),
+    ("rexrov", ThrustPenalty.ABSOLUTE, 1),
+    ("videoray-pro3", ThrustPenalty.INCREMENT, 2),
+]
+
+
+def _program(preset: str, penalty: ThrustPenalty, slots: int) -> MultipleShootingProgram:
+    config = ControllerConfig(type="nmpc", thrust_penalty=penalty, offset_free=False)
+    return MultipleShootingProgram(load_vehicle(preset), config, slots)
+
+
+def _qp_arguments(program: MultipleShootingProgram, solver, rng: np.random.Generator):
+    """A perturbed iterate (shooting gaps, moved thrusts) near two obstacles, one moving."""
+    N, n = program.horizon, program.n_thrusters
+    t = program.sample_time * np.arange(N + 1)
+    reference = np.zeros((N + 1, 6))
+    reference[:, 0], reference[:, 3] = 0.3 * t, 0.3
+    state = np.array([0.2, -0.3, 0.1, 0.25, 0.02, -0.01])
+    obstacles = (
+        ObstacleState(np.array([2.0, 0.4]), 0.5, np.zeros(2)),
+        ObstacleState(np.array([4.0, -1.0]), 0.4, np.array([0.0, 0.1])),
+    )
+    limit = 0.3 * program.ocp.input_upper
+    sample = program.sample(state, rng.uniform(-limit, limit), reference, np.zeros(3), obstacles)
+    states = reference + rng.normal(0.0, 0.05, reference.shape)
+    states[0] = state
+    thrust = rng.uniform(-limit, limit, (N, n))
+    previous = np.vstack([sample.previous, thrust])
+    used = sample.used.astype(float)
+    return (states, previous, thrust, sample.state, sample.previous, sample.reference,
+            solver._weights, sample.disturbance, sample.slots, used, solver._movable)  # fmt: skip
+
+
+@pytest.mark.parametrize(("preset", "penalty", "slots"), CASES)
+def test_compiled_step_solves_the_same_qp_as_casadi(preset, penalty, slots):
+    program = _program(preset, penalty, slots)
+    compiled = SparseRealTimeIteration(program, compiled=True)
+    reference = SparseRealTimeIteration(program, compiled=False)
+    assert compiled.compiled and not reference.compiled
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        arguments = _qp_arguments(program, compiled, rng)
+        status, iterations = compiled._step(*arguments)
+        expected_status, _ = reference._step(*arguments)
+        assert status == expected_status == 0
+        assert iterations > 0
+        assert np.abs(reference._step.dv).max() > 0.1, "a step that moves the thrust"
+        for ours, theirs in ((compiled._step.dz, reference._step.dz),
+                             (compiled._step.dv, reference._step.dv)):  # fmt: skip
+            scale = np.abs(theirs).max()
+            np.testing.assert_allclose(ours, theirs, rtol=0, atol=SAME_STEP_RTOL * scale)
+
+
+def test_non_finite_iterate_is_refused_before_the_solver():
+    program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
+    solver = SparseRealTimeIteration(program, compiled=True)
+    arguments = list(_qp_arguments(program, solver, np.random.default_rng(1)))
+    arguments[0] = arguments[0].copy()
+    arguments[0][5, 3] = np.nan
+    assert solver._step(*arguments) == (-1, 0)
+
+
+def test_library_is_built_once_and_then_loaded(tmp_path, monkeypatch):
+    monkeypatch.setenv("AUVMPC_CACHE_DIR", str(tmp_path))
+    program = _program("bluerov2-heavy", ThrustPenalty.ABSOLUTE, 1)
+    assert SparseRealTimeIteration(program).compiled
+    built = list(tmp_path.glob("rti-*.so"))
+    assert len(built) == 1
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(compiled_qp_step.subprocess, "run", no_compiler)
+    assert SparseRealTimeIteration(program).compiled
+    assert list(tmp_path.glob("*")) == built, "no partial or second file left behind"
+
+
+def test_without_a_compiler_the_casadi_step_is_used(monkeypatch):
+    program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
+    monkeypatch.setattr(compiled_qp_step, "compiler", lambda: None)
+    assert not SparseRealTimeIteration(program).compiled
+    with pytest.raises(RuntimeError, match="no C compiler"):
+        SparseRealTimeIteration(program, compiled=True)
+
+
+def test_jit_off_keeps_the_casadi_step():
+    config = ControllerConfig(type="nmpc", jit=False, offset_free=False)
+    program = MultipleShootingProgram(load_vehicle("jmse2210"), config, 1)
+    assert not SparseRealTimeIteration(program).compiled
