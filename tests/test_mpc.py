@@ -79,9 +79,12 @@ LINE_REFERENCE = "reference={type: line, start: [0, 0], heading_deg: 0, speed: 0
 
 
 def _config(controller_type: str = "mpc", **fields) -> ControllerConfig:
-    """The paper's controller unless told otherwise: no disturbance estimator, so that the
-    QP is built on the measured state (the estimator is exercised in the limit tests)."""
+    """The paper's controller and weights unless told otherwise (the tolerances here were
+    measured with them); no disturbance estimator, so that the QP is built on the measured
+    state (the estimator is exercised in the limit tests)."""
     fields.setdefault("offset_free", False)
+    fields.setdefault("R", (0.01,))
+    fields.setdefault("thrust_penalty", ThrustPenalty.ABSOLUTE)
     return ControllerConfig(type=controller_type, **fields)
 
 
@@ -305,7 +308,7 @@ def _solve_one_ocp(controller, prediction, state, reference, previous, half_plan
         weights = ca.DM(np.diag(config.S if i == ny else config.Q))
         error = X[:, i] - target[i]
         cost += ca.bilin(weights, error, error)
-    R = ca.DM(np.diag(config.thrust_weights(n)))
+    R = ca.DM(np.diag(config.ocp(model).input_weight))
     if config.thrust_penalty is ThrustPenalty.ABSOLUTE:
         cost += sum(ca.bilin(R, F[:, i], F[:, i]) for i in range(ny))
     else:

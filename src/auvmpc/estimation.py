@@ -45,6 +45,13 @@ NX, ND = 6, 3
 Positive = Annotated[float, Field(gt=0)]
 
 
+# Disturbance statistics as fractions of the thrust authority (ObserverConfig.for_vehicle).
+_PRIOR_FORCE_FRACTION = 0.5
+_PRIOR_MOMENT_FRACTION = 0.1
+_RATE_FORCE_FRACTION = 0.025  # per sqrt(s)
+_RATE_MOMENT_FRACTION = 0.003  # per sqrt(s)
+
+
 class ObserverConfig(StrictModel):
     """Noise levels the filter assumes (tuning knobs, not the simulated noise)."""
 
@@ -56,14 +63,46 @@ class ObserverConfig(StrictModel):
         default=(1e-3, 1e-3, 1e-3, 5e-3, 5e-3, 5e-3),
         description="model error per sample on [x, y, psi, u, v, r]",
     )
-    disturbance_rate_std: tuple[Positive, Positive, Positive] = Field(
-        default=(1.0, 1.0, 0.05),
+    disturbance_rate_std: tuple[Positive, Positive, Positive] | None = Field(
+        default=None,
         description="random-walk intensity of the world force X, Y (N/sqrt(s)) and moment "
-        "N (N m/sqrt(s)): larger tracks faster, smaller is smoother",
+        "N (N m/sqrt(s)): larger tracks faster, smaller is smoother; omitted: 2.5 % of the "
+        "vehicle's planar thrust authority and 0.3 % of its yaw authority per sqrt(s), see "
+        "docs/tuning.md",
     )
-    initial_disturbance_std: tuple[Positive, Positive, Positive] = Field(
-        default=(20.0, 20.0, 2.0), description="prior uncertainty of X, Y (N) and N (N m)"
+    initial_disturbance_std: tuple[Positive, Positive, Positive] | None = Field(
+        default=None,
+        description="prior uncertainty of X, Y (N) and N (N m); omitted: half the vehicle's "
+        "planar thrust authority and a tenth of its yaw authority, see docs/tuning.md",
     )
+
+    def for_vehicle(self, model: VehicleParams) -> ObserverConfig:
+        """This tuning with the omitted disturbance statistics scaled to ``model``.
+
+        The unknown force of a 15 N vehicle and of a 2 t ROV differ by two orders of
+        magnitude, so a prior or random walk in newtons cannot transfer; a fraction of the
+        thrust authority (VehicleParams.thrust_authority) does. The fractions keep the
+        paper vehicle near its former fixed tuning (20 N, 1 N/sqrt(s); 2 N m,
+        0.05 N m/sqrt(s)): 21 N, 1.06 N/sqrt(s); 1.8 N m, 0.054 N m/sqrt(s).
+        """
+        update = {}
+        # The world-frame X and Y share one scale: the current turns with the heading.
+        planar = float(max(model.thrust_authority[:2]))
+        yaw = float(model.thrust_authority[2])
+        if self.initial_disturbance_std is None:
+            update["initial_disturbance_std"] = (
+                _PRIOR_FORCE_FRACTION * planar,
+                _PRIOR_FORCE_FRACTION * planar,
+                _PRIOR_MOMENT_FRACTION * yaw,
+            )
+        if self.disturbance_rate_std is None:
+            update["disturbance_rate_std"] = (
+                _RATE_FORCE_FRACTION * planar,
+                _RATE_FORCE_FRACTION * planar,
+                _RATE_MOMENT_FRACTION * yaw,
+            )
+        return self.model_copy(update=update) if update else self
+
 
 
 # The smallest eigenvalue a covariance may have, as a fraction of the smallest noise
@@ -189,6 +228,7 @@ class DisturbanceObserver:
     def __init__(
         self, model: VehicleParams, sample_time: float, config: ObserverConfig, substeps: int = 1
     ) -> None:
+        config = config.for_vehicle(model)
         step = horizontal_model(model, sample_time, substeps).augmented_step
         rate = np.array(config.disturbance_rate_std) ** 2 * sample_time
         measurement = np.square(config.measurement_std)

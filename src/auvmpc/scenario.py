@@ -106,10 +106,15 @@ class ResolvedScenario:
         self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
         n = self.model.n_thrusters
         weights = scenario.controller.R
-        if len(weights) not in (1, n):
+        if weights is not None and len(weights) not in (1, n):
             raise ConfigError(
                 "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
             )
+        # What the scenario left out is filled in for its vehicle here, so the run's record
+        # (scenario.yaml, run.json) holds every value the controller used.
+        self.scenario = scenario = scenario.model_copy(
+            update={"controller": scenario.controller.for_vehicle(self.model)}
+        )
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:

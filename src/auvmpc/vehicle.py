@@ -215,6 +215,15 @@ class VehicleParams(StrictModel):
         matrix.setflags(write=False)
         return matrix
 
+    @cached_property
+    def thrust_authority(self) -> np.ndarray:
+        """The largest |f_u|, |f_v| (N) and |M_r| (N m) each axis can get with every thruster
+        at its larger-magnitude limit (3,): the vehicle's own force scale."""
+        largest = max(abs(self.thrust_min), abs(self.thrust_max))
+        authority = np.abs(self.T) @ np.full(self.n_thrusters, largest)
+        authority.setflags(write=False)
+        return authority
+
     @property
     def thrust_min(self) -> float:
         return self.thrust_limits[0]

@@ -82,7 +82,7 @@ class DoMpcController(ShelledController):
     def __init__(
         self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = 0
     ) -> None:
-        config = config.with_model_substeps(model)
+        config = config.for_vehicle(model)
         try:
             with warnings.catch_warnings():
                 # do-mpc warns at import about optional features (ONNX, OPC UA, torch).

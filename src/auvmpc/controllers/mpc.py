@@ -58,7 +58,7 @@ class LinearMpc(IncrementalMpc):
     """Horizontal condensed MPC; subclasses provide :meth:`prediction_model`."""
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
-        config = config.with_model_substeps(model)
+        config = config.for_vehicle(model)
         self.model = model
         self.config = config
         self.sample_time = config.sample_time

@@ -31,8 +31,10 @@ Two ways to solve it (``config.nmpc_mode``):
   so the Gauss-Newton Hessian is exact for it and constant. The step's QP is built from
   the RK4 map's Jacobians at every shooting node. By default (``qp_structure: sparse``) it
   keeps the states and HPIPM solves it (solvers/sparse_rti.py: well posed for unstable
-  vehicles); ``condensed`` (and move blocking) condenses it onto the thrusts (the shooting
-  gaps enter as offsets) for the configured dense QP backend (``qp_solver``). Obstacle rows
+  vehicles), the whole step in one call to C built with the system compiler where there is
+  one (solvers/compiled_qp_step.py); ``condensed`` (and move blocking) condenses it onto
+  the thrusts (the shooting gaps enter as offsets) for the configured dense QP backend
+  (``qp_solver``). Obstacle rows
   are kept where the linearisation point is within ``_OBSTACLE_RANGE_M`` of the disc.
   ``linearisation_iterations`` > 1 takes that many SQP steps per sample.
 
@@ -95,7 +97,7 @@ class NonlinearMpc(ShelledController):
     def __init__(
         self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = MAX_OBSTACLES
     ) -> None:
-        config = config.with_model_substeps(model)
+        config = config.for_vehicle(model)
         self.model = model
         self.config = config
         self.sample_time = config.sample_time

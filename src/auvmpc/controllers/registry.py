@@ -28,5 +28,5 @@ def build_controller(
     module, name = REGISTRY[config.type]
     controller_class = getattr(importlib.import_module(module), name)
     return controller_class.from_config(
-        model, config.with_model_substeps(model), obstacle_count=obstacle_count
+        model, config.for_vehicle(model), obstacle_count=obstacle_count
     )

@@ -82,7 +82,7 @@ class MultipleShootingProgram:
     def __init__(
         self, model: VehicleParams, config: ControllerConfig, n_slots: int = MAX_OBSTACLES
     ):
-        config = config.with_model_substeps(model)
+        config = config.for_vehicle(model)
         n, ny = model.n_thrusters, config.prediction_horizon
         self.model, self.config = model, config
         self.n_thrusters, self.horizon, self.n_slots = n, ny, n_slots
