@@ -25,6 +25,7 @@ import numpy as np
 from generality import TRANSIENT_S, disturb
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
+from auvmpc.errors import RunFailed
 from auvmpc.random_vehicles import random_vehicle
 from auvmpc.runner import simulate
 from auvmpc.scenario import ResolvedScenario, validate_scenario
@@ -64,7 +65,12 @@ def run_one(job: tuple[int, str, bool]) -> dict:
     for override in LABELS[label]:
         apply_override(data, override)
     started = time.perf_counter()
-    result = simulate(ResolvedScenario(validate_scenario(data), Path.cwd()))
+    try:
+        result = simulate(ResolvedScenario(validate_scenario(data), Path.cwd()))
+    except RunFailed as error:  # the plant diverged: a result of the sweep, not its end
+        return {"index": index, "controller": label, "mass": data["vehicle"]["mass"],
+                "fallbacks": -1, "rms": math.inf, "rms_after": math.inf,
+                "wall_s": time.perf_counter() - started, "failure": str(error)}  # fmt: skip
     metrics = result.metrics
     return {
         "index": index,
@@ -110,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{np.median(rms):13.4f} {rms.max():10.4f} {after.max():13.4f}"
         )
         for r in sorted(failing, key=lambda r: -r["fallbacks"])[:5]:
-            print(f"    vehicle {r['index']:3d} ({r['mass']:7.1f} kg): {r['fallbacks']} fallbacks")
+            what = f"{r['fallbacks']} fallbacks" if r["fallbacks"] >= 0 else r["failure"]
+            print(f"    vehicle {r['index']:3d} ({r['mass']:7.1f} kg): {what}")
     if "nmpc-full" in args.controllers:
         solved = [i for i in range(args.vehicles) if by[(i, "nmpc-full")]["fallbacks"] == 0]
         for c in args.controllers:

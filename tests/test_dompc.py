@@ -107,9 +107,7 @@ def _rollout(model, state, plan, substeps=1):
 
 def _paper_cost(config, model, state, plan, reference):
     """paper-model.md section 4 as LinearMpc stages it, for a thrust plan F_0..F_{ny-1}."""
-    error = (
-        _rollout(model, state, plan, config.for_vehicle(model).model_substeps) - reference
-    )
+    error = _rollout(model, state, plan, config.for_vehicle(model).model_substeps) - reference
     Q, S = np.array(config.Q), np.array(config.S)
     R = config.ocp(model).input_weight
     return float(np.sum(error[1:-1] ** 2 * Q) + np.sum(error[-1] ** 2 * S) + np.sum(plan**2 * R))

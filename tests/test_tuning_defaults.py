@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.controllers.config import THRUST_MOVE_COST, ControllerConfig, ThrustPenalty
 from auvmpc.estimation import ObserverConfig
 from auvmpc.runner import simulate
 from auvmpc.scenario import ResolvedScenario, load_scenario, validate_scenario
@@ -24,11 +24,11 @@ FORMER_TUNING_RTOL = 0.11  # measured: 6 % (X, Y) and 10 % (N) away
 
 
 @pytest.mark.parametrize("preset", preset_names())
-def test_default_thrust_weight_makes_a_half_range_move_cost_one(preset):
+def test_default_thrust_weight_prices_a_half_range_move_the_same_on_every_vehicle(preset):
     model = load_vehicle(preset)
     config = ControllerConfig().for_vehicle(model)
     half_range = (model.thrust_max - model.thrust_min) / 2.0
-    np.testing.assert_allclose(np.array(config.R) * half_range**2, 1.0, rtol=1e-12)
+    np.testing.assert_allclose(np.array(config.R) * half_range**2, THRUST_MOVE_COST, rtol=1e-12)
     assert len(config.R) == model.n_thrusters
     assert config.thrust_penalty is ThrustPenalty.INCREMENT
 

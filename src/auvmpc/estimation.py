@@ -104,7 +104,6 @@ class ObserverConfig(StrictModel):
         return self.model_copy(update=update) if update else self
 
 
-
 # The smallest eigenvalue a covariance may have, as a fraction of the smallest noise
 # variance the filter assumes: far below any real uncertainty, far above round-off.
 COVARIANCE_FLOOR_FRACTION = 1e-6

@@ -28,7 +28,13 @@ from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.references import ReferenceConfig
-from auvmpc.vehicle import VehicleParams, check_plant_scale, load_vehicle, scaled
+from auvmpc.vehicle import (
+    VehicleParams,
+    check_plant_scale,
+    load_vehicle,
+    scaled,
+    stable_plant_step,
+)
 
 __all__ = [
     "ControllerConfig",
@@ -43,14 +49,22 @@ __all__ = [
 NonNegative = Annotated[float, Field(ge=0)]
 
 
+# The plant's longest RK4 step when the scenario gives none and the vehicle allows it (s):
+# 10 steps per 0.5 s sample, far below the time constants of any preset.
+DEFAULT_PLANT_STEP_S = 0.05
+
+
 class PlantConfig(StrictModel):
     """How the simulated vehicle differs from the controller's model, and how it is integrated."""
 
     scale: dict[str, Annotated[float, Field(gt=0)]] = Field(
         default_factory=dict, description="factor per vehicle field, e.g. {Iz_rb: 0.75}"
     )
-    max_step: Annotated[float, Field(gt=0, le=0.5)] = Field(
-        default=0.05, description="longest RK4 step of the plant integration (s)"
+    max_step: Annotated[float, Field(gt=0, le=0.5)] | None = Field(
+        default=None,
+        description="longest RK4 step of the plant integration (s); omitted: 0.05 s, or "
+        "shorter where the plant's damping at the speeds its thrusters can reach needs it "
+        "for RK4 stability",
     )
 
 
@@ -112,8 +126,12 @@ class ResolvedScenario:
             )
         # What the scenario left out is filled in for its vehicle here, so the run's record
         # (scenario.yaml, run.json) holds every value the controller used.
+        plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
         self.scenario = scenario = scenario.model_copy(
-            update={"controller": scenario.controller.for_vehicle(self.model)}
+            update={
+                "controller": scenario.controller.for_vehicle(self.model),
+                "plant": scenario.plant.model_copy(update={"max_step": plant_step}),
+            }
         )
         initial = scenario.initial_thrust
         if initial is not None:

@@ -15,7 +15,7 @@ from auvmpc.estimation import ObserverConfig
 from auvmpc.models.discrete import HORIZONTAL
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
-from auvmpc.vehicle import VehicleParams
+from auvmpc.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates
 
 __all__ = [
     "CONTROLLER_PRESETS",
@@ -23,7 +23,10 @@ __all__ = [
     "ControllerType",
     "NmpcMode",
     "QpStructure",
+    "THRUST_MOVE_COST",
     "ThrustPenalty",
+    "default_thrust_weights",
+    "stable_model_substeps",
 ]
 
 NonNegative = Annotated[float, Field(ge=0)]
@@ -90,7 +93,7 @@ class ControllerConfig(StrictModel):
 
     R: tuple[NonNegative, ...] | None = Field(
         default=None,
-        description="thrust weights, one per thruster or one for all; omitted: 1 / h^2 with "
+        description="thrust weights, one per thruster or one for all; omitted: 0.1 / h^2 with "
         "h half the thrust range, so that a thruster's move by h costs the same on any "
         "vehicle, see docs/tuning.md",
     )
@@ -223,45 +226,37 @@ class ControllerConfig(StrictModel):
         return tuple(range(self.control_horizon or self.prediction_horizon))
 
 
-
 # The cost of moving one thruster by half its range in one sample, in units of the stage cost
-# (Q = 5 per m^2: as much as 0.45 m of position error for one sample). Measured on 12 random
-# vehicles of 10 kg to 1.6 t (benchmarks/generality.py's disturbed circle: a current worth
-# 0.2 m/s, 30 % model error, sensor noise): the worst RMS after the transient was 0.031,
-# 0.032 and 0.040 m at 0.1, 1 and 10; 1 keeps the thrust calmer under noise than 0.1 for
-# a few millimetres.
-_THRUST_MOVE_COST = 1.0
+# (Q = 5 per m^2: as much as 0.14 m of position error for one sample). Measured with
+# benchmarks/generality.py on the fully actuated presets: 1 left the BlueROV2 0.050 m off at
+# the oval's curvature jumps (ideal), 0.1 0.035 m, with the disturbed runs unchanged (RMS
+# 0.014-0.016 m); on 12 random vehicles, disturbed (vehicle_sweep.py --disturbed), 0.1, 1
+# and 10 gave median RMS 0.022, 0.018, 0.021 m and lost the same one (docs/tuning.md).
+THRUST_MOVE_COST = 0.1
 
 
 def default_thrust_weights(model: VehicleParams) -> tuple[float, ...]:
-    """R when the scenario gives none: _THRUST_MOVE_COST / h^2 per thruster, h half the
+    """R when the scenario gives none: THRUST_MOVE_COST / h^2 per thruster, h half the
     thrust range, so the weight means the same on a 15 N and an 800 N thruster."""
     half_range = (model.thrust_max - model.thrust_min) / 2.0
-    return (_THRUST_MOVE_COST / half_range**2,) * model.n_thrusters
+    return (THRUST_MOVE_COST / half_range**2,) * model.n_thrusters
 
 
 # Speeds up to which an automatically chosen model step keeps RK4 stable (m/s, rad/s):
 # above the operating range of the presets, below their extremes.
 _STABILITY_SPEED = 1.5
 _STABILITY_YAW_RATE = 1.0
-# RK4 is stable for h*lambda up to 2.785 on the negative real axis; keep a margin.
-_RK4_STABLE_STEP = 2.5
 
 
 def stable_model_substeps(model: VehicleParams, sample_time: float) -> int:
-    """Fewest RK4 steps per sample that stay stable for the model's damping.
+    """Fewest RK4 steps per sample that stay stable for the model's damping
+    (vehicle.damping_rates) up to 1.5 m/s and 1 rad/s.
 
-    The damping rate of each axis at speed s is |D + 2 D_q s| / M (the linearised
-    quadratic damping); one RK4 step of length h is stable while h * rate < 2.785.
     One 0.5 s step suits the paper vehicle (rate 3.8 /s); the BlueROV2's strong
     quadratic damping (rate 32 /s in sway at 1.5 m/s) needs seven.
     """
-    rates = (
-        abs(model.Xu + 2.0 * model.Xuu * _STABILITY_SPEED) / model.m11,
-        abs(model.Yv + 2.0 * model.Yvv * _STABILITY_SPEED) / model.m22,
-        abs(model.Nr + 2.0 * model.Nrr * _STABILITY_YAW_RATE) / model.Iz,
-    )
-    return max(1, math.ceil(sample_time * max(rates) / _RK4_STABLE_STEP))
+    rates = damping_rates(model, _STABILITY_SPEED, _STABILITY_SPEED, _STABILITY_YAW_RATE)
+    return max(1, math.ceil(sample_time * max(rates) / RK4_STABLE_STEP))
 
 
 BLOCKED_MOVES = (0, 1, 2, 3, 5, 7, 10, 14, 19, 25)
