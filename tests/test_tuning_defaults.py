@@ -4,6 +4,7 @@ paper's settings."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +12,16 @@ import pytest
 
 from auvmpc.controllers.config import THRUST_MOVE_COST, ControllerConfig, ThrustPenalty
 from auvmpc.estimation import ObserverConfig
+from auvmpc.integrators import rk4_step
+from auvmpc.random_vehicles import random_vehicle
 from auvmpc.runner import simulate
-from auvmpc.scenario import ResolvedScenario, load_scenario, validate_scenario
-from auvmpc.vehicle import load_vehicle, preset_names, scaled
+from auvmpc.scenario import (
+    DEFAULT_PLANT_STEP_S,
+    ResolvedScenario,
+    load_scenario,
+    validate_scenario,
+)
+from auvmpc.vehicle import dynamics, load_vehicle, preset_names, scaled, stable_plant_step
 
 PAPER_R = (0.01, 0.01, 0.01, 0.01)
 # The paper vehicle's former fixed estimator tuning, which the authority fractions stay near:
@@ -114,3 +122,38 @@ def test_default_controller_tracks_an_ideal_circle_on_any_preset(preset):
     assert metrics["fallback_steps"] == 0
     assert metrics["rms_position_error_after_transient_m"] <= IDEAL_CIRCLE_RMS_M
     assert metrics["verdict"] == "ok"
+
+
+# --------------------------------------------------------------------------------------------
+# The plant's integration step
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("preset", preset_names())
+def test_presets_keep_the_default_plant_step(preset):
+    assert stable_plant_step(load_vehicle(preset), DEFAULT_PLANT_STEP_S) == DEFAULT_PLANT_STEP_S
+
+
+def test_plant_step_holds_a_full_thrust_spin_of_a_light_vehicle():
+    """A random 16 kg vehicle with 0.28 kg m2 of yaw inertia and 200 N thrusters, every
+    thruster pushing the largest yaw moment: at the chosen step RK4 reaches the analytic
+    steady yaw rate (where the damping moment equals the thrust moment); at 0.05 s it
+    diverges, so the test exercises the limit."""
+    params = random_vehicle(np.random.default_rng(3))
+    moment = params.thrust_authority[2]
+    thrust = np.where(params.T[2] > 0, params.thrust_max, params.thrust_min)
+    assert params.T[2] @ thrust == pytest.approx(moment, rel=1e-9)
+    a, b = -params.Nrr, -params.Nr
+    steady = (-b + math.sqrt(b * b + 4 * a * moment)) / (2 * a)
+
+    def spin(step: float) -> np.ndarray:
+        state = np.zeros(6)
+        with np.errstate(over="ignore", invalid="ignore"):
+            for _ in range(round(10.0 / step)):
+                state = rk4_step(lambda x, u: dynamics(x, u, params), state, thrust, step)
+        return state
+
+    step = stable_plant_step(params, DEFAULT_PLANT_STEP_S)
+    assert step < DEFAULT_PLANT_STEP_S
+    assert spin(step)[5] == pytest.approx(steady, rel=1e-6)
+    assert not np.isfinite(spin(DEFAULT_PLANT_STEP_S)).all()
