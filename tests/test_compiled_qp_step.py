@@ -117,3 +117,15 @@ def test_jit_off_keeps_the_casadi_step():
     config = ControllerConfig(type="nmpc", jit=False, offset_free=False)
     program = MultipleShootingProgram(load_vehicle("jmse2210"), config, 1)
     assert not SparseRealTimeIteration(program).compiled
+
+
+def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path, monkeypatch):
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("a file where the cache folder would be")
+    monkeypatch.setenv("AUVMPC_CACHE_DIR", str(blocked))
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(compiled_qp_step.tempfile, "tempdir", str(tmp_path / "tmp"))
+    program = _program("jmse2210", ThrustPenalty.INCREMENT, 1)
+    assert SparseRealTimeIteration(program).compiled
+    assert blocked.read_text() == "a file where the cache folder would be"
+    assert len(list((tmp_path / "tmp").glob("auvmpc-*/rti-*.so"))) == 1

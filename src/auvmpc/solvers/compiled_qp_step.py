@@ -2,11 +2,12 @@
 CasADi, HPIPM linked from the casadi wheel (``hpipm_ocp_step.c`` beside this file).
 
 Built with the system C compiler the first time a configuration is used and kept in a cache
-folder (``$AUVMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/auvmpc`` or ``~/.cache/auvmpc``), named
-by a hash of everything that goes into it, so later processes (and campaign workers) load it
-at once. Where there is no C compiler, or the casadi wheel lacks HPIPM's headers or library,
-:func:`compiled_qp_step` returns None and the caller keeps CasADi's evaluation of the same
-functions (same QP, slower).
+folder (``$AUVMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/auvmpc`` or ``~/.cache/auvmpc``; the
+system's temporary folder if that cannot be written), named by a hash of everything that
+goes into it, so later processes (and campaign workers) load it at once. Where there is no
+C compiler, or the casadi wheel lacks HPIPM's headers or library, :func:`compiled_qp_step`
+returns None and the caller keeps CasADi's evaluation of the same functions (same QP,
+slower).
 """
 
 from __future__ import annotations
@@ -140,24 +141,27 @@ def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
             " ".join(_FLAGS).encode(),
         ):
             digest.update(part)
-        target = _cache_folder() / f"rti-{digest.hexdigest()[:24]}.so"
-        if not target.exists():
+        name = f"rti-{digest.hexdigest()[:24]}.so"
+        built = Path(scratch) / name
+        command = [
+            cc, *_FLAGS, *map(str, sources), f"-I{scratch}", f"-I{include}",
+            f"-L{libraries}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libraries}",
+            "-lm", "-o", str(built),
+        ]  # fmt: skip
+        for folder in (_cache_folder(), Path(tempfile.gettempdir()) / f"auvmpc-{os.getuid()}"):
+            target = folder / name
             try:
-                target.parent.mkdir(parents=True, exist_ok=True)
-                built = Path(scratch) / "step.so"
-                command = [
-                    cc, *_FLAGS, *map(str, sources), f"-I{scratch}", f"-I{include}",
-                    f"-L{libraries}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libraries}",
-                    "-lm", "-o", str(built),
-                ]  # fmt: skip
-                subprocess.run(command, check=True, capture_output=True, timeout=300)
-                # Atomic: another process may be building the same library.
-                partial = target.with_suffix(f".{os.getpid()}.part")
-                shutil.copyfile(built, partial)
-                os.replace(partial, target)
-            except (OSError, subprocess.SubprocessError):
-                return None
-    try:
-        return ctypes.CDLL(str(target))
-    except OSError:
-        return None
+                if not target.exists():
+                    if not built.exists():
+                        subprocess.run(command, check=True, capture_output=True, timeout=300)
+                    folder.mkdir(parents=True, exist_ok=True)
+                    # Atomic: another process may be building the same library.
+                    partial = target.with_suffix(f".{os.getpid()}.part")
+                    shutil.copyfile(built, partial)
+                    os.replace(partial, target)
+                return ctypes.CDLL(str(target))
+            except subprocess.SubprocessError:
+                return None  # the compiler refused: no folder helps
+            except OSError:
+                continue  # an unwritable cache folder: try the next one
+    return None
