@@ -10,6 +10,9 @@
  * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
  * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N).
  * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [dF; sigma s].
+ *
+ * The QP is solved by up to two interior-point passes: HPIPM's fast "speed" mode, then, only
+ * if that fails, its "robust" mode (solvers/hpipm.py, hpipm_settings, says why).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -26,6 +29,8 @@
 #define NX 6
 #define N_STAGE_OUT 14
 #define NOT_FINITE (-1)
+#define MAX_PASSES 2
+#define SETTINGS_PER_PASS 4
 
 enum { OUT_A, OUT_B, OUT_b, OUT_Q, OUT_S, OUT_R, OUT_q, OUT_r, OUT_C, OUT_D, OUT_lg, OUT_ug,
        OUT_lbu, OUT_ubu };
@@ -36,9 +41,10 @@ typedef struct {
     struct d_ocp_qp_dim dim;
     struct d_ocp_qp qp;
     struct d_ocp_qp_sol sol;
-    struct d_ocp_qp_ipm_arg arg;
-    struct d_ocp_qp_ipm_ws ws;
-    void *hpipm_memory[5];
+    int passes; /* interior-point settings tried in turn until one solves */
+    struct d_ocp_qp_ipm_arg arg[MAX_PASSES];
+    struct d_ocp_qp_ipm_ws ws[MAX_PASSES];
+    void *hpipm_memory[3 + 2 * MAX_PASSES];
     double *out[N_STAGE_OUT]; /* one stage's data, reused for every stage */
     int out_size[N_STAGE_OUT];
     double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
@@ -57,7 +63,7 @@ static void *allocate(void **slot, hpipm_size_t size) {
 void auvmpc_rti_free(void *handle) {
     Step *s = (Step *) handle;
     if (!s) return;
-    for (int i = 0; i < 5; ++i) free(s->hpipm_memory[i]);
+    for (int i = 0; i < 3 + 2 * MAX_PASSES; ++i) free(s->hpipm_memory[i]);
     for (int i = 0; i < N_STAGE_OUT; ++i) free(s->out[i]);
     free(s->fixed);
     free(s->index);
@@ -68,9 +74,9 @@ void auvmpc_rti_free(void *handle) {
     free(s);
 }
 
-/* settings: iteration limit, mu0, tolerance (stationarity, equality, inequality,
- * complementarity), the bound standing for infinity, HPIPM's mode. NULL when memory runs
- * out. */
+/* settings: the bound standing for infinity, the number of passes, then per pass HPIPM's
+ * mode, iteration limit, mu0 and tolerance (stationarity, equality, inequality,
+ * complementarity). NULL when memory runs out. */
 void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
     Step *s = (Step *) calloc(1, sizeof(Step));
     if (!s) return NULL;
@@ -80,7 +86,12 @@ void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
     s->nz = NX + n;
     s->nv = n + 1;
     s->ng = n + S;
-    s->inf = settings[3];
+    s->inf = settings[0];
+    s->passes = (int) settings[1];
+    if (s->passes < 1 || s->passes > MAX_PASSES) {
+        free(s);
+        return NULL;
+    }
 
     int *nx = calloc(N + 1, sizeof(int)), *nu = calloc(N + 1, sizeof(int));
     int *nbx = calloc(N + 1, sizeof(int)), *nbu = calloc(N + 1, sizeof(int));
@@ -100,8 +111,7 @@ void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
         d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[0]);
         d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, ng, ns, &s->dim);
         ok = allocate(&s->hpipm_memory[1], d_ocp_qp_memsize(&s->dim))
-             && allocate(&s->hpipm_memory[2], d_ocp_qp_sol_memsize(&s->dim))
-             && allocate(&s->hpipm_memory[3], d_ocp_qp_ipm_arg_memsize(&s->dim));
+             && allocate(&s->hpipm_memory[2], d_ocp_qp_sol_memsize(&s->dim));
     }
     free(nx); free(nu); free(nbx); free(nbu); free(ng); free(ns);
     if (!ok) {
@@ -110,21 +120,29 @@ void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
     }
     d_ocp_qp_create(&s->dim, &s->qp, s->hpipm_memory[1]);
     d_ocp_qp_sol_create(&s->dim, &s->sol, s->hpipm_memory[2]);
-    d_ocp_qp_ipm_arg_create(&s->dim, &s->arg, s->hpipm_memory[3]);
-    d_ocp_qp_ipm_arg_set_default((enum hpipm_mode) (int) settings[4], &s->arg);
-    int iteration_limit = (int) settings[0];
-    double mu0 = settings[1], tolerance = settings[2];
-    d_ocp_qp_ipm_arg_set_iter_max(&iteration_limit, &s->arg);
-    d_ocp_qp_ipm_arg_set_mu0(&mu0, &s->arg);
-    d_ocp_qp_ipm_arg_set_tol_stat(&tolerance, &s->arg);
-    d_ocp_qp_ipm_arg_set_tol_eq(&tolerance, &s->arg);
-    d_ocp_qp_ipm_arg_set_tol_ineq(&tolerance, &s->arg);
-    d_ocp_qp_ipm_arg_set_tol_comp(&tolerance, &s->arg);
-    if (!allocate(&s->hpipm_memory[4], d_ocp_qp_ipm_ws_memsize(&s->dim, &s->arg))) {
-        auvmpc_rti_free(s);
-        return NULL;
+    for (int p = 0; p < s->passes; ++p) {
+        const double *pass = settings + 2 + SETTINGS_PER_PASS * p;
+        struct d_ocp_qp_ipm_arg *arg = &s->arg[p];
+        if (!allocate(&s->hpipm_memory[3 + 2 * p], d_ocp_qp_ipm_arg_memsize(&s->dim))) {
+            auvmpc_rti_free(s);
+            return NULL;
+        }
+        d_ocp_qp_ipm_arg_create(&s->dim, arg, s->hpipm_memory[3 + 2 * p]);
+        d_ocp_qp_ipm_arg_set_default((enum hpipm_mode) (int) pass[0], arg);
+        int iteration_limit = (int) pass[1];
+        double mu0 = pass[2], tolerance = pass[3];
+        d_ocp_qp_ipm_arg_set_iter_max(&iteration_limit, arg);
+        d_ocp_qp_ipm_arg_set_mu0(&mu0, arg);
+        d_ocp_qp_ipm_arg_set_tol_stat(&tolerance, arg);
+        d_ocp_qp_ipm_arg_set_tol_eq(&tolerance, arg);
+        d_ocp_qp_ipm_arg_set_tol_ineq(&tolerance, arg);
+        d_ocp_qp_ipm_arg_set_tol_comp(&tolerance, arg);
+        if (!allocate(&s->hpipm_memory[4 + 2 * p], d_ocp_qp_ipm_ws_memsize(&s->dim, arg))) {
+            auvmpc_rti_free(s);
+            return NULL;
+        }
+        d_ocp_qp_ipm_ws_create(&s->dim, arg, &s->ws[p], s->hpipm_memory[4 + 2 * p]);
     }
-    d_ocp_qp_ipm_ws_create(&s->dim, &s->arg, &s->ws, s->hpipm_memory[4]);
 
     for (int i = 0; i < N_STAGE_OUT; ++i) {
         s->out_size[i] = (int) rti_stage_sparsity_out(i)[0] * (int) rti_stage_sparsity_out(i)[1];
@@ -232,10 +250,15 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
     d_ocp_qp_set_lbx(0, s->fixed, &s->qp);
     d_ocp_qp_set_ubx(0, s->fixed, &s->qp);
 
-    d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg, &s->ws);
-    int status;
-    d_ocp_qp_ipm_get_status(&s->ws, &status);
-    d_ocp_qp_ipm_get_iter(&s->ws, iterations);
+    int status = 0;
+    for (int p = 0; p < s->passes; ++p) {
+        int used;
+        d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg[p], &s->ws[p]);
+        d_ocp_qp_ipm_get_status(&s->ws[p], &status);
+        d_ocp_qp_ipm_get_iter(&s->ws[p], &used);
+        *iterations += used;
+        if (status == 0) break;
+    }
     for (int k = 0; k <= N; ++k) d_ocp_qp_sol_get_x(k, &s->sol, dz + nz * k);
     for (int k = 0; k < N; ++k) d_ocp_qp_sol_get_u(k, &s->sol, dv + nv * k);
     return status;
