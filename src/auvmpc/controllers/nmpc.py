@@ -131,9 +131,9 @@ class NonlinearMpc(ShelledController):
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> NonlinearMpc:
-        """Room for the scenario's obstacles (at least one slot, at most MAX_OBSTACLES): every
-        unused slot is rows and variables each solve carries."""
-        return cls(model, config, obstacle_slots=max(1, min(MAX_OBSTACLES, obstacle_count)))
+        """Room for the scenario's obstacles (at most MAX_OBSTACLES; none without obstacles):
+        every unused slot is rows and variables each solve carries."""
+        return cls(model, config, obstacle_slots=min(MAX_OBSTACLES, obstacle_count))
 
     # -- the back end of the safety shell -------------------------------------------------
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:

@@ -85,7 +85,7 @@ class CompiledQpStep:
         if not self._handle:
             raise MemoryError("HPIPM workspace")
         self._iterations = ctypes.c_int(0)
-        nz, nv = 6 + thrusters, thrusters + 1
+        nz, nv = 6 + thrusters, thrusters + (1 if slots else 0)  # sparse_rti.stage_inputs
         self.dz = np.zeros((horizon + 1, nz))
         self.dv = np.zeros((horizon, nv))
 

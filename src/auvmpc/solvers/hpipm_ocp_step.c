@@ -84,7 +84,7 @@ void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
     s->n = n;
     s->S = S;
     s->nz = NX + n;
-    s->nv = n + 1;
+    s->nv = n + (S > 0 ? 1 : 0); /* the obstacle slack only where there are obstacle rows */
     s->ng = n + S;
     s->inf = settings[0];
     s->passes = (int) settings[1];

@@ -127,7 +127,8 @@ class SparseRealTimeIteration:
                 if code != _SOLVED or not (np.isfinite(dz).all() and np.isfinite(dv).all()):
                     return Solution(None, total, time.perf_counter() - started, status)
                 thrust = thrust + dv[:, :n]
-                slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
+                if program.n_slots:
+                    slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
                 if cold:
                     disturbance = np.tile(sample.disturbance[:, None], (1, N))
                     rolled = program.rollout(sample.state, thrust.T, disturbance)
@@ -137,7 +138,8 @@ class SparseRealTimeIteration:
                 if not np.all(np.isfinite(states)):
                     return Solution(None, total, time.perf_counter() - started, "non-finite states")
         slacks = np.zeros((N, program.n_slots))
-        slacks[:, 0] = np.maximum(slack, 0.0)
+        if program.n_slots:
+            slacks[:, 0] = np.maximum(slack, 0.0)
         iterate = Iterate(states.copy(), thrust[program.move_steps].copy(), slacks)
         return Solution(iterate, total, time.perf_counter() - started, status)
 
@@ -168,6 +170,11 @@ _CACHE: dict[tuple[str, str, int], StageQp] = {}
 _CACHE_SIZE = 16
 
 
+def stage_inputs(thrusters: int, slots: int) -> int:
+    """nv: the thrust steps, and the obstacle slack when there are obstacle slots."""
+    return thrusters + (1 if slots else 0)
+
+
 def stage_qp(program: MultipleShootingProgram) -> StageQp:
     """The program's stage QP functions, built once per vehicle and configuration."""
     key = (program.model.model_dump_json(), program.config.model_dump_json(), program.n_slots)
@@ -180,7 +187,8 @@ def stage_qp(program: MultipleShootingProgram) -> StageQp:
 
 def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     n, S, NX = program.n_thrusters, program.n_slots, 6
-    nz, nv, ng = NX + n, n + 1, n + S
+    # One slack input per stage for its obstacle rows; none without obstacle slots.
+    nz, nv, ng = NX + n, stage_inputs(n, S), n + S
     ocp = program.ocp
     R_weight = ocp.input_weight
     rho = ocp.slack_penalty
@@ -202,16 +210,18 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     q = ca.vertcat(2.0 * weight * (X - reference), ca.SX.zeros(n))
     R = ca.SX(nv, nv)
     R[:n, :n] = ca.diag(2.0 * R_weight + _STEP_REGULARISATION)
-    R[n, n] = 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
+    if S:
+        R[n, n] = 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
+    slack_gradient = [rho / sigma] if S else []
     S_cross = ca.SX(nv, nz)
     if ocp.penalty is ThrustPenalty.ABSOLUTE:
-        r = ca.vertcat(2.0 * R_weight * F, rho / sigma)
+        r = ca.vertcat(2.0 * R_weight * F, *slack_gradient)
     else:  # R weights the change F_k - P_k, and P_k moves with dp_k
         change = F - P
         Q[NX:, NX:] = ca.diag(2.0 * R_weight)
         S_cross[:n, NX:] = ca.diag(-2.0 * R_weight)
         q[NX:] = -2.0 * R_weight * change
-        r = ca.vertcat(2.0 * R_weight * change, rho / sigma)
+        r = ca.vertcat(2.0 * R_weight * change, *slack_gradient)
 
     # Dynamics: dX_{k+1} = A dX_k + B dF_k + gap, dp_{k+1} = dF_k + (F_k - P_{k+1}).
     successor = program.step(X, F, force)
@@ -230,7 +240,7 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     max_move = ca.DM(ocp.max_move)
     t = step_index * program.sample_time
     C_rows = [ca.horzcat(ca.SX(n, NX), -ca.SX.eye(n))]
-    D_rows = [ca.horzcat(ca.SX.eye(n), ca.SX(n, 1))]
+    D_rows = [ca.horzcat(ca.SX.eye(n), ca.SX(n, nv - n))]
     lower, upper = [-movable * max_move - change], [movable * max_move - change]
     for o in range(S):
         offset = X_next[0:2] - (slots[0:2, o] + t * slots[2:4, o])
@@ -241,8 +251,8 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         near = ca.logic_and(used[o] > 0.5, distance - slots[4, o] < _OBSTACLE_RANGE_M)
         lower.append(ca.if_else(near, slots[4, o] - distance - normal @ gap[0:2], -ca.inf))
         upper.append(ca.inf)
-    lbu = ca.vertcat(ocp.input_lower - F, 0.0)
-    ubu = ca.vertcat(ocp.input_upper - F, ca.inf)
+    lbu = ca.vertcat(ocp.input_lower - F, *([0.0] if S else []))
+    ubu = ca.vertcat(ocp.input_upper - F, *([ca.inf] if S else []))
 
     dense = [ca.densify(e) for e in (A, B, b, Q, S_cross, R, q, r)]
     dense += [ca.densify(ca.vertcat(*C_rows)), ca.densify(ca.vertcat(*D_rows))]
