@@ -99,18 +99,11 @@ class SparseRealTimeIteration:
         program = self.program
         n, N = program.n_thrusters, program.horizon
         started = time.perf_counter()
-        states = np.ascontiguousarray(guess.states, dtype=float)  # (N + 1, 6)
-        thrust = np.ascontiguousarray(program.plan(guess), dtype=float)  # (N, n)
-        fixed = (
-            np.ascontiguousarray(sample.state, dtype=float),
-            np.ascontiguousarray(sample.previous, dtype=float),
-            np.ascontiguousarray(sample.reference, dtype=float),
-            self._weights,
-            np.ascontiguousarray(sample.disturbance, dtype=float),
-            np.ascontiguousarray(sample.slots, dtype=float),
-            sample.used.astype(float),
-            self._movable,
-        )
+        states = np.asarray(guess.states, dtype=float)  # (N + 1, 6)
+        thrust = np.asarray(program.plan(guess), dtype=float)  # (N, n)
+        used = sample.used.astype(float)
+        fixed = (sample.state, sample.previous, sample.reference, self._weights,
+                 sample.disturbance, sample.slots, used, self._movable)  # fmt: skip
         total, status, slack = 0, "not run", np.zeros(N)
         with np.errstate(over="ignore", invalid="ignore"):
             for _ in range(iterations):
