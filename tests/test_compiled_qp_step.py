@@ -4,6 +4,8 @@ independent assembly of the same QP, on vehicles from 2 to 4 thrusters and 15 kg
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -129,3 +131,18 @@ def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path,
     assert SparseRealTimeIteration(program).compiled
     assert blocked.read_text() == "a file where the cache folder would be"
     assert len(list((tmp_path / "tmp").glob("auvmpc-*/rti-*.so"))) == 1
+
+
+def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
+    monkeypatch.setenv("AUVMPC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_qp_step, "_CACHE_LIMIT", 2)
+    old = [tmp_path / f"rti-old{i}.so" for i in range(3)]
+    for age, library in enumerate(old):
+        library.write_bytes(b"")
+        os.utime(library, (1e9 + age, 1e9 + age))
+    mine = tmp_path / "notes.txt"
+    mine.write_text("not auvmpc's")
+    assert SparseRealTimeIteration(_program("jmse2210", ThrustPenalty.ABSOLUTE, 1)).compiled
+    kept = sorted(p.name for p in tmp_path.glob("rti-*.so"))
+    assert len(kept) == 2 and "rti-old2.so" in kept, "the newest old one and the new one"
+    assert mine.read_text() == "not auvmpc's"

@@ -32,6 +32,9 @@ _DATA_NAME = "rti_qp_data"
 # when several configurations are loaded in one process.
 _FLAGS = ("-O2", "-fPIC", "-shared", "-Wl,-Bsymbolic")
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+# Libraries kept in the cache folder, the least recently used dropped beyond it: one is
+# 0.1-0.2 MB and a sweep over random vehicles builds one per vehicle.
+_CACHE_LIMIT = 256
 
 
 @functools.cache
@@ -159,9 +162,19 @@ def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
                     partial = target.with_suffix(f".{os.getpid()}.part")
                     shutil.copyfile(built, partial)
                     os.replace(partial, target)
+                    _prune(folder)
+                os.utime(target)  # its last use, for _prune
                 return ctypes.CDLL(str(target))
             except subprocess.SubprocessError:
                 return None  # the compiler refused: no folder helps
             except OSError:
                 continue  # an unwritable cache folder: try the next one
     return None
+
+
+def _prune(folder: Path) -> None:
+    """Drop the least recently used of this module's libraries beyond _CACHE_LIMIT (only
+    files named as it names them; a library another process has loaded stays usable)."""
+    libraries = sorted(folder.glob("rti-*.so"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for stale in libraries[_CACHE_LIMIT:]:
+        stale.unlink(missing_ok=True)
