@@ -23,9 +23,12 @@ from auvmpc.vehicle import load_vehicle
 # The filter's estimate of a constant 11.2 N current after 40 s of excitation: the random
 # walk it assumes (1 N/sqrt(s)) keeps a steady-state spread of a few hundredths of a newton.
 CURRENT_ESTIMATE_TOL_N = 0.1
-# The same after a long noisy run under feedback: the estimate wanders with the sensor
-# noise (+-0.3 N measured on the BlueROV2, whose strong damping makes a force less visible).
-LONG_RUN_CURRENT_TOL_N = 1.0
+# The same after a long noisy run under feedback, averaged over the last minute: each sample
+# wanders with the sensor noise (standard deviation up to 1.2 N measured on the BlueROV2,
+# whose strong damping makes a force less visible, with the velocity process noise that
+# admits model error), the minute's mean stays within 0.04 N of the truth (measured).
+LONG_RUN_CURRENT_TOL_N = 0.25
+LONG_RUN_AVERAGE_SAMPLES = 120
 
 
 def test_observer_recovers_a_constant_world_current(jmse):
@@ -198,8 +201,9 @@ def test_covariance_stays_symmetric_positive_definite_and_bounded_over_a_long_ru
     vehicle, duration_s, current
 ):
     params = load_vehicle(vehicle)
-    largest = []
+    largest, estimates = [], []
     for observer in _estimator_in_the_loop(params, duration_s, current):
+        estimates.append(observer.disturbance_world)
         ekf = observer._filter
         P = ekf.covariance
         assert np.array_equal(P, P.T), "covariance lost symmetry"
@@ -212,9 +216,8 @@ def test_covariance_stays_symmetric_positive_definite_and_bounded_over_a_long_ru
     # (+-5 %).
     settled = np.array(largest[120:])
     assert settled.max() < 2.0 * np.median(settled)
-    np.testing.assert_allclose(
-        observer.disturbance_world, [*current, 0.0], atol=LONG_RUN_CURRENT_TOL_N
-    )
+    last_minute = np.mean(estimates[-LONG_RUN_AVERAGE_SAMPLES:], axis=0)
+    np.testing.assert_allclose(last_minute, [*current, 0.0], atol=LONG_RUN_CURRENT_TOL_N)
 
 
 def test_a_diverged_prediction_restarts_the_filter_instead_of_crashing():
