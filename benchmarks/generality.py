@@ -17,7 +17,7 @@ Conditions: ``ideal`` (exact model, no current, no noise) and ``disturbed``: a c
 world current force equal to the vehicle's drag at 0.2 m/s (from 30 deg), the plant's
 inertia and damping 30 % off the controller's model (up or down by axis), and sensor noise
 (1 cm, 0.3 deg, 1 cm/s, 0.3 deg/s). The columns are the run metrics of
-``shared/spec/interfaces.md`` after the scenario's transient (30 s).
+``run.json`` after the scenario's transient (30 s).
 """
 
 from __future__ import annotations

@@ -111,11 +111,15 @@ def main(argv: list[str] | None = None) -> int:
         failing = [r for r in mine if r["fallbacks"]]
         rms = np.array([r["rms"] for r in mine])
         after = np.array([r["rms_after"] for r in mine])
+        diverged = sum(r["fallbacks"] < 0 for r in mine)
+        most = max(r["fallbacks"] for r in mine)
+        most_text = f"{most:d}" + (f" +{diverged} diverged" if diverged else "")
         print(
-            f"{c:16s} {len(failing):21d} {max(r['fallbacks'] for r in mine):14d} "
+            f"{c:16s} {len(failing):21d} {most_text:>14s} "
             f"{np.median(rms):13.4f} {rms.max():10.4f} {after.max():13.4f}"
         )
-        for r in sorted(failing, key=lambda r: -r["fallbacks"])[:5]:
+        # A diverged run (fallbacks -1) first, then the most fallbacks.
+        for r in sorted(failing, key=lambda r: (r["fallbacks"] >= 0, -r["fallbacks"]))[:5]:
             what = f"{r['fallbacks']} fallbacks" if r["fallbacks"] >= 0 else r["failure"]
             print(f"    vehicle {r['index']:3d} ({r['mass']:7.1f} kg): {what}")
     if "nmpc-full" in args.controllers:

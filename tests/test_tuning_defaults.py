@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from auvmpc.controllers.config import THRUST_MOVE_COST, ControllerConfig, ThrustPenalty
 from auvmpc.estimation import ObserverConfig
@@ -157,3 +158,41 @@ def test_plant_step_holds_a_full_thrust_spin_of_a_light_vehicle():
     assert step < DEFAULT_PLANT_STEP_S
     assert spin(step)[5] == pytest.approx(steady, rel=1e-6)
     assert not np.isfinite(spin(DEFAULT_PLANT_STEP_S)).all()
+
+
+def test_an_override_gets_the_new_vehicles_own_defaults():
+    """Filled-in values are the vehicle's, not the scenario's: after changing the vehicle,
+    the RK4 substeps and the estimator prior are the new vehicle's (the paper vehicle's one
+    0.5 s step is unstable for the BlueROV2)."""
+    from auvmpc.api import override
+
+    changed = override(load_scenario("paper-disturbed"), {"vehicle": "bluerov2-heavy"})
+    fresh = ControllerConfig(
+        **load_scenario("paper-disturbed").given.controller.model_dump(exclude_unset=True)
+    ).for_vehicle(load_vehicle("bluerov2-heavy"))
+    assert changed.scenario.controller.model_substeps == fresh.model_substeps > 1
+    assert (
+        changed.scenario.controller.observer.initial_disturbance_std
+        == fresh.observer.initial_disturbance_std
+    )
+
+
+def test_a_campaign_may_scale_a_default_that_depends_on_the_vehicle(tmp_path):
+    from auvmpc.campaign.sampling import scenario_for_run
+    from auvmpc.campaign.spec import load_campaign
+
+    spec = {
+        "name": "scaled-weights",
+        "base": "bluerov2-figure-eight",
+        "runs": 2,
+        "seed": 3,
+        "parameters": {
+            "controller.R.0": {"type": "uniform", "low": 2.0, "high": 3.0, "apply": "multiply"}
+        },  # fmt: skip
+        "criterion": "thrust_limit_violations == 0",
+    }
+    path = tmp_path / "campaign.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    default = load_scenario("bluerov2-figure-eight").scenario.controller.R[0]
+    scaled_weight = scenario_for_run(load_campaign(path), 0).scenario.controller.R[0]
+    assert 2.0 * default <= scaled_weight <= 3.0 * default

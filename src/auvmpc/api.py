@@ -77,7 +77,9 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     from auvmpc.errors import format_validation_error
     from auvmpc.scenario import apply_override, scenario_to_dict, validate_scenario
 
-    data = scenario_to_dict(scenario.scenario)
+    # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
+    # must get its own defaults).
+    data = scenario_to_dict(getattr(scenario, "given", scenario.scenario))
     for text in _override_strings(overrides):
         apply_override(data, text)
     if data.get("kind") == "depth":

@@ -113,7 +113,8 @@ class ResolvedScenario:
     """A scenario plus what its names point at: the nominal model and the simulated plant."""
 
     def __init__(self, scenario: Scenario, base_dir: Path) -> None:
-        self.scenario = scenario
+        self.given = scenario  # as written: what overrides apply to
+        self.scenario = scenario  # below: with what the vehicle decides filled in
         self.base_dir = base_dir
         self.model: VehicleParams = _load_vehicle_relative(scenario.vehicle, base_dir)
         check_plant_scale(scenario.plant.scale)
@@ -125,7 +126,8 @@ class ResolvedScenario:
                 "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
             )
         # What the scenario left out is filled in for its vehicle here, so the run's record
-        # (scenario.yaml, run.json) holds every value the controller used.
+        # (run.json's scenario) holds every value the controller used. Overrides apply to
+        # ``given``: a filled-in value must not outlive a change of vehicle or sample time.
         plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
         self.scenario = scenario = scenario.model_copy(
             update={

@@ -218,8 +218,9 @@ class VehicleParams(StrictModel):
     @cached_property
     def thrust_authority(self) -> np.ndarray:
         """The largest f_u, f_v (N) and M_r (N m) each axis can get on its own within the
-        thrust limits (3,), each thruster at whichever limit helps: the vehicle's own force
-        scale."""
+        thrust limits (3,), in the positive direction, each thruster at whichever limit
+        helps: the vehicle's own force scale (with asymmetric limits the negative direction
+        may be weaker)."""
         T = self.T
         authority = np.maximum(T * self.thrust_max, T * self.thrust_min).sum(axis=1)
         authority.setflags(write=False)
@@ -253,7 +254,7 @@ def stable_plant_step(params: VehicleParams, longest: float) -> float:
     """The longest RK4 step (at most ``longest``) that stays stable over everything the
     thrusters can do: each axis at the steady speed its full thrust authority reaches.
 
-    A light yaw inertia with strong thrusters (a 16 kg random vehicle: 0.22 kg m2, 200 N)
+    A light yaw inertia with strong thrusters (a 16 kg random vehicle: 0.28 kg m2, 200 N)
     spins at 8 rad/s, where a 0.05 s step diverged; every preset keeps 0.05 s.
     """
     tops = [

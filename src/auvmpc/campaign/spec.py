@@ -627,8 +627,9 @@ def _related(path: str, field_name: str) -> bool:
 
 
 def _resolved_dict(data: dict[str, Any], campaign: Campaign) -> dict[str, Any]:
-    """Scenario ``data`` (known valid) dumped with every default filled in."""
-    return scenario_to_dict(validate_scenario(copy.deepcopy(data)))
+    """Scenario ``data`` (known valid) dumped with every default filled in, those chosen for
+    the vehicle included (a parameter may scale the default thrust weights)."""
+    return scenario_to_dict(_resolve(campaign, copy.deepcopy(data)).scenario)
 
 
 def _lookup(data: Any, keys: Sequence[str]) -> Any:

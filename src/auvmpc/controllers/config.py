@@ -94,8 +94,8 @@ class ControllerConfig(StrictModel):
     R: tuple[NonNegative, ...] | None = Field(
         default=None,
         description="thrust weights, one per thruster or one for all; omitted: 0.1 / h^2 with "
-        "h half the thrust range, so that a thruster's move by h costs the same on any "
-        "vehicle, see docs/tuning.md",
+        "h half the thrust range, so that (with the increment penalty) a thruster's move by h "
+        "costs the same on any vehicle, see docs/tuning.md",
     )
     vehicle_radius: NonNegative = Field(
         default=0.5, description="vehicle envelope disc for obstacle constraints and clearance (m)"

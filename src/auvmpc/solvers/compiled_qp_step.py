@@ -20,9 +20,13 @@ import shutil
 import subprocess
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
+
+if TYPE_CHECKING:  # sparse_rti imports this module
+    from auvmpc.solvers.sparse_rti import StageQp
 
 __all__ = ["CompiledQpStep", "compiled_qp_step", "compiler"]
 
@@ -68,29 +72,33 @@ class CompiledQpStep:
     """One sparse QP of the real-time iteration, built and solved by one C call.
 
     Holds HPIPM's memory for one controller; the call fills the step (dz, dv) in place and
-    returns HPIPM's status (0: solved; -1: the QP data were not finite) and its iterations.
+    returns HPIPM's status (0: solved; -1: the QP data were not finite; -2: their evaluation
+    failed) and its iterations.
     """
 
-    def __init__(self, library: ctypes.CDLL, horizon: int, thrusters: int, slots: int,
-                 settings: tuple[float, ...]) -> None:  # fmt: skip
+    def __init__(self, library: ctypes.CDLL, qp: StageQp, horizon: int, thrusters: int,
+                 slots: int, settings: tuple[float, ...]) -> None:  # fmt: skip
         self._library = library  # kept alive as long as the handle
         library.auvmpc_rti_create.restype = ctypes.c_void_p
-        library.auvmpc_rti_create.argtypes = [ctypes.c_int] * 3 + [_DOUBLE_P]
+        library.auvmpc_rti_create.argtypes = [ctypes.c_int] * 6 + [_DOUBLE_P, ctypes.c_int]
         library.auvmpc_rti_step.restype = ctypes.c_int
         library.auvmpc_rti_step.argtypes = (
             [ctypes.c_void_p] + [_DOUBLE_P] * 13 + [ctypes.POINTER(ctypes.c_int)]
         )
         library.auvmpc_rti_free.argtypes = [ctypes.c_void_p]
         values = np.array(settings, dtype=float)
+        sizes = (qp.states, qp.inputs, qp.rows)
         self._handle = library.auvmpc_rti_create(
-            horizon, thrusters, slots, values.ctypes.data_as(_DOUBLE_P)
+            horizon, thrusters, slots, *sizes, values.ctypes.data_as(_DOUBLE_P), len(values)
         )
         if not self._handle:
-            raise MemoryError("HPIPM workspace")
+            raise RuntimeError(
+                "the compiled QP step could not be set up: out of memory, or sizes or settings "
+                "that disagree with the generated stage functions"
+            )
         self._iterations = ctypes.c_int(0)
-        nz, nv = 6 + thrusters, thrusters + (1 if slots else 0)  # sparse_rti.stage_inputs
-        self.dz = np.zeros((horizon + 1, nz))
-        self.dv = np.zeros((horizon, nv))
+        self.dz = np.zeros((horizon + 1, qp.states))
+        self.dv = np.zeros((horizon, qp.inputs))
 
     def __del__(self) -> None:
         handle, self._handle = getattr(self, "_handle", None), None
@@ -114,14 +122,13 @@ class CompiledQpStep:
         return int(status), int(self._iterations.value)
 
 
-def compiled_qp_step(stage: ca.Function, terminal: ca.Function, horizon: int, thrusters: int,
-                     slots: int, settings: tuple[float, ...]
-                     ) -> CompiledQpStep | None:  # fmt: skip
+def compiled_qp_step(qp: StageQp, horizon: int, thrusters: int, slots: int,
+                     settings: tuple[float, ...]) -> CompiledQpStep | None:  # fmt: skip
     """The compiled step for these stage functions, or None where it cannot be built."""
-    library = _library(stage, terminal)
+    library = _library(qp.stage, qp.terminal)
     if library is None:
         return None
-    return CompiledQpStep(library, horizon, thrusters, slots, settings)
+    return CompiledQpStep(library, qp, horizon, thrusters, slots, settings)
 
 
 def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
@@ -140,6 +147,7 @@ def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
             *(p.read_bytes() for p in sources),
             (Path(scratch) / (_DATA_NAME + ".h")).read_bytes(),
             ca.__version__.encode(),
+            str(libraries).encode(),  # baked in by -rpath: another venv needs its own
             cc.encode(),
             " ".join(_FLAGS).encode(),
         ):
@@ -154,10 +162,12 @@ def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
         for folder in (_cache_folder(), Path(tempfile.gettempdir()) / f"auvmpc-{os.getuid()}"):
             target = folder / name
             try:
+                folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+                if not _private(folder):
+                    continue  # a library there could be anybody's code
                 if not target.exists():
                     if not built.exists():
                         subprocess.run(command, check=True, capture_output=True, timeout=300)
-                    folder.mkdir(parents=True, exist_ok=True)
                     # Atomic: another process may be building the same library.
                     partial = target.with_suffix(f".{os.getpid()}.part")
                     shutil.copyfile(built, partial)
@@ -172,9 +182,24 @@ def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
     return None
 
 
+def _private(folder: Path) -> bool:
+    """Whether only this user can write into ``folder`` (a library loaded from it runs as
+    this user)."""
+    status = folder.stat()
+    return status.st_uid == os.getuid() and not status.st_mode & 0o022
+
+
 def _prune(folder: Path) -> None:
     """Drop the least recently used of this module's libraries beyond _CACHE_LIMIT (only
-    files named as it names them; a library another process has loaded stays usable)."""
-    libraries = sorted(folder.glob("rti-*.so"), key=lambda p: p.stat().st_mtime, reverse=True)
+    files named as it names them; a library another process has loaded stays usable).
+    Another process may be pruning the same folder: a file gone already is skipped."""
+
+    def last_use(path: Path) -> float:
+        try:
+            return path.stat().st_mtime
+        except FileNotFoundError:
+            return 0.0
+
+    libraries = sorted(folder.glob("rti-*.so"), key=last_use, reverse=True)
     for stale in libraries[_CACHE_LIMIT:]:
         stale.unlink(missing_ok=True)

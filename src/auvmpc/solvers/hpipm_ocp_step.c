@@ -29,6 +29,7 @@
 #define NX 6
 #define N_STAGE_OUT 14
 #define NOT_FINITE (-1)
+#define EVALUATION_FAILED (-2)
 #define MAX_PASSES 2
 #define SETTINGS_PER_PASS 4
 
@@ -74,46 +75,65 @@ void auvmpc_rti_free(void *handle) {
     free(s);
 }
 
-/* settings: the bound standing for infinity, the number of passes, then per pass HPIPM's
- * mode, iteration limit, mu0 and tolerance (stationarity, equality, inequality,
- * complementarity). NULL when memory runs out. */
-void *auvmpc_rti_create(int N, int n, int S, const double *settings) {
+/* Whether a generated output holds `size` values, all of them: CasADi's compressed sparsity
+ * is [rows, columns, 1] for a dense matrix, else [rows, columns, column offsets, rows...]. */
+static int dense_of_size(const casadi_int *sp, int size) {
+    casadi_int nonzeros = sp[2] == 1 ? sp[0] * sp[1] : sp[2 + sp[1]];
+    return sp[0] * sp[1] == size && nonzeros == size;
+}
+
+/* Whether the generated stage functions have the sizes the caller gave. */
+static int sizes_agree(int nz, int nv, int ng) {
+    const int expected[N_STAGE_OUT] = {nz * nz, nz * nv, nz, nz * nz, nv * nz, nv * nv, nz, nv,
+                                       ng * nz, ng * nv, ng, ng, nv, nv};
+    for (int i = 0; i < N_STAGE_OUT; ++i)
+        if (!dense_of_size(rti_stage_sparsity_out(i), expected[i])) return 0;
+    return dense_of_size(rti_terminal_sparsity_out(0), nz * nz)
+           && dense_of_size(rti_terminal_sparsity_out(1), nz);
+}
+
+/* Sizes: horizon N, thrusters n, obstacle slots S, and the stage QP's nz, nv, ng (checked
+ * against the generated functions). settings (count values): the bound standing for
+ * infinity, the number of passes, then per pass HPIPM's mode, iteration limit, mu0 and
+ * tolerance (stationarity, equality, inequality, complementarity). NULL when memory runs
+ * out or the sizes or settings disagree. */
+void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const double *settings,
+                        int count) {
+    if (nz != NX + n || count < 2 || !sizes_agree(nz, nv, ng)) return NULL;
+    int passes = (int) settings[1];
+    if (passes < 1 || passes > MAX_PASSES || count < 2 + SETTINGS_PER_PASS * passes) return NULL;
     Step *s = (Step *) calloc(1, sizeof(Step));
     if (!s) return NULL;
     s->N = N;
     s->n = n;
     s->S = S;
-    s->nz = NX + n;
-    s->nv = n + (S > 0 ? 1 : 0); /* the obstacle slack only where there are obstacle rows */
-    s->ng = n + S;
+    s->nz = nz;
+    s->nv = nv;
+    s->ng = ng;
     s->inf = settings[0];
-    s->passes = (int) settings[1];
-    if (s->passes < 1 || s->passes > MAX_PASSES) {
-        free(s);
-        return NULL;
-    }
+    s->passes = passes;
 
     int *nx = calloc(N + 1, sizeof(int)), *nu = calloc(N + 1, sizeof(int));
     int *nbx = calloc(N + 1, sizeof(int)), *nbu = calloc(N + 1, sizeof(int));
-    int *ng = calloc(N + 1, sizeof(int)), *ns = calloc(N + 1, sizeof(int));
-    int ok = nx && nu && nbx && nbu && ng && ns;
+    int *rows = calloc(N + 1, sizeof(int)), *ns = calloc(N + 1, sizeof(int));
+    int ok = nx && nu && nbx && nbu && rows && ns;
     if (ok) {
         for (int k = 0; k <= N; ++k) {
             nx[k] = s->nz;
             nu[k] = k < N ? s->nv : 0;
             nbu[k] = nu[k];
-            ng[k] = k < N ? s->ng : 0;
+            rows[k] = k < N ? s->ng : 0;
         }
         nbx[0] = s->nz; /* z_0 fixed by its bounds */
         ok = allocate(&s->hpipm_memory[0], d_ocp_qp_dim_memsize(N)) != NULL;
     }
     if (ok) {
         d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[0]);
-        d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, ng, ns, &s->dim);
+        d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, rows, ns, &s->dim);
         ok = allocate(&s->hpipm_memory[1], d_ocp_qp_memsize(&s->dim))
              && allocate(&s->hpipm_memory[2], d_ocp_qp_sol_memsize(&s->dim));
     }
-    free(nx); free(nu); free(nbx); free(nbu); free(ng); free(ns);
+    free(nx); free(nu); free(nbx); free(nbu); free(rows); free(ns);
     if (!ok) {
         auvmpc_rti_free(s);
         return NULL;
@@ -194,7 +214,8 @@ static int has_nan(const double *v, int size) {
     return 0;
 }
 
-/* The HPIPM status (0: solved), or NOT_FINITE when the QP data are not finite. */
+/* The HPIPM status (0: solved), NOT_FINITE when the QP data are not finite,
+ * EVALUATION_FAILED when the generated functions report an error. */
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
@@ -209,7 +230,7 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
                                      movable + k, &step_index};
         memcpy(s->arg_work, in, sizeof(in));
         memcpy(s->res_work, s->out, sizeof(s->out));
-        if (rti_stage(s->arg_work, s->res_work, s->iw, s->w, 0)) return NOT_FINITE;
+        if (rti_stage(s->arg_work, s->res_work, s->iw, s->w, 0)) return EVALUATION_FAILED;
         /* The gaps and gradients go non-finite first on a diverged iterate. */
         if (!all_finite(s->out[OUT_b], s->out_size[OUT_b]) || !all_finite(s->out[OUT_q], nz)
             || !all_finite(s->out[OUT_r], nv))
@@ -239,7 +260,7 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
     memcpy(s->arg_work, in, sizeof(in));
     s->res_work[0] = s->out[OUT_Q];
     s->res_work[1] = s->out[OUT_q];
-    if (rti_terminal(s->arg_work, s->res_work, s->iw, s->w, 0)) return NOT_FINITE;
+    if (rti_terminal(s->arg_work, s->res_work, s->iw, s->w, 0)) return EVALUATION_FAILED;
     if (!all_finite(s->out[OUT_q], nz)) return NOT_FINITE;
     d_ocp_qp_set_Q(N, s->out[OUT_Q], &s->qp);
     d_ocp_qp_set_q(N, s->out[OUT_q], &s->qp);
@@ -252,11 +273,11 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
 
     int status = 0;
     for (int p = 0; p < s->passes; ++p) {
-        int used;
+        int pass_iterations;
         d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg[p], &s->ws[p]);
         d_ocp_qp_ipm_get_status(&s->ws[p], &status);
-        d_ocp_qp_ipm_get_iter(&s->ws[p], &used);
-        *iterations += used;
+        d_ocp_qp_ipm_get_iter(&s->ws[p], &pass_iterations);
+        *iterations += pass_iterations;
         if (status == 0) break;
     }
     for (int k = 0; k <= N; ++k) d_ocp_qp_sol_get_x(k, &s->sol, dz + nz * k);

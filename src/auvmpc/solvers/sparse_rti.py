@@ -63,7 +63,7 @@ _STEP_REGULARISATION = 1e-9
 # (m), as in the condensed real-time iteration: one SQP step cannot move the plan that far,
 # and a far row would only perturb the interior point's solution (by ~1e-7 N).
 _OBSTACLE_RANGE_M = 5.0
-_SOLVED, _NOT_FINITE = 0, -1
+_SOLVED, _NOT_FINITE, _EVALUATION_FAILED = 0, -1, -2
 
 
 class SparseRealTimeIteration:
@@ -79,7 +79,7 @@ class SparseRealTimeIteration:
         limit = program.config.qp_iteration_limit
         step = None
         if compiled or (compiled is None and program.config.jit):
-            step = compiled_qp_step(qp.stage, qp.terminal, N, n, slots, hpipm_settings(limit))
+            step = compiled_qp_step(qp, N, n, slots, hpipm_settings(limit))
             if step is None and compiled:
                 raise RuntimeError("no C compiler, or no HPIPM in the casadi wheel")
         self.compiled = step is not None
@@ -115,7 +115,9 @@ class SparseRealTimeIteration:
                     return Solution(
                         None, total, time.perf_counter() - started, "non-finite QP data"
                     )
-                status = f"hpipm {code}"
+                status = (
+                    "QP data evaluation failed" if code == _EVALUATION_FAILED else f"hpipm {code}"
+                )
                 dz, dv = self._step.dz, self._step.dv
                 if code != _SOLVED or not (np.isfinite(dz).all() and np.isfinite(dv).all()):
                     return Solution(None, total, time.perf_counter() - started, status)
