@@ -146,3 +146,13 @@ def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch)
     kept = sorted(p.name for p in tmp_path.glob("rti-*.so"))
     assert len(kept) == 2 and "rti-old2.so" in kept, "the newest old one and the new one"
     assert mine.read_text() == "not auvmpc's"
+
+
+def test_a_run_without_a_compiler_says_it_took_the_slower_path(monkeypatch):
+    from auvmpc.api import load_scenario, simulate
+
+    monkeypatch.setattr(compiled_qp_step, "compiler", lambda: None)
+    every_move_free = {"duration": 5.0, "controller.control_horizon": 30}
+    run = simulate(load_scenario("paper-ideal", every_move_free, controller="nmpc"))
+    assert any("no C compiler" in warning for warning in run.warnings)
+    assert run.metrics["fallback_steps"] == 0

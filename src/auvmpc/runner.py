@@ -177,10 +177,12 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
     # One BLAS thread: a controller step works on small matrices, where a second thread only
     # adds hand-over latency (measured: p99 2 ms -> 16 ms for ltv-mpc at nc 30), and
     # campaigns run one process per core anyway.
+    controller = make_controller(scenario, resolved.model)
+    warnings = [*warnings, *controller.build_warnings]
     with threadpool_limits(limits=1, user_api="blas"):
         log = closed_loop(
             resolved.plant,
-            make_controller(scenario, resolved.model),
+            controller,
             make_reference(scenario.reference, resolved.base_dir),
             duration=scenario.duration,
             initial_state=scenario.initial_state,

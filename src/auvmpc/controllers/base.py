@@ -82,6 +82,9 @@ class Controller(ABC):
 
     sample_time: float
     preview_steps: int
+    # What a run should record about how this controller was built (e.g. a slower path
+    # taken because the machine lacks something); the run adds them to its warnings.
+    build_warnings: tuple[str, ...] = ()
 
     @abstractmethod
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:

@@ -118,6 +118,11 @@ class NonlinearMpc(ShelledController):
             # (HPIPM took 50 iterations without converging); move blocking keeps the
             # condensed QP, whose variables are the moves themselves.
             self._solver = SparseRealTimeIteration(self.program)
+            if config.jit and not self._solver.compiled:
+                self.build_warnings = (
+                    "nmpc: no C compiler (or no HPIPM in the casadi wheel), so the real-time "
+                    "step runs through CasADi's virtual machine: same QP, 2-3x slower per step",
+                )
         elif config.nmpc_mode is NmpcMode.REAL_TIME:
             self._solver = CondensedRealTimeIteration(self.program, config)
         else:  # unreachable: NmpcMode has no other member
