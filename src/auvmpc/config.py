@@ -4,14 +4,16 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from auvmpc.errors import ConfigError
 
 __all__ = [
+    "NonNegative",
+    "Positive",
     "StrictModel",
     "builtin_descriptions",
     "load_yaml",
@@ -22,6 +24,11 @@ __all__ = [
 # A scenario, vehicle or campaign file larger than this is not one (the largest preset is
 # 3 kB); reading it whole would only waste memory before the parser refuses it.
 MAX_TEXT_FILE_BYTES = 16 * 1024 * 1024
+
+
+# The number constraints every configuration model uses.
+NonNegative = Annotated[float, Field(ge=0)]
+Positive = Annotated[float, Field(gt=0)]
 
 
 class StrictModel(BaseModel):

@@ -18,7 +18,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from auvmpc.config import StrictModel
+from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import ControlStatus, Observation
 from auvmpc.controllers.config import ThrustPenalty
 from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, WaveType, wave_number
@@ -35,8 +35,6 @@ __all__ = [
     "STEP_METRIC_KEYS",
 ]
 
-NonNegative = Annotated[float, Field(ge=0)]
-Positive = Annotated[float, Field(gt=0)]
 STEADY_WINDOW_S = 10.0  # "over the last 10 s" (issue 5)
 WATER_DENSITY = 1025.0  # kg/m^3, sea water (a fresh-water tank: 1000; 2.5 % on the wave force)
 

@@ -21,14 +21,13 @@ a 1500 s circle and P lost positive definiteness at 487 s (docs/model.md).
 from __future__ import annotations
 
 import math
-from typing import Annotated
 
 import casadi as ca
 import numpy as np
 import scipy.linalg
 from pydantic import Field
 
-from auvmpc.config import StrictModel
+from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
 from auvmpc.vehicle import VehicleParams
 
@@ -42,7 +41,6 @@ __all__ = [
 ]
 
 NX, ND = 6, 3
-Positive = Annotated[float, Field(gt=0)]
 
 
 # Disturbance statistics as fractions of the thrust authority (ObserverConfig.for_vehicle).

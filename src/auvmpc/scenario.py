@@ -16,6 +16,7 @@ import yaml
 from pydantic import Field, ValidationError, model_validator
 
 from auvmpc.config import (
+    NonNegative,
     StrictModel,
     builtin_descriptions,
     load_yaml,
@@ -45,8 +46,6 @@ __all__ = [
     "load_scenario",
     "apply_override",
 ]
-
-NonNegative = Annotated[float, Field(ge=0)]
 
 
 # The plant's longest RK4 step when the scenario gives none and the vehicle allows it (s):

@@ -45,12 +45,11 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Annotated
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from auvmpc.config import StrictModel
+from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
@@ -58,8 +57,6 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]
 
-NonNegative = Annotated[float, Field(ge=0)]
-Positive = Annotated[float, Field(gt=0)]
 
 # A command is "saturated" when the limits moved it by more than this (N): float round-off
 # in the allocation is far smaller, any real clipping far larger.

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 from pydantic import Field, field_validator, model_validator
 
-from auvmpc.config import StrictModel
+from auvmpc.config import NonNegative, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
@@ -29,7 +29,6 @@ __all__ = [
     "stable_model_substeps",
 ]
 
-NonNegative = Annotated[float, Field(ge=0)]
 Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
 
 

@@ -8,12 +8,11 @@ N m) and rotated into the body frame by the plant (paper-model.md section 6).
 from __future__ import annotations
 
 import math
-from typing import Annotated
 
 import numpy as np
 from pydantic import Field
 
-from auvmpc.config import StrictModel
+from auvmpc.config import NonNegative, Positive, StrictModel
 
 __all__ = [
     "DisturbanceConfig",
@@ -23,9 +22,6 @@ __all__ = [
     "WorldDisturbance",
     "SensorNoise",
 ]
-
-NonNegative = Annotated[float, Field(ge=0)]
-Positive = Annotated[float, Field(gt=0)]
 
 
 class GaussMarkovConfig(StrictModel):
