@@ -24,7 +24,7 @@ import numpy as np
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpProblem, QpSolverName, make_qp_solver
 
-__all__ = ["AffinePrediction", "CondensedQp", "SoftRows", "add_soft_rows"]
+__all__ = ["AffinePrediction", "CondensedQp", "SoftRows", "soft_constrained_qp"]
 
 # Keeps H positive definite when R = 0 (DAQP needs it); far below every real weight.
 _HESSIAN_REGULARISATION = 1e-9
@@ -56,23 +56,47 @@ class SoftRows:
         return len(self.steps)
 
 
-def add_soft_rows(
-    H: np.ndarray, f: np.ndarray, coefficients: np.ndarray, lower: np.ndarray, penalty: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``coefficients . z + s_r >= lower`` with one slack each, the slacks being the last
-    ``len(lower)`` variables of a dense QP: their cost goes into ``H`` and ``f`` (in place),
-    the rows and their lower bounds are returned.
+def soft_constrained_qp(
+    H: np.ndarray,
+    f: np.ndarray,
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    bounds: tuple[np.ndarray, np.ndarray],
+    soft: tuple[np.ndarray, np.ndarray] | None,
+    penalty: float,
+) -> QpProblem:
+    """The dense QP with hard ``rows`` (matrix over the free variables, lower, upper), the
+    variable ``bounds`` and, if given, ``soft`` rows ``coefficients . z + s_r >= lower``
+    with one slack each, the slacks being the last variables: their cost goes into ``H``
+    and ``f`` (in place), their bounds are in ``bounds`` already.
 
     One slack per row: an exact L1 penalty relaxes only the rows that must be.
     """
-    n_rows, n_free = coefficients.shape
-    slack = np.arange(n_free, n_free + n_rows)
-    H[slack, slack] = 2.0 * SLACK_QUADRATIC_WEIGHT
-    f[slack] = penalty
-    block = np.zeros((n_rows, n_free + n_rows))
-    block[:, :n_free] = coefficients
-    block[:, slack] = np.eye(n_rows)
-    return block, lower
+    matrix, lower, upper = rows
+    n_all = H.shape[0]
+    hard = np.zeros((matrix.shape[0], n_all))
+    hard[:, : matrix.shape[1]] = matrix
+    blocks, lowers, uppers = [hard], [lower], [upper]
+    if soft is not None:
+        coefficients, soft_lower = soft
+        n_rows, n_free = coefficients.shape
+        slack = np.arange(n_free, n_free + n_rows)
+        H[slack, slack] = 2.0 * SLACK_QUADRATIC_WEIGHT
+        f[slack] = penalty
+        block = np.zeros((n_rows, n_all))
+        block[:, :n_free] = coefficients
+        block[:, slack] = np.eye(n_rows)
+        blocks.append(block)
+        lowers.append(soft_lower)
+        uppers.append(np.full(n_rows, np.inf))
+    return QpProblem(
+        H=H,
+        f=f,
+        A=np.vstack(blocks),
+        lower=np.concatenate(lowers),
+        upper=np.concatenate(uppers),
+        bound_lower=bounds[0],
+        bound_upper=bounds[1],
+    )
 
 
 class CondensedQp:
@@ -152,30 +176,21 @@ class CondensedQp:
         bound_lower = np.concatenate([-self._move_bound, np.zeros(n_slack)])
         bound_upper = np.concatenate([self._move_bound, np.full(n_slack, np.inf)])
         nc = len(self.move_steps)
-        input_rows = np.zeros((self._input_rows.shape[0], nz))
-        input_rows[:, :n_moves] = self._input_rows
-        rows = [input_rows]
-        lower = [np.tile(self._input_lower - previous, nc)]
-        upper = [np.tile(self._input_upper - previous, nc)]
-        if n_slack:
-            block, bound = add_soft_rows(
-                H,
-                f,
+        input_rows = (
+            self._input_rows,
+            np.tile(self._input_lower - previous, nc),
+            np.tile(self._input_upper - previous, nc),
+        )
+        soft_rows = (
+            (
                 np.einsum("rk,rkj->rj", soft.coefficients, sensitivity[soft.steps]),
                 soft.lower - np.einsum("rk,rk->r", soft.coefficients, free[soft.steps]),
-                self.slack_penalty,
             )
-            rows.append(block)
-            lower.append(bound)
-            upper.append(np.full(n_slack, np.inf))
-        return QpProblem(
-            H=H,
-            f=f,
-            A=np.vstack(rows),
-            lower=np.concatenate(lower),
-            upper=np.concatenate(upper),
-            bound_lower=bound_lower,
-            bound_upper=bound_upper,
+            if n_slack
+            else None
+        )
+        return soft_constrained_qp(
+            H, f, input_rows, (bound_lower, bound_upper), soft_rows, self.slack_penalty
         )
 
     def add_trust_region(

@@ -11,8 +11,8 @@ import time
 import numpy as np
 
 from auvmpc.ocp.tracking import ThrustPenalty
-from auvmpc.solvers.condensed_qp import add_soft_rows
-from auvmpc.solvers.dense_qp import QpProblem, make_qp_solver
+from auvmpc.solvers.condensed_qp import soft_constrained_qp
+from auvmpc.solvers.dense_qp import make_qp_solver
 from auvmpc.solvers.multiple_shooting import (
     NX,
     Iterate,
@@ -58,17 +58,17 @@ class CondensedRealTimeIteration:
         ocp = program.ocp
         self._sqrt_weights = np.sqrt(ocp.stage_weights())  # rows n = 1..ny
         R = ocp.input_weight
+        # D: the block difference U_j - U_{j-1} (U_{-1} = 0), the rate rows' matrix.
+        self._rate_matrix = np.eye(nc * n) - np.eye(nc * n, k=-n)
         self._absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
         if self._absolute:
             # sum_i |F_i|_R^2 with F_i = E_i U: each move's weight counts the steps it is held.
             counts = np.bincount(program.held, minlength=nc)
             self._thrust_hessian = 2.0 * np.diag(np.repeat(counts, n) * np.tile(R, nc))
         else:
-            # sum_j |U_j - U_{j-1}|_R^2 = |D U - e_0 F_prev|_R^2 with D the block difference.
-            self._difference = np.eye(nc * n) - np.eye(nc * n, k=-n)
-            self._thrust_hessian = (
-                2.0 * self._difference.T @ (np.tile(R, nc)[:, None] * self._difference)
-            )
+            # sum_j |U_j - U_{j-1}|_R^2 = |D U - e_0 F_prev|_R^2.
+            D = self._rate_matrix
+            self._thrust_hessian = 2.0 * D.T @ (np.tile(R, nc)[:, None] * D)
         self._R = np.tile(R, nc)
 
     def reset(self) -> None:
@@ -131,30 +131,17 @@ class CondensedRealTimeIteration:
 
         # Rate rows: U_0 - F_prev and U_j - U_{j-1} within +-max_move.
         change = np.concatenate([thrust[:n] - sample.previous, thrust[n:] - thrust[:-n]])
-        rate_rows = np.zeros((n_thrust, nz))
-        rate_rows[:, :n_thrust] = np.eye(n_thrust) - np.eye(n_thrust, k=-n)
         max_change = program.max_change
-        rows, lower, upper = [rate_rows], [-max_change - change], [max_change - change]
+        rate_rows = (self._rate_matrix, -max_change - change, max_change - change)
+        soft_rows = None
         if n_slack:
             normals = normal[steps, slot_index]  # (rows, 2)
-            block, bound = add_soft_rows(
-                H,
-                f,
+            soft_rows = (
                 np.einsum("rk,rkj->rj", normals, sensitivity[steps + 1, :2, :]),
                 -clearance[steps, slot_index] - np.einsum("rk,rk->r", normals, free[steps + 1, :2]),
-                program.ocp.slack_penalty,
             )
-            rows.append(block)
-            lower.append(bound)
-            upper.append(np.full(n_slack, np.inf))
-        problem = QpProblem(
-            H=H,
-            f=f,
-            A=np.vstack(rows),
-            lower=np.concatenate(lower),
-            upper=np.concatenate(upper),
-            bound_lower=bound_lower,
-            bound_upper=bound_upper,
+        problem = soft_constrained_qp(
+            H, f, rate_rows, (bound_lower, bound_upper), soft_rows, program.ocp.slack_penalty
         )
         result = self._solver.solve(problem, np.zeros(nz))
         if result.z is None:
@@ -195,9 +182,9 @@ class CondensedRealTimeIteration:
         if self._absolute:
             return self._thrust_hessian @ thrust
         n = self.program.n_thrusters
-        change = self._difference @ thrust
+        change = self._rate_matrix @ thrust
         change[:n] -= sample.previous
-        return 2.0 * self._difference.T @ (self._R * change)
+        return 2.0 * self._rate_matrix.T @ (self._R * change)
 
 
 def _regularisation(H: np.ndarray) -> float:
