@@ -165,11 +165,6 @@ _CACHE: dict[tuple[str, str, int], StageQp] = {}
 _CACHE_SIZE = 16
 
 
-def stage_inputs(thrusters: int, slots: int) -> int:
-    """nv: the thrust steps, and the obstacle slack when there are obstacle slots."""
-    return thrusters + (1 if slots else 0)
-
-
 def stage_qp(program: MultipleShootingProgram) -> StageQp:
     """The program's stage QP functions, built once per vehicle and configuration."""
     key = (program.model.model_dump_json(), program.config.model_dump_json(), program.n_slots)
@@ -183,7 +178,7 @@ def stage_qp(program: MultipleShootingProgram) -> StageQp:
 def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     n, S, NX = program.n_thrusters, program.n_slots, 6
     # One slack input per stage for its obstacle rows; none without obstacle slots.
-    nz, nv, ng = NX + n, stage_inputs(n, S), n + S
+    nz, nv, ng = NX + n, n + (1 if S else 0), n + S
     ocp = program.ocp
     R_weight = ocp.input_weight
     rho = ocp.slack_penalty
