@@ -32,6 +32,7 @@ from pydantic import AfterValidator, Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
+from auvmpc.models.six_dof_params import SixDofParams
 
 __all__ = [
     "STATE_NAMES",
@@ -140,6 +141,26 @@ class VehicleParams(StrictModel):
     thrust_limits: ThrustLimits = Field(description="per thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per thruster |dF/dt| bound (N/s)")
     heave: HeaveParams | None = Field(default=None, description="depth model, if any")
+    six_dof: SixDofParams | None = Field(
+        default=None,
+        description="6-DOF model (3-D thruster poses, hydrodynamics), if any; not needed "
+        "for 3-DOF and depth scenarios",
+    )
+
+    @model_validator(mode="after")
+    def _rigid_body(self) -> VehicleParams:
+        # M_RB is positive definite iff the inertia about the centre of gravity is; the
+        # section alone cannot check this, it does not know the mass.
+        if self.six_dof is not None:
+            mass_matrix = self.six_dof.mass_matrix(self.mass)
+            if np.min(np.linalg.eigvalsh(mass_matrix)) <= 0:
+                raise FieldError(
+                    "six_dof.inertia",
+                    self.six_dof.inertia,
+                    "the mass matrix M_RB + M_A is not positive definite: the inertia about "
+                    "the centre of gravity (I_b + m S(r_g)^2) must be",
+                )
+        return self
 
     @model_validator(mode="after")
     def _steerable(self) -> VehicleParams:
