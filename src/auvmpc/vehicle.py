@@ -331,7 +331,7 @@ def body_from_world(force_world, psi):
     return fx * cos_psi + fy * sin_psi, -fx * sin_psi + fy * cos_psi
 
 
-def dynamics(state, thrust, params: VehicleParams, disturbance_body=None):
+def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, current_world=None):
     """State derivative of the 3-DOF model (module docstring).
 
     Parameters
@@ -340,10 +340,20 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None):
     thrust : (n,) array or CasADi column, one force per thruster (N)
     params : VehicleParams
     disturbance_body : (3,) [d_u, d_v, d_r] or None
+    current_world : (2,) water velocity (V_x, V_y) in the world frame (m/s), or None
 
     Returns
     -------
     (6,) NumPy array for numeric input, CasADi column for symbolic input.
+
+    Notes
+    -----
+    A current acts through the relative velocity u_r = u - u_c, v_r = v - v_c, with
+    (u_c, v_c) the current in the body frame (Fossen 2021, sec. 6.5; six-dof.md): damping
+    and the Coriolis-centripetal terms see (u_r, v_r), and since the body turns under a
+    current fixed in the world, u_c' = r v_c and v_c' = -r u_c are added to u', v'. This is
+    the 6-DOF model's horizontal rows (``auvmpc.models.six_dof``) with w = p = q = 0 and the
+    current held constant (as over one plant step). Without one, the original equations.
     """
     symbolic = isinstance(state, ca.SX | ca.MX) or isinstance(thrust, ca.SX | ca.MX)
     _, _, psi, u, v, r = (state[i] for i in range(NX))
@@ -359,13 +369,22 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None):
         tau_v = tau_v + disturbance_body[1]
         tau_r = tau_r + disturbance_body[2]
     p = params
+    if current_world is None:
+        u_r, v_r = u, v
+    else:
+        u_c, v_c = body_from_world(current_world, psi)
+        u_r, v_r = u - u_c, v - v_c
+    u_dot = (p.Xu * u_r + p.Xuu * absolute(u_r) * u_r + p.m22 * v_r * r + tau_u) / p.m11
+    v_dot = (p.Yv * v_r + p.Yvv * absolute(v_r) * v_r - p.m11 * u_r * r + tau_v) / p.m22
+    if current_world is not None:
+        u_dot, v_dot = u_dot + r * v_c, v_dot - r * u_c
     derivative = (
         u * cos_psi - v * sin_psi,
         u * sin_psi + v * cos_psi,
         r,
-        (p.Xu * u + p.Xuu * absolute(u) * u + p.m22 * v * r + tau_u) / p.m11,
-        (p.Yv * v + p.Yvv * absolute(v) * v - p.m11 * u * r + tau_v) / p.m22,
-        (p.Nr * r + p.Nrr * absolute(r) * r + (p.m11 - p.m22) * u * v + tau_r) / p.Iz,
+        u_dot,
+        v_dot,
+        (p.Nr * r + p.Nrr * absolute(r) * r + (p.m11 - p.m22) * u_r * v_r + tau_r) / p.Iz,
     )
     if symbolic:
         return ca.vertcat(*derivative)

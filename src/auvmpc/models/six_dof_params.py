@@ -156,7 +156,9 @@ class SixDofParams(StrictModel):
             )
         added = self.added_mass_matrix
         if not _is_symmetric(added):
-            raise FieldError("added_mass", self.added_mass, "the added-mass matrix must be symmetric")
+            raise FieldError(
+                "added_mass", self.added_mass, "the added-mass matrix must be symmetric"
+            )
         if _smallest_eigenvalue(added) < -SYMMETRY_TOL * max(float(np.max(np.abs(added))), 1.0):
             raise FieldError(
                 "added_mass",

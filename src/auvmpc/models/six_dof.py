@@ -1,0 +1,339 @@
+"""The 6-DOF vehicle model in Fossen's matrix form, written once in CasADi.
+
+Conventions (``shared/spec/six-dof.md``; equation numbers: Fossen, *Handbook of Marine Craft
+Hydrodynamics and Motion Control*, 2nd ed., 2021):
+
+- World frame NED (x north, y east, z down, so z is the depth below the surface); body frame
+  x forward, y starboard, z down, origin CO. Depth scenarios elsewhere in auvmpc use z up:
+  convert at the boundary, never here.
+- State ``[x, y, z, phi, theta, psi, u, v, w, p, q, r]`` = [eta; nu]: position (m), zyx Euler
+  angles (rad), body linear (m/s) and angular (rad/s) velocity. Input: one force per
+  ``six_dof`` thruster (N), tau = T F.
+- Current: water velocity v_c (m/s, world frame, irrotational) at the vehicle and v_c' its
+  rate of change along the vehicle's path (m/s2; zero for a current uniform in space and
+  constant in time). Body frame nu_c = [R^T v_c; 0]; relative velocity nu_r = nu - nu_c.
+
+Equations (eqs. 2.40, 6.1, 6.45):
+
+    eta' = J(eta) nu
+    M_RB nu' + M_A nu_r' + C_RB(nu) nu + C_A(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau
+
+with nu_c' = [-S(omega) R^T v_c + R^T v_c'; 0] (the body sees a fixed current turn as it
+turns), solved for nu' as  M nu' = tau - C_RB(nu) nu - C_A(nu_r) nu_r - D(nu_r) nu_r - g(eta)
++ M_A nu_c'.  C_RB is the linear-velocity-independent form (eq. 3.56), for which Fossen's
+property holds: with a constant current this equals M nu_r' + C(nu_r) nu_r + D nu_r + g = tau.
+Forces of the fluid's own acceleration (Froude-Krylov) are left out, as in Fossen's models.
+
+Pitch singularity: T(phi, theta) has 1/cos(theta), undefined at theta = +-90 deg. The
+numeric evaluation and the plant refuse states with |theta| above
+:data:`PITCH_LIMIT_RAD` (85 deg) with :class:`PitchSingularity`, rather than clamp (which
+would change the dynamics silently); the vehicles here are passively stable in pitch and
+never come near it. The symbolic expressions are valid for |theta| < 90 deg.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.integrators import rk4, rk4_step_time_varying
+from auvmpc.models.discrete import StateLayout
+from auvmpc.vehicle import VehicleParams
+
+__all__ = [
+    "PITCH_LIMIT_RAD",
+    "SIX_DOF",
+    "PitchSingularity",
+    "SixDofModel",
+    "Rzyx",
+    "Tzyx",
+    "check_pitch",
+    "coriolis_added_mass",
+    "coriolis_rigid_body",
+    "depth_rate",
+    "dynamics",
+    "integrate",
+    "restoring_forces",
+    "six_dof_model",
+]
+
+SIX_DOF = StateLayout(
+    names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"),
+    position=(0, 1),
+    heading=5,
+)
+NX = 12
+# Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.
+PITCH_LIMIT_RAD = math.radians(85.0)
+
+
+class PitchSingularity(ArithmeticError):
+    """The Euler-angle kinematics were asked for |theta| beyond PITCH_LIMIT_RAD."""
+
+
+def _skew(a):
+    """S(a): S(a) b = a x b (eq. 2.9), on a CasADi 3-vector."""
+    return ca.vertcat(
+        ca.horzcat(0, -a[2], a[1]),
+        ca.horzcat(a[2], 0, -a[0]),
+        ca.horzcat(-a[1], a[0], 0),
+    )
+
+
+def Rzyx(phi, theta, psi):
+    """Body-to-world rotation R(Theta) for zyx Euler angles (eq. 2.18)."""
+    cphi, sphi = ca.cos(phi), ca.sin(phi)
+    cth, sth = ca.cos(theta), ca.sin(theta)
+    cpsi, spsi = ca.cos(psi), ca.sin(psi)
+    return ca.vertcat(
+        ca.horzcat(cpsi * cth, -spsi * cphi + cpsi * sth * sphi, spsi * sphi + cpsi * cphi * sth),
+        ca.horzcat(spsi * cth, cpsi * cphi + sphi * sth * spsi, -cpsi * sphi + sth * spsi * cphi),
+        ca.horzcat(-sth, cth * sphi, cth * cphi),
+    )
+
+
+def Tzyx(phi, theta):
+    """Body angular velocity to Euler-angle rates, T(Theta) (eq. 2.28); singular at
+    theta = +-90 deg."""
+    cphi, sphi = ca.cos(phi), ca.sin(phi)
+    cth, tth = ca.cos(theta), ca.tan(theta)
+    return ca.vertcat(
+        ca.horzcat(1, sphi * tth, cphi * tth),
+        ca.horzcat(0, cphi, -sphi),
+        ca.horzcat(0, sphi / cth, cphi / cth),
+    )
+
+
+def coriolis_rigid_body(mass: float, inertia: np.ndarray, r_g: np.ndarray, omega):
+    """C_RB(nu), the linear-velocity-independent form (eq. 3.56): depends on omega only."""
+    S_omega, S_rg = _skew(omega), ca.DM(_numeric_skew(r_g))
+    upper = ca.horzcat(mass * S_omega, -mass * ca.mtimes(S_omega, S_rg))
+    lower = ca.horzcat(mass * ca.mtimes(S_rg, S_omega), -_skew(ca.mtimes(ca.DM(inertia), omega)))
+    return ca.vertcat(upper, lower)
+
+
+def coriolis_added_mass(added_mass: np.ndarray, nu_r):
+    """C_A(nu_r) = [[0, -S(A11 nu1 + A12 nu2)], [-S(A11 nu1 + A12 nu2), -S(A21 nu1 + A22 nu2)]]
+    (eq. 6.43), M_A = [[A11, A12], [A21, A22]]."""
+    M_A = ca.DM(added_mass)
+    momentum = ca.mtimes(M_A, nu_r)
+    linear, angular = _skew(momentum[0:3]), _skew(momentum[3:6])
+    return ca.vertcat(ca.horzcat(ca.DM.zeros(3, 3), -linear), ca.horzcat(-linear, -angular))
+
+
+def restoring_forces(weight: float, buoyancy: float, r_g, r_b, phi, theta):
+    """g(eta) from weight, buoyancy and their centres (eq. 4.6)."""
+    W, B = weight, buoyancy
+    x_g, y_g, z_g = r_g
+    x_b, y_b, z_b = r_b
+    cphi, sphi = ca.cos(phi), ca.sin(phi)
+    cth, sth = ca.cos(theta), ca.sin(theta)
+    return ca.vertcat(
+        (W - B) * sth,
+        -(W - B) * cth * sphi,
+        -(W - B) * cth * cphi,
+        -(y_g * W - y_b * B) * cth * cphi + (z_g * W - z_b * B) * cth * sphi,
+        (z_g * W - z_b * B) * sth + (x_g * W - x_b * B) * cth * cphi,
+        -(x_g * W - x_b * B) * cth * sphi - (y_g * W - y_b * B) * sth,
+    )
+
+
+def _numeric_skew(a) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def dynamics(state, thrust, params: VehicleParams, current_world=None, current_rate_world=None):
+    """x' of the 6-DOF model (module docstring) for a vehicle with a ``six_dof`` section.
+
+    Parameters
+    ----------
+    state : (12,) array or CasADi column, [eta; nu]
+    thrust : (n,) array or CasADi column, one force per ``six_dof`` thruster (N)
+    params : VehicleParams with ``six_dof``
+    current_world : (3,) water velocity at the vehicle, world NED (m/s), or None (still water)
+    current_rate_world : (3,) its rate along the vehicle's path (m/s2), or None (zero)
+
+    Returns
+    -------
+    (12,) NumPy array for numeric input (evaluated through the model's compiled CasADi
+    Function, refusing |theta| > PITCH_LIMIT_RAD), CasADi column for symbolic input.
+    """
+    symbolic = any(isinstance(a, ca.SX | ca.MX) for a in (state, thrust, current_world))
+    if not symbolic:
+        return six_dof_model(params).evaluate(state, thrust, current_world, current_rate_world)
+    zero = ca.DM.zeros(3)
+    return _expression(
+        params,
+        state,
+        thrust,
+        zero if current_world is None else ca.vertcat(*_entries(current_world)),
+        zero if current_rate_world is None else ca.vertcat(*_entries(current_rate_world)),
+    )
+
+
+def _entries(vector):
+    return [vector[i] for i in range(3)]
+
+
+def _expression(params: VehicleParams, state, thrust, current_world, current_rate_world):
+    six = params.six_dof
+    if six is None:
+        raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+    r_g = np.array(six.center_of_gravity, dtype=float)
+    r_b = np.array(six.center_of_buoyancy, dtype=float)
+    phi, theta, psi = state[3], state[4], state[5]
+    nu = state[6:12]
+    linear, omega = nu[0:3], nu[3:6]
+    R = Rzyx(phi, theta, psi)
+
+    current_body = ca.mtimes(R.T, current_world)
+    nu_r = ca.vertcat(linear - current_body, omega)
+    # d/dt (R^T v_c) along the path: the body turns under the current, and the current
+    # itself may change (in time, or with depth as the vehicle dives).
+    current_body_rate = -ca.mtimes(_skew(omega), current_body) + ca.mtimes(R.T, current_rate_world)
+    nu_c_rate = ca.vertcat(current_body_rate, ca.DM.zeros(3))
+
+    M_A = six.added_mass_matrix
+    M = six.mass_matrix(params.mass)
+    C_RB = coriolis_rigid_body(params.mass, six.inertia_matrix, r_g, omega)
+    C_A = coriolis_added_mass(M_A, nu_r)
+    damping = (
+        -ca.DM(np.array(six.linear_damping)) * nu_r
+        - ca.DM(np.array(six.quadratic_damping)) * ca.fabs(nu_r) * nu_r
+    )  # D(nu_r) nu_r, diagonal: element-wise
+    g = restoring_forces(six.weight(params.mass), six.buoyancy, r_g, r_b, phi, theta)
+    tau = ca.mtimes(ca.DM(six.T), thrust)
+
+    forces = (
+        tau
+        - ca.mtimes(C_RB, nu)
+        - ca.mtimes(C_A, nu_r)
+        - damping
+        - g
+        + ca.mtimes(ca.DM(M_A), nu_c_rate)
+    )
+    nu_dot = ca.mtimes(ca.DM(np.linalg.inv(M)), forces)
+    eta_dot = ca.vertcat(ca.mtimes(R, linear), ca.mtimes(Tzyx(phi, theta), omega))
+    return ca.vertcat(eta_dot, nu_dot)
+
+
+class SixDofModel:
+    """The 6-DOF model of one vehicle as compiled CasADi functions, built once.
+
+    ``derivative(x, F, v_c, v_c')`` is the model; ``step(x, F, v_c, h)`` is one RK4 step of
+    length h under a current uniform in space and constant over the step.
+    """
+
+    layout = SIX_DOF
+
+    def __init__(self, params: VehicleParams) -> None:
+        if params.six_dof is None:
+            raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+        self.params = params
+        self.n_thrusters = params.six_dof.n_thrusters
+        state, thrust = ca.SX.sym("x", NX), ca.SX.sym("F", self.n_thrusters)
+        current, current_rate = ca.SX.sym("v_c", 3), ca.SX.sym("v_c_rate", 3)
+        derivative = _expression(params, state, thrust, current, current_rate)
+        self.derivative = ca.Function(
+            "six_dof", [state, thrust, current, current_rate], [derivative],
+            ["x", "F", "v_c", "v_c_rate"], ["x_dot"],
+        )  # fmt: skip
+        h = ca.SX.sym("h")
+        still = ca.DM.zeros(3)
+
+        def f(x, u):
+            return self.derivative(x, u, current, still)
+
+        self.step = ca.Function(
+            "six_dof_rk4", [state, thrust, current, h], [rk4(f, state, thrust, h)],
+            ["x", "F", "v_c", "h"], ["x_next"],
+        )  # fmt: skip
+
+    def evaluate(self, state, thrust, current_world=None, current_rate_world=None) -> np.ndarray:
+        """x' (12,) on NumPy input; refuses |theta| > PITCH_LIMIT_RAD."""
+        state = np.asarray(state, dtype=float)
+        check_pitch(state)
+        value = self.derivative(
+            state,
+            np.asarray(thrust, dtype=float),
+            np.zeros(3) if current_world is None else np.asarray(current_world, dtype=float),
+            np.zeros(3)
+            if current_rate_world is None
+            else np.asarray(current_rate_world, dtype=float),
+        )
+        return np.asarray(value, dtype=float).ravel()
+
+
+def check_pitch(state: np.ndarray) -> None:
+    """Raise PitchSingularity if the state's pitch is beyond PITCH_LIMIT_RAD (or not finite)."""
+    theta = float(state[4])
+    if not abs(theta) <= PITCH_LIMIT_RAD:
+        raise PitchSingularity(
+            f"pitch theta = {math.degrees(theta):.1f} deg is beyond +-"
+            f"{math.degrees(PITCH_LIMIT_RAD):.0f} deg, where the zyx Euler-angle kinematics "
+            "(1/cos theta) are near their singularity"
+        )
+
+
+def depth_rate(state: np.ndarray) -> float:
+    """z' (m/s, down positive): the third row of R(Theta) times [u, v, w]."""
+    phi, theta = state[3], state[4]
+    u, v, w = state[6], state[7], state[8]
+    return float(
+        -math.sin(theta) * u
+        + math.cos(theta) * math.sin(phi) * v
+        + math.cos(theta) * math.cos(phi) * w
+    )
+
+
+CurrentAt = Callable[[float, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def integrate(
+    model: SixDofModel,
+    state: np.ndarray,
+    thrust: np.ndarray,
+    duration: float,
+    substeps: int,
+    current_at: CurrentAt | None = None,
+    t0: float = 0.0,
+) -> np.ndarray:
+    """The plant over one zero-order-hold sample: ``substeps`` RK4 steps (as the 3-DOF plant).
+
+    ``current_at(t, x) -> (v_c, v_c')`` gives the water velocity at the vehicle and its rate
+    along the path (world frame), e.g. from :class:`auvmpc.environment.currents.WaterCurrent`;
+    None is still water. The pitch is checked after every step.
+    """
+    thrust = np.asarray(thrust, dtype=float)
+    state = np.asarray(state, dtype=float)
+    h = duration / substeps
+    check_pitch(state)
+    if current_at is None:
+        still = np.zeros(3)
+        for _ in range(substeps):
+            state = np.asarray(model.step(state, thrust, still, h), dtype=float).ravel()
+            check_pitch(state)
+        return state
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        current, rate = current_at(t, x)
+        return np.asarray(model.derivative(x, thrust, current, rate), dtype=float).ravel()
+
+    for i in range(substeps):
+        state = rk4_step_time_varying(rhs, t0 + i * h, state, h)
+        check_pitch(state)
+    return state
+
+
+@functools.lru_cache(maxsize=16)
+def _cached(params_json: str) -> SixDofModel:
+    return SixDofModel(VehicleParams.model_validate_json(params_json))
+
+
+def six_dof_model(params: VehicleParams) -> SixDofModel:
+    """The compiled 6-DOF model of ``params``, built once per process."""
+    return _cached(params.model_dump_json())
