@@ -48,6 +48,7 @@ __all__ = [
     "load_vehicle",
     "preset_names",
     "scaled",
+    "steady_speed",
 ]
 
 STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
@@ -279,7 +280,7 @@ def stable_plant_step(params: VehicleParams, longest: float) -> float:
     spins at 8 rad/s, where a 0.05 s step diverged; every preset keeps 0.05 s.
     """
     tops = [
-        _steady_speed(linear, quadratic, force)
+        steady_speed(linear, quadratic, force)
         for linear, quadratic, force in zip(
             (params.Xu, params.Yv, params.Nr),
             (params.Xuu, params.Yvv, params.Nrr),
@@ -290,7 +291,7 @@ def stable_plant_step(params: VehicleParams, longest: float) -> float:
     return min(longest, RK4_STABLE_STEP / max(damping_rates(params, *tops)))
 
 
-def _steady_speed(linear: float, quadratic: float, force: float) -> float:
+def steady_speed(linear: float, quadratic: float, force: float) -> float:
     """Where |linear| s + |quadratic| s^2 = force (damping coefficients are <= 0)."""
     a, b = -quadratic, -linear
     if a > 0:
