@@ -119,3 +119,51 @@ def test_a_vehicle_held_at_depth_drifts_with_the_current_at_that_depth():
     world_velocity = np.asarray(Rzyx(*state[3:6])) @ state[6:9]  # it has turned meanwhile
     np.testing.assert_allclose(world_velocity, [0.1, -0.05, 0.0], atol=1e-9)
     assert state[2] == pytest.approx(20.0, abs=1e-9)
+
+
+def test_a_horizontal_scenario_takes_a_water_current_and_its_plant_drifts_with_it(jmse):
+    from auvmpc.environment.disturbances import DisturbanceConfig, WorldDisturbance
+    from auvmpc.scenario import validate_scenario
+    from auvmpc.sim.loop import plant_step
+
+    data = {
+        "name": "drift",
+        "duration": 10.0,
+        "reference": {"type": "circle"},
+        "initial_state": [0, 0, 0, 0, 0, 0],
+        "disturbance": {"water_current": {"velocity_m_per_s": [0.3, -0.2, 0.0]}},
+    }
+    scenario = validate_scenario(data)
+    disturbance = WorldDisturbance(scenario.disturbance, 0.5, np.random.default_rng(0))
+    state = np.array([0.0, 0.0, 0.5, 0.4, 0.2, 0.6])
+    zero = np.zeros(jmse.n_thrusters)
+    for k in range(240):
+        state = plant_step(jmse, state, zero, 1.0 * k, 1.0, disturbance, 20)
+        disturbance.advance()
+    c, s = math.cos(state[2]), math.sin(state[2])
+    world = [c * state[3] - s * state[4], s * state[3] + c * state[4]]
+    np.testing.assert_allclose(world, [0.3, -0.2], atol=1e-9)
+    # Without one, the force form alone, as before.
+    assert WorldDisturbance(DisturbanceConfig(), 0.5, None).water_velocity_world(0.0) is None
+
+
+@pytest.mark.parametrize(
+    ("current", "reason"),
+    [
+        ({"depth_profile": [[0, 1], [10, 0.5]]}, "the horizontal plant has none"),
+        ({"velocity_m_per_s": [0.1, 0.0, 0.05]}, "no vertical velocity"),
+    ],
+)
+def test_a_horizontal_scenario_refuses_what_its_plant_cannot_apply(current, reason):
+    from auvmpc.errors import ConfigError
+    from auvmpc.scenario import validate_scenario
+
+    data = {
+        "name": "drift",
+        "duration": 10.0,
+        "reference": {"type": "circle"},
+        "initial_state": [0, 0, 0, 0, 0, 0],
+        "disturbance": {"water_current": current},
+    }
+    with pytest.raises(ConfigError, match=f"disturbance.water_current: .*{reason}"):
+        validate_scenario(data)

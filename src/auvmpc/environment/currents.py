@@ -49,7 +49,8 @@ class WaterCurrentConfig(StrictModel):
     depth_profile: tuple[ProfilePoint, ...] = Field(
         default=(),
         description="[depth below the surface (m), factor] pairs, depths increasing; the "
-        "velocity is scaled by the factor, linear in between, held beyond the ends",
+        "velocity is scaled by the factor, linear in between, held beyond the ends (not in "
+        "horizontal scenarios: their plant has no depth)",
     )
 
     @field_validator("depth_profile")

@@ -3,6 +3,8 @@
 Every random quantity comes from an injected ``numpy.random.Generator``: same
 seed, same bits. Forces are given in the world frame as ``[X, Y, N]`` (N, N,
 N m) and rotated into the body frame by the plant (paper-model.md section 6).
+A current may also be given as water velocity (``water_current``), which the plant
+applies through the relative velocity (:mod:`auvmpc.environment.currents`).
 """
 
 from __future__ import annotations
@@ -10,9 +12,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
+from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig
 
 __all__ = [
     "DisturbanceConfig",
@@ -50,6 +53,21 @@ class DisturbanceConfig(StrictModel):
         default=None, description="slowly varying part of the current, if any"
     )
     waves: WaveForceConfig | None = Field(default=None, description="oscillating force, if any")
+    water_current: WaterCurrentConfig | None = Field(
+        default=None,
+        description="current as water velocity (world frame), acting through the velocity "
+        "relative to the water; adds to the force form above",
+    )
+
+    @field_validator("water_current")
+    @classmethod
+    def _horizontal(cls, current: WaterCurrentConfig | None) -> WaterCurrentConfig | None:
+        # The horizontal plant has no depth to read a profile at, nor a vertical velocity.
+        if current is not None and current.depth_profile:
+            raise ValueError("a depth profile needs a depth; the horizontal plant has none")
+        if current is not None and current.velocity_m_per_s[2] != 0:
+            raise ValueError("the horizontal plant has no vertical velocity: give down = 0")
+        return current
 
 
 class SensorNoiseConfig(StrictModel):
@@ -84,19 +102,38 @@ class WorldDisturbance:
         self._wave_phase = 0.0
         if config.waves is not None:
             self._wave_phase = float(rng.uniform(0.0, 2.0 * math.pi))
+        # Drawn after the force parts, so that adding a water current leaves their bits alone.
+        self._water = (
+            None
+            if config.water_current is None
+            else WaterCurrent(config.water_current, sample_time, rng)
+        )
 
     @property
     def is_constant(self) -> bool:
-        return self.config.current_variation is None and self.config.waves is None
+        water = self.config.water_current
+        return (
+            self.config.current_variation is None
+            and self.config.waves is None
+            and (water is None or water.variation is None)
+        )
 
     def advance(self) -> None:
-        """Move the Gauss-Markov state forward by one control sample."""
+        """Move the Gauss-Markov states forward by one control sample."""
+        if self._water is not None:
+            self._water.advance()
         variation = self.config.current_variation
         if variation is None or variation.std_N == 0:
             return
         decay = math.exp(-self.sample_time / variation.time_constant_s)
         drive = variation.std_N * math.sqrt(1.0 - decay * decay)
         self._variation[:2] = decay * self._variation[:2] + drive * self._rng.normal(size=2)
+
+    def water_velocity_world(self, t: float) -> np.ndarray | None:
+        """Horizontal water velocity ``[V_x, V_y]`` (m/s) at time t, or None without one."""
+        if self._water is None:
+            return None
+        return self._water.velocity_world(t)[:2]
 
     def force_world(self, t: float) -> np.ndarray:
         """World-frame ``[X, Y, N]`` at time t within the current sample."""

@@ -33,7 +33,8 @@ def plant_step(
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         force = disturbance.force_world(t)
         d_u, d_v = body_from_world(force, x[2])
-        return dynamics(x, thrust, plant, (d_u, d_v, force[2]))
+        water = disturbance.water_velocity_world(t)
+        return dynamics(x, thrust, plant, (d_u, d_v, force[2]), current_world=water)
 
     h = duration / substeps
     for i in range(substeps):
