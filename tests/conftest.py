@@ -18,6 +18,18 @@ PLANT_VS_SOLVE_IVP_TOL = 1e-6
 # Symbolic (CasADi) and numeric evaluation of the same formula: round-off only.
 ROUND_OFF_TOL = 1e-12
 
+# The 6-DOF model with w = p = q = 0 and neutral buoyancy against the 3-DOF model: the same
+# equations in a different operation order, so round-off only (1e-15 per step), also over a
+# 20 s trajectory of 400 RK4 steps; 1e-9 is the issue's bound.
+SIX_DOF_REDUCTION_TOL = 1e-9
+# Small roll and pitch oscillations at 1 % of a radian: the pendulum's amplitude effect on the
+# frequency is a^2 / 16 ~ 6e-6, RK4's phase error at h = 0.01 s is (omega h)^4 / 120 < 1e-8;
+# 1e-4 relative also absorbs the zero crossings' linear interpolation.
+NATURAL_FREQUENCY_REL_TOL = 1e-4
+# An unpowered vehicle in a uniform current after 40 of its slowest linear time constants
+# (jmse2210's surge: 6 s): exp(-40) ~ 4e-18 of its start; 1e-9 m/s is round-off with margin.
+DRIFT_VELOCITY_TOL = 1e-9
+
 PAPER_INITIAL_STATE = (7.5, -12.0, math.pi / 2, 0.4, 0.1, 0.02 * math.pi)
 
 
@@ -55,15 +67,3 @@ def random_limit_case(rng, params, reference, sample_time: float, horizon: int):
     else:  # all at the upper limit, the asymmetric side for bluerov
         previous = np.full(n, high)
     return t0, state, preview, previous
-
-# The 6-DOF model with w = p = q = 0 and neutral buoyancy against the 3-DOF model: the same
-# equations in a different operation order, so round-off only (1e-15 per step), also over a
-# 20 s trajectory of 400 RK4 steps; 1e-9 is the issue's bound.
-SIX_DOF_REDUCTION_TOL = 1e-9
-# Small roll and pitch oscillations at 1 % of a radian: the pendulum's amplitude effect on the
-# frequency is a^2 / 16 ~ 6e-6, RK4's phase error at h = 0.01 s is (omega h)^4 / 120 < 1e-8;
-# 1e-4 relative also absorbs the zero crossings' linear interpolation.
-NATURAL_FREQUENCY_REL_TOL = 1e-4
-# An unpowered vehicle in a uniform current after 40 of its slowest linear time constants
-# (jmse2210's surge: 6 s): exp(-40) ~ 4e-18 of its start; 1e-9 m/s is round-off with margin.
-DRIFT_VELOCITY_TOL = 1e-9
