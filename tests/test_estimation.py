@@ -131,6 +131,9 @@ class _ConstantCurrent:
     def force_world(self, t):
         return self.force
 
+    def water_velocity_world(self, t):
+        return None  # a force, no moving water
+
     def advance(self):
         pass
 
