@@ -15,8 +15,8 @@ from auvmpc.sim.verdict import (
     LOST_FALLBACK_S,
     characteristic_length_m,
     relative_heading_turns,
-    top_yaw_rate_rad_per_s,
 )
+from auvmpc.vehicle import top_yaw_rate
 
 SAMPLE_TIME = 0.5
 TRANSIENT_S = 20.0
@@ -175,7 +175,7 @@ def test_a_small_path_lowers_the_distance_that_counts_as_lost(jmse):
 
 def test_a_yaw_rate_excursion_is_degraded(vehicle):
     log = circle_log(vehicle)
-    top = top_yaw_rate_rad_per_s(vehicle)
+    top = top_yaw_rate(vehicle)
     log.state[100, 5] = 0.6 * top  # above half the vehicle's top rate, heading still fine
     metrics = metrics_of(log, vehicle)
     assert metrics["max_abs_yaw_rate_rad_per_s"] == pytest.approx(0.6 * top)
@@ -185,7 +185,7 @@ def test_a_yaw_rate_excursion_is_degraded(vehicle):
 
 def test_top_yaw_rate_balances_damping_against_the_largest_yaw_moment(jmse):
     # jmse2210: four thrusters with 0.30 m arms at 15 N -> 18 N m; Nr -1.5, Nrr -2.5.
-    r = top_yaw_rate_rad_per_s(jmse)
+    r = top_yaw_rate(jmse)
     assert 2.5 * r**2 + 1.5 * r == pytest.approx(4 * 0.4243 * math.sin(math.pi / 4) * 15.0)
 
 

@@ -48,6 +48,12 @@ _PRIOR_FORCE_FRACTION = 0.5
 _PRIOR_MOMENT_FRACTION = 0.1
 _RATE_FORCE_FRACTION = 0.025  # per sqrt(s)
 _RATE_MOMENT_FRACTION = 0.003  # per sqrt(s)
+# An underactuated vehicle answers a sideways force by turning (its reference crabs,
+# ocp/underactuated_reference.py), so the force estimate steers its heading and must be
+# slower than the heading loop. Measured on videoray-pro3 (generality benchmark, disturbed
+# figure-eight): at 2.5 % the estimate and the heading swung together every sample
+# (0.75 m max error), at 0.4 % 0.16 m.
+_RATE_FORCE_FRACTION_UNDERACTUATED = 0.004  # per sqrt(s)
 
 
 # Model error per sample on [x, y, psi, u, v, r] (m, rad, m/s, rad/s). The velocities' 0.02
@@ -74,8 +80,8 @@ class ObserverConfig(StrictModel):
         default=None,
         description="random-walk intensity of the world force X, Y (N/sqrt(s)) and moment "
         "N (N m/sqrt(s)): larger tracks faster, smaller is smoother; omitted: 2.5 % of the "
-        "vehicle's planar thrust authority and 0.3 % of its yaw authority per sqrt(s), see "
-        "docs/tuning.md",
+        "vehicle's planar thrust authority (0.4 % if it is underactuated) and 0.3 % of its yaw "
+        "authority per sqrt(s), see docs/tuning.md",
     )
     initial_disturbance_std: tuple[Positive, Positive, Positive] | None = Field(
         default=None,
@@ -103,11 +109,10 @@ class ObserverConfig(StrictModel):
                 _PRIOR_MOMENT_FRACTION * yaw,
             )
         if self.disturbance_rate_std is None:
-            update["disturbance_rate_std"] = (
-                _RATE_FORCE_FRACTION * planar,
-                _RATE_FORCE_FRACTION * planar,
-                _RATE_MOMENT_FRACTION * yaw,
-            )
+            force_rate = (
+                _RATE_FORCE_FRACTION_UNDERACTUATED if model.underactuated else _RATE_FORCE_FRACTION
+            ) * planar
+            update["disturbance_rate_std"] = (force_rate, force_rate, _RATE_MOMENT_FRACTION * yaw)
         return self.model_copy(update=update) if update else self
 
 

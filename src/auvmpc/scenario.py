@@ -98,14 +98,17 @@ class Scenario(StrictModel):
 
     @model_validator(mode="after")
     def _whole_samples(self) -> Scenario:
-        steps = self.duration / self.controller.sample_time
-        if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-            raise FieldError(
-                "duration",
-                self.duration,
-                f"not a whole number of samples of {self.controller.sample_time} s",
-            )
+        # An omitted sample time is checked once the vehicle has chosen it (ResolvedScenario).
+        if self.controller.sample_time is not None:
+            check_whole_samples(self.duration, self.controller.sample_time, FieldError)
         return self
+
+
+def check_whole_samples(duration: float, sample_time: float, error=ConfigError) -> None:
+    """Raise ``error`` on ``duration`` unless it is a whole number of samples."""
+    steps = duration / sample_time
+    if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+        raise error("duration", duration, f"not a whole number of samples of {sample_time} s")
 
 
 class ResolvedScenario:
@@ -134,6 +137,7 @@ class ResolvedScenario:
                 "plant": scenario.plant.model_copy(update={"max_step": plant_step}),
             }
         )
+        check_whole_samples(scenario.duration, scenario.controller.sample_time)
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:

@@ -49,6 +49,8 @@ __all__ = [
     "preset_names",
     "scaled",
     "steady_speed",
+    "top_yaw_rate",
+    "turn_up_time",
 ]
 
 STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
@@ -297,6 +299,19 @@ def steady_speed(linear: float, quadratic: float, force: float) -> float:
     if a > 0:
         return (-b + math.sqrt(b * b + 4.0 * a * force)) / (2.0 * a)
     return force / b if b > 0 else math.inf
+
+
+def top_yaw_rate(params: VehicleParams) -> float:
+    """The steady yaw rate under the largest yaw moment the thrusters can make (rad/s):
+    |Nrr| r^2 + |Nr| r = M_max. Infinite for a vehicle without yaw damping."""
+    return steady_speed(params.Nr, params.Nrr, float(params.thrust_authority[2]))
+
+
+def turn_up_time(params: VehicleParams) -> float:
+    """How long the largest yaw moment takes to spin the vehicle up to its top yaw rate
+    from rest, damping aside (s): Iz r_top / M_max. The fastest thing an underactuated
+    vehicle steers with (0.08 s for the VideoRay and the BlueROV2, 0.27 s for jmse2210)."""
+    return params.Iz * top_yaw_rate(params) / float(params.thrust_authority[2])
 
 
 # Singular values below this fraction of the largest count as zero in the allocation rank:

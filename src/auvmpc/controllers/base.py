@@ -10,6 +10,7 @@ from enum import StrEnum
 import numpy as np
 
 from auvmpc.ocp.tracking import ActuatorLimits
+from auvmpc.ocp.underactuated_reference import crab_reference
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "feasible_thrust_box",
     "horizontal_limits",
     "project_to_limits",
+    "tracked_reference",
 ]
 
 
@@ -102,6 +104,20 @@ def align_heading(state: np.ndarray, reference: np.ndarray) -> np.ndarray:
     turns = np.round((state[2] - aligned[0, 2]) / (2.0 * math.pi))
     aligned[:, 2] += 2.0 * math.pi * turns
     return aligned
+
+
+def tracked_reference(
+    model: VehicleParams,
+    state: np.ndarray,
+    disturbance: np.ndarray,
+    reference: np.ndarray,
+    sample_time: float,
+) -> np.ndarray:
+    """The reference preview a horizontal controller's cost tracks: for an underactuated
+    vehicle with the heading it can hold (ocp/underactuated_reference.py), and aligned to
+    the turn the vehicle is on."""
+    crabbed = crab_reference(model, reference, disturbance, sample_time, float(state[2]))
+    return align_heading(state, crabbed)
 
 
 def next_planned_move(plan: np.ndarray | None, previous: np.ndarray):

@@ -184,7 +184,7 @@ class BaselineController(ShelledController):
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
-        return cls(model, config.sample_time, config.baseline)
+        return cls(model, config.for_vehicle(model).sample_time, config.baseline)
 
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         """Clear the integrators and remember ``initial_thrust`` as F(-1) for the rate limit.

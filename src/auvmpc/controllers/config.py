@@ -15,16 +15,18 @@ from auvmpc.estimation import ObserverConfig
 from auvmpc.models.discrete import HORIZONTAL
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
-from auvmpc.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates
+from auvmpc.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates, turn_up_time
 
 __all__ = [
     "CONTROLLER_PRESETS",
     "ControllerConfig",
     "ControllerType",
+    "DEFAULT_SAMPLE_TIME_S",
     "NmpcMode",
     "QpStructure",
     "THRUST_MOVE_COST",
     "ThrustPenalty",
+    "default_sample_time",
     "default_thrust_weights",
     "stable_model_substeps",
 ]
@@ -64,7 +66,11 @@ class ControllerConfig(StrictModel):
         default=ControllerType.LTV_MPC,
         description="which controller (default: the best tracker of docs/paper-reproduction.md)",
     )
-    sample_time: Annotated[float, Field(gt=0)] = Field(default=0.5, description="Te (s)")
+    sample_time: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="Te (s); omitted: 0.5, or shorter for an underactuated vehicle whose "
+        "turn is faster than that (default_sample_time, docs/tuning.md)",
+    )
     prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
     control_horizon: Annotated[int, Field(ge=1)] | None = Field(
         default=None,
@@ -193,12 +199,15 @@ class ControllerConfig(StrictModel):
         return self
 
     def for_vehicle(self, model: VehicleParams) -> ControllerConfig:
-        """This config with every setting that was omitted filled in for ``model``: the RK4
-        steps, the thrust weights and the estimator's disturbance statistics
+        """This config with every setting that was omitted filled in for ``model``: the
+        sample time, the RK4 steps, the thrust weights and the estimator's disturbance statistics
         (docs/tuning.md says why each scales as it does)."""
         update: dict[str, Any] = {}
+        sample_time = self.sample_time or default_sample_time(model)
+        if self.sample_time is None:
+            update["sample_time"] = sample_time
         if self.model_substeps is None:
-            update["model_substeps"] = stable_model_substeps(model, self.sample_time)
+            update["model_substeps"] = stable_model_substeps(model, sample_time)
         if self.R is None:
             update["R"] = default_thrust_weights(model)
         observer = self.observer.for_vehicle(model)
@@ -223,6 +232,33 @@ class ControllerConfig(StrictModel):
         if self.move_steps is not None:
             return self.move_steps
         return tuple(range(self.control_horizon or self.prediction_horizon))
+
+
+# The sample time when none is given: the paper's, for every fully actuated vehicle.
+DEFAULT_SAMPLE_TIME_S = 0.5
+# Sample times a derived one is rounded down to: each divides whole seconds, so scenario
+# durations in seconds stay whole numbers of samples.
+SAMPLE_TIME_GRID_S = (0.5, 0.25, 0.2, 0.1, 0.05)
+# Samples per turn-up time (turn_up_time) that an underactuated vehicle's sample may span.
+TURN_UP_SAMPLES = 3.0
+
+
+def default_sample_time(model: VehicleParams) -> float:
+    """Te when the scenario gives none: DEFAULT_SAMPLE_TIME_S, but for an underactuated
+    vehicle no more than TURN_UP_SAMPLES of its turn-up time (vehicle.turn_up_time), on
+    SAMPLE_TIME_GRID_S.
+
+    An underactuated vehicle moves sideways only by turning, so its heading loop is inside
+    its position loop and the sample has to resolve the turn. Measured with
+    benchmarks/generality.py (docs/tuning.md): videoray-pro3 (turn-up 0.08 s) lost every
+    disturbed run to a two-sample yaw oscillation at 0.5 s, and tracked all of them within
+    0.21 m at 0.25 s and 0.2 s. A fully actuated vehicle pushes sideways directly; the
+    BlueROV2 (also 0.08 s) meets every floor at 0.5 s and at 0.2 s paid 2.5 times the steps.
+    """
+    if not model.underactuated:
+        return DEFAULT_SAMPLE_TIME_S
+    longest = TURN_UP_SAMPLES * turn_up_time(model)
+    return next((te for te in SAMPLE_TIME_GRID_S if te <= longest), SAMPLE_TIME_GRID_S[-1])
 
 
 # The cost of moving one thruster by half its range in one sample, in units of the stage cost

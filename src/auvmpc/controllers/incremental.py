@@ -52,7 +52,15 @@ class IncrementalMpc(ShelledController):
         """Affine model over the horizon around ``nominal_input`` (ny, nu)."""
 
     def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """A preview of states (reference or plan) put in the frame of ``state``."""
         return np.asarray(reference, dtype=float)
+
+    def tracked_reference(
+        self, state: np.ndarray, disturbance: np.ndarray, reference: np.ndarray
+    ) -> np.ndarray:
+        """The reference preview the cost tracks (the plant may reshape what it cannot
+        follow as given)."""
+        return self.aligned_reference(state, reference)
 
     def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
         return SoftRows.empty(nominal.shape[1])
@@ -68,7 +76,9 @@ class IncrementalMpc(ShelledController):
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         qp = self.qp
         state, disturbance = self.estimate(np.asarray(observation.state, dtype=float))
-        reference = self.aligned_reference(state, observation.reference[: qp.horizon + 1])
+        reference = self.tracked_reference(
+            state, disturbance, observation.reference[: qp.horizon + 1]
+        )
         moves = qp.shifted_moves(self._plan, previous)
         self.linearisation_nodes = (
             self.aligned_reference(state, _shifted(self._predicted))

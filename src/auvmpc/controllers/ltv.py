@@ -37,13 +37,12 @@ class LtvMpc(LinearMpc):
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
+        config = self.config  # with what the vehicle decides filled in
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE
         if config.qp_structure is not QpStructure.CONDENSED:
             self.sparse_qp = SparseIncrementalQp(self.ocp, config.qp_iteration_limit)
             self.sparse_only = config.qp_structure is QpStructure.SPARSE
-        sampled = horizontal_model(
-            model, config.sample_time, self.config.model_substeps, config.jit
-        )
+        sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self._rollout = sampled.linearised_rollout(config.prediction_horizon)
         self._steps = sampled.linearised_nodes(config.prediction_horizon)
 

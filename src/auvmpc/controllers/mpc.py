@@ -25,6 +25,7 @@ from auvmpc.controllers.base import (
     Observation,
     ObstacleState,
     align_heading,
+    tracked_reference,
 )
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
@@ -99,6 +100,11 @@ class LinearMpc(IncrementalMpc):
 
     def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
         return align_heading(state, reference)
+
+    def tracked_reference(
+        self, state: np.ndarray, disturbance: np.ndarray, reference: np.ndarray
+    ) -> np.ndarray:
+        return tracked_reference(self.model, state, disturbance, reference, self.sample_time)
 
     def soft_rows(
         self, nominal: np.ndarray, reference: np.ndarray, observation: Observation

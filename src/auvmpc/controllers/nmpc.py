@@ -64,8 +64,8 @@ import numpy as np
 
 from auvmpc.controllers.base import (
     Observation,
-    align_heading,
     horizontal_limits,
+    tracked_reference,
 )
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
 from auvmpc.controllers.shell import Proposal, ShelledController
@@ -153,7 +153,10 @@ class NonlinearMpc(ShelledController):
         disturbance = np.zeros(ND)
         if self._observer is not None:
             state, disturbance = self._observer.correct(state)
-        reference = align_heading(state, observation.reference[: self.horizon + 1])
+        reference = tracked_reference(
+            self.model, state, disturbance, observation.reference[: self.horizon + 1],
+            self.sample_time,
+        )  # fmt: skip
         self._next_guess = None
         if not all(np.all(np.isfinite(a)) for a in (state, disturbance, reference)):
             # Never hand NaN to a solver (IPOPT raises on it): a failed step, not an error.

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.vehicle import VehicleParams
+from auvmpc.vehicle import VehicleParams, top_yaw_rate
 
 __all__ = [
     "Verdict",
@@ -39,7 +39,6 @@ __all__ = [
     "characteristic_length_m",
     "judge",
     "relative_heading_turns",
-    "top_yaw_rate_rad_per_s",
 ]
 
 # Sea water density (kg/m3), for the volume-equivalent size of a vehicle.
@@ -74,18 +73,6 @@ def characteristic_length_m(params: VehicleParams) -> float:
     span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
     cube = (params.mass / SEA_WATER_DENSITY) ** (1.0 / 3.0)
     return max(span, cube)
-
-
-def top_yaw_rate_rad_per_s(params: VehicleParams) -> float:
-    """The steady yaw rate under the largest yaw moment the thrusters can make (rad/s):
-    |Nrr| r^2 + |Nr| r = M_max. Infinite for a vehicle without yaw damping."""
-    arms = params.T[2]
-    low, high = params.thrust_limits
-    moment = float(np.sum(np.maximum(arms * low, arms * high)))
-    linear, quadratic = abs(params.Nr), abs(params.Nrr)
-    if quadratic > 0.0:
-        return (-linear + math.sqrt(linear**2 + 4.0 * quadratic * moment)) / (2.0 * quadratic)
-    return moment / linear if linear > 0.0 else math.inf
 
 
 def relative_heading_turns(psi: np.ndarray, psi_ref: np.ndarray) -> float:
@@ -154,7 +141,7 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
     yaw_rate = facts.max_abs_yaw_rate_after_transient
     yaw_limit = max(
         YAW_RATE_REFERENCE_FACTOR * facts.max_abs_reference_yaw_rate,
-        YAW_RATE_CAPABILITY_FRACTION * top_yaw_rate_rad_per_s(params),
+        YAW_RATE_CAPABILITY_FRACTION * top_yaw_rate(params),
     )
     if yaw_rate is not None and yaw_rate > yaw_limit:
         degraded.append(
