@@ -9,6 +9,7 @@ import os
 import numpy as np
 import pytest
 
+import auvmpc.native as native
 import auvmpc.solvers.compiled_qp_step as compiled_qp_step
 from auvmpc.controllers.base import ObstacleState
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
@@ -109,7 +110,7 @@ def test_library_is_built_once_and_then_loaded(tmp_path, monkeypatch):
 
 def test_without_a_compiler_the_casadi_step_is_used(monkeypatch):
     program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
-    monkeypatch.setattr(compiled_qp_step, "compiler", lambda: None)
+    monkeypatch.setattr(native, "compiler", lambda: None)
     assert not SparseRealTimeIteration(program).compiled
     with pytest.raises(RuntimeError, match="no C compiler"):
         SparseRealTimeIteration(program, compiled=True)
@@ -135,7 +136,7 @@ def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path,
 
 def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
     monkeypatch.setenv("AUVMPC_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(compiled_qp_step, "_CACHE_LIMIT", 2)
+    monkeypatch.setattr(native, "_CACHE_LIMIT", 2)
     old = [tmp_path / f"rti-old{i}.so" for i in range(3)]
     for age, library in enumerate(old):
         library.write_bytes(b"")
@@ -151,7 +152,7 @@ def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch)
 def test_a_run_without_a_compiler_says_it_took_the_slower_path(monkeypatch):
     from auvmpc.api import load_scenario, simulate
 
-    monkeypatch.setattr(compiled_qp_step, "compiler", lambda: None)
+    monkeypatch.setattr(native, "compiler", lambda: None)
     every_move_free = {"duration": 5.0, "controller.control_horizon": 30}
     run = simulate(load_scenario("paper-ideal", every_move_free, controller="nmpc"))
     assert any("no C compiler" in warning for warning in run.warnings)

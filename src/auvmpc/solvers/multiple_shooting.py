@@ -96,6 +96,7 @@ class MultipleShootingProgram:
 
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self.step = sampled.step
+        self.numeric_step = sampled.numeric_step
         self.rollout = sampled.rollout(ny)
         # The step with its Jacobians, evaluated at every shooting node in one call.
         self.linearised_steps = sampled.linearised_nodes(ny)
@@ -209,11 +210,11 @@ class MultipleShootingProgram:
         the thrusts at the move steps are read from the plan shifted by one sample.
         """
         plan = self.plan(iterate)
-        terminal = np.asarray(self.step(iterate.states[-1], plan[-1], disturbance)).ravel()
+        terminal = self.numeric_step(iterate.states[-1], plan[-1], disturbance)
         return Iterate(
-            states=np.vstack([iterate.states[1:], terminal]),
-            thrust=np.vstack([plan[1:], plan[-1:]])[self.move_steps],
-            slack=np.vstack([iterate.slack[1:], iterate.slack[-1:]]),
+            states=np.concatenate([iterate.states[1:], terminal[None]]),
+            thrust=np.concatenate([plan[1:], plan[-1:]])[self.move_steps],
+            slack=np.concatenate([iterate.slack[1:], iterate.slack[-1:]]),
         )
 
     def reference_guess(self, sample: Sample) -> Iterate:
