@@ -111,10 +111,17 @@ def compiled_qp_step(qp: StageQp, horizon: int, thrusters: int, slots: int,
 
 
 def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
-    hpipm = _casadi_hpipm()
-    if native.compiler() is None or hpipm is None:
+    if native.compiler() is None or _casadi_hpipm() is None:
         return None
-    include, libraries = hpipm
+    return _built_library(stage, terminal, native.cache_folder())
+
+
+# Per process too: generating the C and hashing it costs ~8 ms a controller.
+@functools.lru_cache(maxsize=16)
+def _built_library(stage: ca.Function, terminal: ca.Function, folder: Path) -> ctypes.CDLL | None:
+    """The library in the cache ``folder`` (native.cache_folder(), where shared_library
+    looks), built there unless it is there already."""
+    include, libraries = _casadi_hpipm()
     with tempfile.TemporaryDirectory(prefix="auvmpc-rti-") as scratch:
         generator = ca.CodeGenerator(_DATA_NAME + ".c", {"with_header": True})
         generator.add(stage)
