@@ -11,6 +11,7 @@ and the real-time iterations (solvers/condensed_rti.py, solvers/sparse_rti.py) s
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -216,7 +217,7 @@ class MultipleShootingProgram:
         slots = np.zeros((self.n_slots, SLOT_FIELDS))
         slots[:, 0:2] = state[:2] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
-        nearest = sorted(obstacles, key=lambda o: float(np.linalg.norm(o.center - state[:2])))
+        nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[:2]))
         extra = self.ocp.keep_out_extra
         for o, obstacle in enumerate(nearest[: self.n_slots]):
             slots[o] = [*obstacle.center, *obstacle.velocity, obstacle.radius + extra]
