@@ -7,9 +7,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
+import auvmpc.native as native
+from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, WaveForceConfig, WorldDisturbance
 from auvmpc.integrators import rk4, rk4_step_time_varying
-from auvmpc.sim.loop import plant_step
+from auvmpc.sim.plant import PlantStepper, plant_step
 from auvmpc.vehicle import body_from_world, dynamics
 from tests.conftest import PLANT_VS_SOLVE_IVP_TOL
 
@@ -73,3 +75,39 @@ def test_plant_step_matches_solve_ivp(jmse, waves):
     reference = solve_ivp(rhs, (1.0, 1.5), state, method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
     ours = plant_step(jmse, state, thrust, 1.0, 0.5, disturbance, substeps=10)
     np.testing.assert_allclose(ours, reference, atol=PLANT_VS_SOLVE_IVP_TOL)
+
+
+# The compiled plant sample evaluates the same expressions as plant_step in C; they differ
+# only by the order of a few floating-point operations (measured: below 1e-14 m, m/s, rad).
+COMPILED_PLANT_TOL = 1e-12
+
+
+@pytest.mark.parametrize(
+    "waves", [None, WaveForceConfig(amplitude_N=4.0, period_s=3.0, direction_deg=30)]
+)
+@pytest.mark.parametrize("water", [None, WaterCurrentConfig(velocity_m_per_s=(0.2, -0.1, 0.0))])
+def test_compiled_plant_sample_is_plant_step(jmse, waves, water):
+    if not PlantStepper(jmse, 0.5, 10).compiled:
+        pytest.skip("no C compiler on this machine")
+    config = DisturbanceConfig(
+        current_force_world=(10.0, 5.0), moment_N_m=0.3, waves=waves, water_current=water
+    )
+    disturbance = WorldDisturbance(config, 0.5, np.random.default_rng(0))
+    state = np.array([7.5, -12.0, 1.57, 0.4, 0.1, 0.06])
+    thrust = np.array([12.0, -3.0, 7.0, 15.0])
+    compiled = PlantStepper(jmse, 0.5, 10)
+    for k in range(5):
+        ours = compiled(state, thrust, 0.5 * k, disturbance)
+        expected = plant_step(jmse, state, thrust, 0.5 * k, 0.5, disturbance, 10)
+        np.testing.assert_allclose(ours, expected, rtol=0, atol=COMPILED_PLANT_TOL)
+        state = expected
+
+
+def test_without_a_compiler_the_plant_sample_is_plant_step(jmse, monkeypatch):
+    monkeypatch.setattr(native, "compiler", lambda: None)
+    stepper = PlantStepper(jmse, 0.4, 7)  # a sample no other test has compiled
+    assert not stepper.compiled
+    disturbance = WorldDisturbance(DisturbanceConfig(), 0.4, np.random.default_rng(0))
+    state, thrust = np.array([0.0, 0.0, 0.3, 0.5, 0.0, 0.0]), np.array([5.0, 5.0, 0.0, 0.0])
+    expected = plant_step(jmse, state, thrust, 0.0, 0.4, disturbance, 7)
+    np.testing.assert_array_equal(stepper(state, thrust, 0.0, disturbance), expected)

@@ -56,13 +56,15 @@ def git_revision() -> str | None:
 
 def library_versions(extra: Iterable[str] = ()) -> dict[str, str | None]:
     """Installed versions of numpy, scipy, casadi and ``extra`` (None if not installed)."""
-    versions: dict[str, str | None] = {}
-    for name in (*BASE_LIBRARIES, *extra):
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = None
-    return versions
+    return {name: _installed_version(name) for name in (*BASE_LIBRARIES, *extra)}
+
+
+@functools.cache  # reading package metadata costs ~2 ms a package, and a process keeps them
+def _installed_version(name: str) -> str | None:
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
 
 
 @dataclass

@@ -158,7 +158,8 @@ class NonlinearMpc(ShelledController):
             self.sample_time,
         )  # fmt: skip
         self._next_guess = None
-        if not all(np.all(np.isfinite(a)) for a in (state, disturbance, reference)):
+        finite = np.isfinite(state).all() and np.isfinite(disturbance).all()
+        if not (finite and np.isfinite(reference).all()):
             # Never hand NaN to a solver (IPOPT raises on it): a failed step, not an error.
             return Proposal(plan=None, disturbance=disturbance)
         sample = self.program.sample(state, previous, reference, disturbance, observation.obstacles)

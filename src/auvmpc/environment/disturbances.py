@@ -147,6 +147,19 @@ class WorldDisturbance:
             force = force + magnitude * np.array([math.cos(angle), math.sin(angle), 0.0])
         return force
 
+    def forces_world(self, times: np.ndarray) -> np.ndarray:
+        """(len(times), 3): :meth:`force_world` at each time within the current sample."""
+        times = np.asarray(times, dtype=float)
+        forces = np.tile(self._mean + self._variation, (times.size, 1))
+        waves = self.config.waves
+        if waves is not None and waves.amplitude_N > 0:
+            angle = math.radians(waves.direction_deg)
+            magnitude = waves.amplitude_N * np.sin(
+                2.0 * math.pi * times / waves.period_s + self._wave_phase
+            )
+            forces += magnitude[:, None] * np.array([math.cos(angle), math.sin(angle), 0.0])
+        return forces
+
 
 class SensorNoise:
     """Adds Gaussian noise to a true state; a no-op (and draws nothing) when all std are 0."""

@@ -10,6 +10,7 @@ process, so a campaign that runs many scenarios of one vehicle compiles them onc
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from auvmpc.codegen import compiled
 from auvmpc.integrators import rk4
+from auvmpc.native import native_function
 from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
 __all__ = ["HORIZONTAL", "DiscreteModel", "StateLayout", "horizontal_model"]
@@ -81,6 +83,13 @@ class DiscreteModel:
         f = world_disturbance_dynamics(model)
         following = rk4(lambda x, u: f(x, u, force), state, thrust, sample_time, substeps)
         self.step = ca.Function("rk4_step", [state, thrust, force], [following])
+        # The step on NumPy values, for evaluations outside a solver (the shift of a warm
+        # start, once per sample): compiled and called through ctypes where jit allows, since
+        # a CasADi call from Python costs ~35 us (auvmpc.native).
+        native = native_function(self.step) if jit else None
+        self.numeric_step: Callable[..., np.ndarray] = (
+            native if native is not None else _flat(self.step)
+        )
         linearised = ca.Function(
             "rk4_step_linearised",
             [state, thrust, force],
@@ -111,6 +120,11 @@ class DiscreteModel:
     def linearised_nodes(self, horizon: int) -> ca.Function:
         """(X (6, N), F (n, N), d (3, N)) -> successors and Jacobians at N given nodes."""
         return self.linearised_step.map(horizon)
+
+
+def _flat(function: ca.Function) -> Callable[..., np.ndarray]:
+    """``function``'s single output as a flat NumPy array."""
+    return lambda *inputs: np.asarray(function(*inputs)).ravel()
 
 
 @functools.lru_cache(maxsize=32)

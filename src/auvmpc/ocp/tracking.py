@@ -61,7 +61,7 @@ class ActuatorLimits:
     ) -> tuple[np.ndarray, bool]:
         """Clip a command into the hard-limit box; also say whether it had to move."""
         lower, upper = self.box(previous, sample_time)
-        clipped = np.clip(command, lower, upper)
+        clipped = np.minimum(np.maximum(command, lower), upper)  # np.clip, at half the cost
         return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
 
 

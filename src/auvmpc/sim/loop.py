@@ -11,35 +11,12 @@ import numpy as np
 from auvmpc.controllers.base import Controller, Observation
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
-from auvmpc.integrators import rk4_step_time_varying
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
-from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
+from auvmpc.sim.plant import PlantStepper, plant_step
+from auvmpc.vehicle import VehicleParams
 
 __all__ = ["closed_loop", "plant_step"]
-
-
-def plant_step(
-    plant: VehicleParams,
-    state: np.ndarray,
-    thrust: np.ndarray,
-    t0: float,
-    duration: float,
-    disturbance: WorldDisturbance,
-    substeps: int,
-) -> np.ndarray:
-    """Integrate the plant over one zero-order-hold sample with RK4 sub-steps."""
-
-    def rhs(t: float, x: np.ndarray) -> np.ndarray:
-        force = disturbance.force_world(t)
-        d_u, d_v = body_from_world(force, x[2])
-        water = disturbance.water_velocity_world(t)
-        return dynamics(x, thrust, plant, (d_u, d_v, force[2]), current_world=water)
-
-    h = duration / substeps
-    for i in range(substeps):
-        state = rk4_step_time_varying(rhs, t0 + i * h, state, h)
-    return state
 
 
 def closed_loop(
@@ -62,11 +39,12 @@ def closed_loop(
     The controller sees the (noisy) measured state every ``controller.sample_time``;
     its command is applied unaltered and held until the next sample, so the log
     shows the controller's mistakes rather than hiding them. The plant is
-    integrated with RK4 at steps no longer than ``max_plant_step``.
+    integrated with RK4 at steps no longer than ``max_plant_step`` (sim/plant.py).
     """
     sample_time = controller.sample_time
     steps = int(round(duration / sample_time))
     substeps = max(1, math.ceil(sample_time / max_plant_step - 1e-9))
+    plant_sample = PlantStepper(plant, sample_time, substeps)
     n_thrusters = plant.n_thrusters
     log = SimLog.allocate(steps, n_thrusters, sample_time)
     previous = (
@@ -101,7 +79,7 @@ def closed_loop(
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
-        state = plant_step(plant, state, thrust, t, sample_time, disturbance, substeps)
+        state = plant_sample(state, thrust, t, disturbance)
         disturbance.advance()
         if on_step is not None:
             on_step(k + 1, steps)

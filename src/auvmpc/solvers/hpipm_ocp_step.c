@@ -9,10 +9,17 @@
  * Memory layout of the arguments (row-major, one stage per row): X (N+1, 6) the iterate's
  * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
  * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N).
- * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [dF; sigma s].
+ * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [w; sigma s], w = dF - dp
+ * (solvers/sparse_rti.py, stage_qp).
  *
- * The QP is solved by up to two interior-point passes: HPIPM's fast "speed" mode, then, only
- * if that fails, its "robust" mode (solvers/hpipm.py, hpipm_settings, says why).
+ * Stage 0's state z_0 = [x_hat - X_0; F_prev - P_0] is known, so it is not a QP variable:
+ * it is folded into stage 0's dynamics offset, input gradient and row bounds (HPIPM sees
+ * nx_0 = 0). As a bound lb = ub it was ten two-sided inequalities for the interior point
+ * (measured: the most iterations of one step on paper-obstacles fell from 123 to 22).
+ *
+ * The QP is solved by up to two interior-point passes, each with its own settings (solvers/
+ * hpipm.py, hpipm_settings, says which and why): a fast one, started from this controller's
+ * previous QP solution, then, only if that fails, a robust one from HPIPM's cold start.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -27,14 +34,16 @@
 #include "rti_qp_data.h"
 
 #define NX 6
-#define N_STAGE_OUT 14
+#define N_STAGE_OUT 16
 #define NOT_FINITE (-1)
 #define EVALUATION_FAILED (-2)
 #define MAX_PASSES 2
-#define SETTINGS_PER_PASS 4
+#define SETTINGS_PER_PASS 5
+#define GENERAL_SETTINGS 2 /* infinity, passes */
+#define MEMORY_SLOTS (3 + 2 * MAX_PASSES)
 
 enum { OUT_A, OUT_B, OUT_b, OUT_Q, OUT_S, OUT_R, OUT_q, OUT_r, OUT_C, OUT_D, OUT_lg, OUT_ug,
-       OUT_lbu, OUT_ubu };
+       OUT_lbu, OUT_ubu, OUT_lbp_next, OUT_ubp_next };
 
 typedef struct {
     int N, n, S, nz, nv, ng;
@@ -45,29 +54,35 @@ typedef struct {
     int passes; /* interior-point settings tried in turn until one solves */
     struct d_ocp_qp_ipm_arg arg[MAX_PASSES];
     struct d_ocp_qp_ipm_ws ws[MAX_PASSES];
-    void *hpipm_memory[3 + 2 * MAX_PASSES];
+    void *hpipm_memory[MEMORY_SLOTS];
+    int memory_used;
     double *out[N_STAGE_OUT]; /* one stage's data, reused for every stage */
     int out_size[N_STAGE_OUT];
     double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
-    int *index;   /* 0, 1, ..., max(nz, nv) - 1: every bound is on every variable */
+    int *index;   /* 0, 1, ..., nv - 1: every input is bounded */
+    int *state_index; /* NX, ..., nz - 1: the thrust part of every state but z_0 is bounded */
     const casadi_real **arg_work;
     casadi_real **res_work;
     casadi_int *iw;
     casadi_real *w;
 } Step;
 
-static void *allocate(void **slot, hpipm_size_t size) {
-    *slot = calloc(1, size);
-    return *slot;
+/* Zeroed memory that auvmpc_rti_free releases; NULL when it runs out. */
+static void *allocate(Step *s, hpipm_size_t size) {
+    if (s->memory_used == MEMORY_SLOTS) return NULL;
+    void *memory = calloc(1, size > 0 ? size : 1);
+    if (memory) s->hpipm_memory[s->memory_used++] = memory;
+    return memory;
 }
 
 void auvmpc_rti_free(void *handle) {
     Step *s = (Step *) handle;
     if (!s) return;
-    for (int i = 0; i < 3 + 2 * MAX_PASSES; ++i) free(s->hpipm_memory[i]);
+    for (int i = 0; i < s->memory_used; ++i) free(s->hpipm_memory[i]);
     for (int i = 0; i < N_STAGE_OUT; ++i) free(s->out[i]);
     free(s->fixed);
     free(s->index);
+    free(s->state_index);
     free(s->arg_work);
     free(s->res_work);
     free(s->iw);
@@ -85,7 +100,7 @@ static int dense_of_size(const casadi_int *sp, int size) {
 /* Whether the generated stage functions have the sizes the caller gave. */
 static int sizes_agree(int nz, int nv, int ng) {
     const int expected[N_STAGE_OUT] = {nz * nz, nz * nv, nz, nz * nz, nv * nz, nv * nv, nz, nv,
-                                       ng * nz, ng * nv, ng, ng, nv, nv};
+                                       ng * nz, ng * nv, ng, ng, nv, nv, nz - NX, nz - NX};
     for (int i = 0; i < N_STAGE_OUT; ++i)
         if (!dense_of_size(rti_stage_sparsity_out(i), expected[i])) return 0;
     return dense_of_size(rti_terminal_sparsity_out(0), nz * nz)
@@ -94,14 +109,18 @@ static int sizes_agree(int nz, int nv, int ng) {
 
 /* Sizes: horizon N, thrusters n, obstacle slots S, and the stage QP's nz, nv, ng (checked
  * against the generated functions). settings (count values): the bound standing for
- * infinity, the number of passes, then per pass HPIPM's mode, iteration limit, mu0 and
- * tolerance (stationarity, equality, inequality, complementarity). NULL when memory runs
- * out or the sizes or settings disagree. */
+ * infinity, the number of passes, then per pass HPIPM's mode, iteration limit, mu0,
+ * tolerance (stationarity, equality, inequality, complementarity) and warm start (0: cold,
+ * 1: from the primal solution HPIPM holds, the previous call's). NULL when memory runs out or
+ * the sizes or settings disagree. */
 void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const double *settings,
                         int count) {
-    if (nz != NX + n || count < 2 || !sizes_agree(nz, nv, ng)) return NULL;
+    if (N < 1 || nz != NX + n || count < GENERAL_SETTINGS || !sizes_agree(nz, nv, ng))
+        return NULL;
     int passes = (int) settings[1];
-    if (passes < 1 || passes > MAX_PASSES || count < 2 + SETTINGS_PER_PASS * passes) return NULL;
+    if (passes < 1 || passes > MAX_PASSES
+        || count < GENERAL_SETTINGS + SETTINGS_PER_PASS * passes)
+        return NULL;
     Step *s = (Step *) calloc(1, sizeof(Step));
     if (!s) return NULL;
     s->N = N;
@@ -119,37 +138,39 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     int ok = nx && nu && nbx && nbu && rows && ns;
     if (ok) {
         for (int k = 0; k <= N; ++k) {
-            nx[k] = s->nz;
+            nx[k] = k > 0 ? s->nz : 0; /* z_0 is known: folded into stage 0 */
             nu[k] = k < N ? s->nv : 0;
             nbu[k] = nu[k];
+            nbx[k] = k > 0 ? n : 0;
             rows[k] = k < N ? s->ng : 0;
         }
-        nbx[0] = s->nz; /* z_0 fixed by its bounds */
-        ok = allocate(&s->hpipm_memory[0], d_ocp_qp_dim_memsize(N)) != NULL;
+        ok = allocate(s, d_ocp_qp_dim_memsize(N)) != NULL;
     }
     if (ok) {
-        d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[0]);
+        d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[s->memory_used - 1]);
         d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, rows, ns, &s->dim);
-        ok = allocate(&s->hpipm_memory[1], d_ocp_qp_memsize(&s->dim))
-             && allocate(&s->hpipm_memory[2], d_ocp_qp_sol_memsize(&s->dim));
     }
     free(nx); free(nu); free(nbx); free(nbu); free(rows); free(ns);
-    if (!ok) {
+    void *qp_memory = ok ? allocate(s, d_ocp_qp_memsize(&s->dim)) : NULL;
+    void *sol_memory = qp_memory ? allocate(s, d_ocp_qp_sol_memsize(&s->dim)) : NULL;
+    if (!sol_memory) {
         auvmpc_rti_free(s);
         return NULL;
     }
-    d_ocp_qp_create(&s->dim, &s->qp, s->hpipm_memory[1]);
-    d_ocp_qp_sol_create(&s->dim, &s->sol, s->hpipm_memory[2]);
+    d_ocp_qp_create(&s->dim, &s->qp, qp_memory);
+    d_ocp_qp_sol_create(&s->dim, &s->sol, sol_memory);
+
     for (int p = 0; p < s->passes; ++p) {
-        const double *pass = settings + 2 + SETTINGS_PER_PASS * p;
+        const double *pass = settings + GENERAL_SETTINGS + SETTINGS_PER_PASS * p;
         struct d_ocp_qp_ipm_arg *arg = &s->arg[p];
-        if (!allocate(&s->hpipm_memory[3 + 2 * p], d_ocp_qp_ipm_arg_memsize(&s->dim))) {
+        void *arg_memory = allocate(s, d_ocp_qp_ipm_arg_memsize(&s->dim));
+        if (!arg_memory) {
             auvmpc_rti_free(s);
             return NULL;
         }
-        d_ocp_qp_ipm_arg_create(&s->dim, arg, s->hpipm_memory[3 + 2 * p]);
+        d_ocp_qp_ipm_arg_create(&s->dim, arg, arg_memory);
         d_ocp_qp_ipm_arg_set_default((enum hpipm_mode) (int) pass[0], arg);
-        int iteration_limit = (int) pass[1];
+        int iteration_limit = (int) pass[1], warm_start = (int) pass[4];
         double mu0 = pass[2], tolerance = pass[3];
         d_ocp_qp_ipm_arg_set_iter_max(&iteration_limit, arg);
         d_ocp_qp_ipm_arg_set_mu0(&mu0, arg);
@@ -157,11 +178,13 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
         d_ocp_qp_ipm_arg_set_tol_eq(&tolerance, arg);
         d_ocp_qp_ipm_arg_set_tol_ineq(&tolerance, arg);
         d_ocp_qp_ipm_arg_set_tol_comp(&tolerance, arg);
-        if (!allocate(&s->hpipm_memory[4 + 2 * p], d_ocp_qp_ipm_ws_memsize(&s->dim, arg))) {
+        d_ocp_qp_ipm_arg_set_warm_start(&warm_start, arg);
+        void *ws_memory = allocate(s, d_ocp_qp_ipm_ws_memsize(&s->dim, arg));
+        if (!ws_memory) {
             auvmpc_rti_free(s);
             return NULL;
         }
-        d_ocp_qp_ipm_ws_create(&s->dim, arg, &s->ws[p], s->hpipm_memory[4 + 2 * p]);
+        d_ocp_qp_ipm_ws_create(&s->dim, arg, &s->ws[p], ws_memory);
     }
 
     for (int i = 0; i < N_STAGE_OUT; ++i) {
@@ -169,9 +192,9 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
         s->out[i] = calloc(s->out_size[i] > 0 ? s->out_size[i] : 1, sizeof(double));
         if (!s->out[i]) ok = 0;
     }
-    int width = s->nz > s->nv ? s->nz : s->nv;
     s->fixed = calloc(s->nz, sizeof(double));
-    s->index = calloc(width, sizeof(int));
+    s->index = calloc(s->nv, sizeof(int));
+    s->state_index = calloc(n, sizeof(int));
     casadi_int sz_arg, sz_res, sz_iw, sz_w, t_arg, t_res, t_iw, t_w;
     rti_stage_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     rti_terminal_work(&t_arg, &t_res, &t_iw, &t_w);
@@ -183,14 +206,34 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     s->res_work = calloc(sz_res + 1, sizeof(casadi_real *));
     s->iw = calloc(sz_iw + 1, sizeof(casadi_int));
     s->w = calloc(sz_w + 1, sizeof(casadi_real));
-    if (!ok || !s->fixed || !s->index || !s->arg_work || !s->res_work || !s->iw || !s->w) {
+    if (!ok || !s->fixed || !s->index || !s->state_index || !s->arg_work || !s->res_work || !s->iw || !s->w) {
         auvmpc_rti_free(s);
         return NULL;
     }
-    for (int i = 0; i < width; ++i) s->index[i] = i;
-    d_ocp_qp_set_idxbx(0, s->index, &s->qp);
-    for (int k = 0; k < N; ++k) d_ocp_qp_set_idxbu(k, s->index, &s->qp);
+    for (int i = 0; i < s->nv; ++i) s->index[i] = i;
+    for (int i = 0; i < n; ++i) s->state_index[i] = NX + i;
+    for (int k = 0; k < N; ++k) {
+        d_ocp_qp_set_idxbu(k, s->index, &s->qp);
+        d_ocp_qp_set_idxbx(k + 1, s->state_index, &s->qp);
+    }
     return s;
+}
+
+/* Stage 0 with its known state z_0 folded in (nx_0 = 0): the dynamics offset b + A z_0,
+ * the input gradient r + S z_0, the row bounds minus C z_0. */
+static void fold_initial_state(Step *s) {
+    const int nz = s->nz, nv = s->nv, ng = s->ng;
+    const double *z = s->fixed;
+    double *b = s->out[OUT_b], *r = s->out[OUT_r], *lg = s->out[OUT_lg], *ug = s->out[OUT_ug];
+    const double *A = s->out[OUT_A], *S = s->out[OUT_S], *C = s->out[OUT_C];
+    for (int j = 0; j < nz; ++j) { /* column-major: A[i + nz j], S[i + nv j], C[i + ng j] */
+        for (int i = 0; i < nz; ++i) b[i] += A[i + nz * j] * z[j];
+        for (int i = 0; i < nv; ++i) r[i] += S[i + nv * j] * z[j];
+        for (int i = 0; i < ng; ++i) {
+            lg[i] -= C[i + ng * j] * z[j]; /* -inf stays -inf */
+            ug[i] -= C[i + ng * j] * z[j];
+        }
+    }
 }
 
 static int all_finite(const double *v, int size) {
@@ -223,6 +266,9 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
     Step *s = (Step *) handle;
     const int N = s->N, n = s->n, nz = s->nz, nv = s->nv;
     *iterations = 0;
+    for (int i = 0; i < NX; ++i) s->fixed[i] = x_hat[i] - X[i];
+    for (int i = 0; i < n; ++i) s->fixed[NX + i] = F_prev[i] - P[i];
+    if (!all_finite(s->fixed, nz)) return NOT_FINITE;
     for (int k = 0; k < N; ++k) {
         double step_index = k + 1;
         const casadi_real *in[12] = {X + NX * k, X + NX * (k + 1), P + n * k, P + n * (k + 1),
@@ -237,24 +283,29 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
             return NOT_FINITE;
         for (int i = 0; i < N_STAGE_OUT; ++i)
             if (has_nan(s->out[i], s->out_size[i])) return NOT_FINITE;
+        if (k == 0) fold_initial_state(s);
         clip(s->out[OUT_lg], s->ng, s->inf);
         clip(s->out[OUT_ug], s->ng, s->inf);
         clip(s->out[OUT_lbu], nv, s->inf);
         clip(s->out[OUT_ubu], nv, s->inf);
-        d_ocp_qp_set_A(k, s->out[OUT_A], &s->qp);
+        if (k > 0) { /* stage 0 has no state */
+            d_ocp_qp_set_A(k, s->out[OUT_A], &s->qp);
+            d_ocp_qp_set_Q(k, s->out[OUT_Q], &s->qp);
+            d_ocp_qp_set_S(k, s->out[OUT_S], &s->qp);
+            d_ocp_qp_set_q(k, s->out[OUT_q], &s->qp);
+            d_ocp_qp_set_C(k, s->out[OUT_C], &s->qp);
+        }
         d_ocp_qp_set_B(k, s->out[OUT_B], &s->qp);
         d_ocp_qp_set_b(k, s->out[OUT_b], &s->qp);
-        d_ocp_qp_set_Q(k, s->out[OUT_Q], &s->qp);
-        d_ocp_qp_set_S(k, s->out[OUT_S], &s->qp);
         d_ocp_qp_set_R(k, s->out[OUT_R], &s->qp);
-        d_ocp_qp_set_q(k, s->out[OUT_q], &s->qp);
         d_ocp_qp_set_r(k, s->out[OUT_r], &s->qp);
-        d_ocp_qp_set_C(k, s->out[OUT_C], &s->qp);
         d_ocp_qp_set_D(k, s->out[OUT_D], &s->qp);
         d_ocp_qp_set_lg(k, s->out[OUT_lg], &s->qp);
         d_ocp_qp_set_ug(k, s->out[OUT_ug], &s->qp);
         d_ocp_qp_set_lbu(k, s->out[OUT_lbu], &s->qp);
         d_ocp_qp_set_ubu(k, s->out[OUT_ubu], &s->qp);
+        d_ocp_qp_set_lbx(k + 1, s->out[OUT_lbp_next], &s->qp);
+        d_ocp_qp_set_ubx(k + 1, s->out[OUT_ubp_next], &s->qp);
     }
     const casadi_real *in[2] = {X + NX * N, ref + NX * N};
     memcpy(s->arg_work, in, sizeof(in));
@@ -265,12 +316,6 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
     d_ocp_qp_set_Q(N, s->out[OUT_Q], &s->qp);
     d_ocp_qp_set_q(N, s->out[OUT_q], &s->qp);
 
-    for (int i = 0; i < NX; ++i) s->fixed[i] = x_hat[i] - X[i];
-    for (int i = 0; i < n; ++i) s->fixed[NX + i] = F_prev[i] - P[i];
-    if (!all_finite(s->fixed, nz)) return NOT_FINITE;
-    d_ocp_qp_set_lbx(0, s->fixed, &s->qp);
-    d_ocp_qp_set_ubx(0, s->fixed, &s->qp);
-
     int status = 0;
     for (int p = 0; p < s->passes; ++p) {
         int pass_iterations;
@@ -280,7 +325,8 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
         *iterations += pass_iterations;
         if (status == 0) break;
     }
-    for (int k = 0; k <= N; ++k) d_ocp_qp_sol_get_x(k, &s->sol, dz + nz * k);
+    memcpy(dz, s->fixed, nz * sizeof(double));
+    for (int k = 1; k <= N; ++k) d_ocp_qp_sol_get_x(k, &s->sol, dz + nz * k);
     for (int k = 0; k < N; ++k) d_ocp_qp_sol_get_u(k, &s->sol, dv + nv * k);
     return status;
 }

@@ -10,6 +10,8 @@ and the real-time iterations (solvers/condensed_rti.py, solvers/sparse_rti.py) s
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -96,11 +98,20 @@ class MultipleShootingProgram:
 
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self.step = sampled.step
+        self.numeric_step = sampled.numeric_step
         self.rollout = sampled.rollout(ny)
         # The step with its Jacobians, evaluated at every shooting node in one call.
         self.linearised_steps = sampled.linearised_nodes(ny)
 
         self.n_w = NX * (ny + 1) + n * self.n_moves + n_slots * ny
+        self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
+
+    @functools.cached_property
+    def nlp(self) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """(w, p, cost, g) as expanded SX, built on first use: IPOPT needs them, the real-time
+        iterations do not (~25 ms a controller on paper-obstacles)."""
+        config, ocp = self.config, self.ocp
+        n, ny, n_slots = self.n_thrusters, self.horizon, self.n_slots
         w = ca.SX.sym("w", self.n_w)
         X = ca.reshape(w[: NX * (ny + 1)], NX, ny + 1)  # column i: X_i
         U = ca.reshape(w[NX * (ny + 1) : NX * (ny + 1) + n * self.n_moves], n, self.n_moves)
@@ -121,7 +132,6 @@ class MultipleShootingProgram:
                 centre = slots[0:2, o] + (i * config.sample_time) * slots[2:4, o]
                 distance = ca.sqrt(ca.sumsqr(X[0:2, i] - centre) + DISTANCE_SMOOTHING_M2)
                 clearances.append(distance - slots[4, o] + slack[o, i - 1])
-        self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
         g = ca.vertcat(*gaps, *changes, *clearances)
 
         Q, S, R = np.diag(ocp.stage_weight), np.diag(ocp.terminal_weight), np.diag(ocp.input_weight)
@@ -135,7 +145,23 @@ class MultipleShootingProgram:
             cost += sum(ca.bilin(R, dF, dF) for dF in changes)
         cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
         cost += SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)
-        self.w, self.p, self.cost, self.g = w, p, cost, g
+        return w, p, cost, g
+
+    @property
+    def w(self) -> ca.SX:
+        return self.nlp[0]
+
+    @property
+    def p(self) -> ca.SX:
+        return self.nlp[1]
+
+    @property
+    def cost(self) -> ca.SX:
+        return self.nlp[2]
+
+    @property
+    def g(self) -> ca.SX:
+        return self.nlp[3]
 
     # -- packing -------------------------------------------------------------------------
     def pack(self, iterate: Iterate) -> np.ndarray:
@@ -191,7 +217,7 @@ class MultipleShootingProgram:
         slots = np.zeros((self.n_slots, SLOT_FIELDS))
         slots[:, 0:2] = state[:2] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
-        nearest = sorted(obstacles, key=lambda o: float(np.linalg.norm(o.center - state[:2])))
+        nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[:2]))
         extra = self.ocp.keep_out_extra
         for o, obstacle in enumerate(nearest[: self.n_slots]):
             slots[o] = [*obstacle.center, *obstacle.velocity, obstacle.radius + extra]
@@ -209,11 +235,11 @@ class MultipleShootingProgram:
         the thrusts at the move steps are read from the plan shifted by one sample.
         """
         plan = self.plan(iterate)
-        terminal = np.asarray(self.step(iterate.states[-1], plan[-1], disturbance)).ravel()
+        terminal = self.numeric_step(iterate.states[-1], plan[-1], disturbance)
         return Iterate(
-            states=np.vstack([iterate.states[1:], terminal]),
-            thrust=np.vstack([plan[1:], plan[-1:]])[self.move_steps],
-            slack=np.vstack([iterate.slack[1:], iterate.slack[-1:]]),
+            states=np.concatenate([iterate.states[1:], terminal[None]]),
+            thrust=np.concatenate([plan[1:], plan[-1:]])[self.move_steps],
+            slack=np.concatenate([iterate.slack[1:], iterate.slack[-1:]]),
         )
 
     def reference_guess(self, sample: Sample) -> Iterate:

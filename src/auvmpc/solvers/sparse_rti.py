@@ -16,17 +16,19 @@ The QP of one Gauss-Newton SQP step around an iterate (X, F), in deltas, stage k
 
     stage state  z_k = [dX_k; dp_k]   (p_k = F_{k-1}: the previous thrust, so that the rate
                                        limit is a stage constraint)
-    stage input  v_k = [dF_k; sigma s_k] (s_k >= 0: one exact-penalty slack for the obstacle
-                                       rows of step k + 1, scaled: hpipm.slack_scale)
-    dynamics     dX_{k+1} = A_k dX_k + B_k dF_k + (RK4(X_k, F_k) - X_{k+1}),
-                 dp_{k+1} = dF_k + (F_k - p_{k+1})
-    bounds       dz_0 = [x_hat - X_0; F_prev - p_0],  F_min <= F_k + dF_k <= F_max
-    rate rows    |(F_k + dF_k) - (p_k + dp_k)| <= rate Te at a move step, = 0 where the thrust
-                 is held (move blocking is a stage equality, not a change of variables)
+    stage input  v_k = [w_k; sigma s_k] (w_k = dF_k - dp_k, the change of the thrust's
+                                       increment; s_k >= 0: one exact-penalty slack for the
+                                       obstacle rows of step k + 1, scaled: hpipm.slack_scale)
+    dynamics     dX_{k+1} = A_k dX_k + B_k (dp_k + w_k) + (RK4(X_k, F_k) - X_{k+1}),
+                 dp_{k+1} = dp_k + w_k + (F_k - p_{k+1})
+    bounds       z_0 = [x_hat - X_0; F_prev - p_0] (known: folded into stage 0),
+                 |(F_k - p_k) + w_k| <= rate Te at a move step, = 0 where the thrust is held
+                 (the rate limit), F_min <= p_{k+1} + dp_{k+1} <= F_max (the thrust limit,
+                 on F_k + dF_k): boxes, which cost the interior point less than rows
     obstacles    n . (p(X_{k+1}) + dX_{k+1}[:2] - c_o) + s_k >= reach_o,  written at stage k
                  through the linearised dynamics (n: the unit normal from the obstacle)
     cost         the program's cost (Gauss-Newton: its Hessian is exact and constant) plus
-                 rho s_k + s_k^2, and a tiny Levenberg-Marquardt term on dF.
+                 rho s_k + s_k^2, and a tiny Levenberg-Marquardt term on w.
 
 The stage data are two CasADi functions (:class:`StageQp`). By default they are compiled to
 C together with a small HPIPM driver, so that one SQP step (linearisation, QP, solve) is one
@@ -55,7 +57,7 @@ from auvmpc.solvers.multiple_shooting import (
 
 __all__ = ["CasadiQpStep", "SparseRealTimeIteration", "StageQp", "stage_qp"]
 
-# Levenberg-Marquardt term on the thrust step (as in the condensed real-time iteration): keeps
+# Levenberg-Marquardt term on the thrust step w (as in the condensed real-time iteration): keeps
 # the stage Hessian definite when R = 0; it penalises the step, not the iterate, so the fixed
 # point is unchanged.
 _STEP_REGULARISATION = 1e-9
@@ -121,7 +123,7 @@ class SparseRealTimeIteration:
                 dz, dv = self._step.dz, self._step.dv
                 if code != _SOLVED or not (np.isfinite(dz).all() and np.isfinite(dv).all()):
                     return Solution(None, total, time.perf_counter() - started, status)
-                thrust = thrust + dv[:, :n]
+                thrust = thrust + dz[:N, 6:] + dv[:, :n]  # dF_k = dp_k + w_k (stage_qp)
                 if program.n_slots:
                     slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
                 if cold:
@@ -146,9 +148,11 @@ class StageQp(NamedTuple):
         cost_k  = 1/2 [v; z]' [R S; S' Q] [v; z] + r' v + q' z
         lbu <= v_k <= ubu,   lg <= C_k z_k + D_k v_k <= ug
 
+        lbp <= dp_{k+1} <= ubp   (the thrust part of the next state)
+
     ``stage`` maps (X_k, X_{k+1}, P_k, P_{k+1}, F_k, r_k, W_k, d, slots, used, movable_k,
-    k + 1) to (A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu), every matrix dense and
-    column-major; ``terminal`` maps (X_N, r_N) to (Q, q) of the last stage. Both are
+    k + 1) to (A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu, lbp, ubp), every matrix dense
+    and column-major; ``terminal`` maps (X_N, r_N) to (Q, q) of the last stage. Both are
     expanded SX, so the same functions are evaluated by CasADi or compiled to C.
     """
 
@@ -178,7 +182,7 @@ def stage_qp(program: MultipleShootingProgram) -> StageQp:
 def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     n, S, NX = program.n_thrusters, program.n_slots, 6
     # One slack input per stage for its obstacle rows; none without obstacle slots.
-    nz, nv, ng = NX + n, n + (1 if S else 0), n + S
+    nz, nv, ng = NX + n, n + (1 if S else 0), S
     ocp = program.ocp
     R_weight = ocp.input_weight
     rho = ocp.slack_penalty
@@ -194,7 +198,11 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     movable = ca.SX.sym("movable")
     step_index = ca.SX.sym("step")  # k + 1: the step whose obstacle rows this stage carries
 
-    # Cost of z_k = [dX_k; dp_k] and v_k = [dF_k; sigma s_k].
+    # The input is the change of the thrust's increment, w_k = dF_k - dp_k, so that the
+    # rate limit is a bound on w and the thrust limit a bound on the next state's dp (box
+    # constraints, where general rows cost the interior point more); dF_k = dp_k + w_k.
+    # Cost of z_k = [dX_k; dp_k] and v_k = [w_k; sigma s_k].
+    change = F - P
     Q = ca.SX(nz, nz)
     Q[:NX, :NX] = ca.diag(2.0 * weight)
     q = ca.vertcat(2.0 * weight * (X - reference), ca.SX.zeros(n))
@@ -204,68 +212,61 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         R[n, n] = 2.0 * SLACK_QUADRATIC_WEIGHT / sigma**2
     slack_gradient = [rho / sigma] if S else []
     S_cross = ca.SX(nv, nz)
-    if ocp.penalty is ThrustPenalty.ABSOLUTE:
-        r = ca.vertcat(2.0 * R_weight * F, *slack_gradient)
-    else:  # R weights the change F_k - P_k, and P_k moves with dp_k
-        change = F - P
+    if ocp.penalty is ThrustPenalty.ABSOLUTE:  # R weights F + dF = F + dp + w
         Q[NX:, NX:] = ca.diag(2.0 * R_weight)
-        S_cross[:n, NX:] = ca.diag(-2.0 * R_weight)
-        q[NX:] = -2.0 * R_weight * change
+        S_cross[:n, NX:] = ca.diag(2.0 * R_weight)
+        q[NX:] = 2.0 * R_weight * F
+        r = ca.vertcat(2.0 * R_weight * F, *slack_gradient)
+    else:  # R weights the change (F + dF) - (P + dp) = change + w
         r = ca.vertcat(2.0 * R_weight * change, *slack_gradient)
 
-    # Dynamics: dX_{k+1} = A dX_k + B dF_k + gap, dp_{k+1} = dF_k + (F_k - P_{k+1}).
+    # Dynamics: dX_{k+1} = A dX_k + B (dp_k + w_k) + gap, dp_{k+1} = dp_k + w_k + (F_k - P_{k+1}).
     successor = program.step(X, F, force)
-    A = ca.diagcat(ca.jacobian(successor, X), ca.SX(n, n))
+    A_x, B_x = ca.jacobian(successor, X), ca.jacobian(successor, F)
+    A = ca.SX(nz, nz)
+    A[:NX, :NX] = A_x
+    A[:NX, NX:] = B_x
+    A[NX:, NX:] = ca.SX.eye(n)
     B = ca.SX(nz, nv)
-    B[:NX, :n] = ca.jacobian(successor, F)
+    B[:NX, :n] = B_x
     B[NX:, :n] = ca.SX.eye(n)
     gap = successor - X_next
     b = ca.vertcat(gap, F - P_next)
 
-    # Rows: the rate |(F + dF) - (P + dp)| <= movable * max_move, then per obstacle slot the
-    # half-plane tangent to its inflated disc at X_{k+1}, n . (p_{k+1} + dp_{k+1} - c) + s >=
-    # reach, through the linearised dynamics; kept for the used slots within
-    # _OBSTACLE_RANGE_M of the disc.
-    change = F - P
+    # Bounds: the rate |change + w| <= movable * max_move on w; the thrust limit on the
+    # next state's dp, F_min <= P_{k+1} + dp_{k+1} <= F_max.
     max_move = ca.DM(ocp.max_move)
+    lbu = ca.vertcat(-movable * max_move - change, *([0.0] if S else []))
+    ubu = ca.vertcat(movable * max_move - change, *([ca.inf] if S else []))
+    lbp_next, ubp_next = ocp.input_lower - P_next, ocp.input_upper - P_next
+
+    # Rows: per obstacle slot the half-plane tangent to its inflated disc at X_{k+1},
+    # n . (p_{k+1} + dp_{k+1} - c) + s >= reach, through the linearised dynamics; kept for the
+    # used slots within _OBSTACLE_RANGE_M of the disc.
     t = step_index * program.sample_time
-    C_rows = [ca.horzcat(ca.SX(n, NX), -ca.SX.eye(n))]
-    D_rows = [ca.horzcat(ca.SX.eye(n), ca.SX(n, nv - n))]
-    lower, upper = [-movable * max_move - change], [movable * max_move - change]
+    C_rows, D_rows, lower, upper = [], [], [], []
     for o in range(S):
         offset = X_next[0:2] - (slots[0:2, o] + t * slots[2:4, o])
         distance = ca.sqrt(ca.sumsqr(offset) + DISTANCE_SMOOTHING_M2)
         normal = (offset / distance).T
-        C_rows.append(ca.horzcat(normal @ A[0:2, :NX], ca.SX(1, n)))
+        C_rows.append(normal @ A[0:2, :])
         D_rows.append(ca.horzcat(normal @ B[0:2, :n], ca.SX(1, 1) + 1.0 / sigma))
         near = ca.logic_and(used[o] > 0.5, distance - slots[4, o] < _OBSTACLE_RANGE_M)
         lower.append(ca.if_else(near, slots[4, o] - distance - normal @ gap[0:2], -ca.inf))
         upper.append(ca.inf)
-    lbu = ca.vertcat(ocp.input_lower - F, *([0.0] if S else []))
-    ubu = ca.vertcat(ocp.input_upper - F, *([ca.inf] if S else []))
+    C = ca.vertcat(*C_rows) if S else ca.SX(0, nz)
+    D = ca.vertcat(*D_rows) if S else ca.SX(0, nv)
+    lg = ca.vertcat(*lower) if S else ca.SX(0, 1)
+    ug = ca.vertcat(*upper) if S else ca.SX(0, 1)
 
-    dense = [ca.densify(e) for e in (A, B, b, Q, S_cross, R, q, r)]
-    dense += [ca.densify(ca.vertcat(*C_rows)), ca.densify(ca.vertcat(*D_rows))]
-    dense += [ca.densify(e) for e in (ca.vertcat(*lower), ca.vertcat(*upper), lbu, ubu)]
+    outputs = (A, B, b, Q, S_cross, R, q, r, C, D, lg, ug, lbu, ubu, lbp_next, ubp_next)
+    inputs = (X, X_next, P, P_next, F, reference, weight, force, slots, used, movable, step_index)
     stage = ca.Function(
         "rti_stage",
-        [X, X_next, P, P_next, F, reference, weight, force, slots, used, movable, step_index],
-        dense,
-        [
-            "X",
-            "X_next",
-            "P",
-            "P_next",
-            "F",
-            "ref",
-            "W",
-            "d_world",
-            "slots",
-            "used",
-            "movable",
-            "step",
-        ],  # fmt: skip
-        ["A", "B", "b", "Q", "S", "R", "q", "r", "C", "D", "lg", "ug", "lbu", "ubu"],
+        list(inputs),
+        [ca.densify(ca.SX(e)) for e in outputs],
+        "X X_next P P_next F ref W d_world slots used movable step".split(),
+        "A B b Q S R q r C D lg ug lbu ubu lbp_next ubp_next".split(),
     )
     terminal_weight = ocp.terminal_weight
     Q_N = ca.SX(nz, nz)
@@ -299,17 +300,14 @@ class CasadiQpStep:
         lbx = [x_hat - X[:, 0], previous - P[:, 0]]
         ubx = list(lbx)
         for k in range(N):
-            A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu = qp.stage(
+            A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu, lbp, ubp = qp.stage(
                 X[:, k], X[:, k + 1], P[:, k], P[:, k + 1], F[:, k], reference[:, k],
                 weight[:, k], force, slot_data, used, movable[k], k + 1,
             )  # fmt: skip
             hessian.append(ca.blockcat([[Q, S.T], [S, R]]))
             gradient += [q, r]
-            if k > 0:
-                lbx.append(-np.inf * np.ones(nz))
-                ubx.append(np.inf * np.ones(nz))
-            lbx.append(lbu)
-            ubx.append(ubu)
+            lbx += [lbu, -np.inf * np.ones(NX), lbp]  # v_k, then z_{k+1}
+            ubx += [ubu, np.inf * np.ones(NX), ubp]
             left, right = k * (nz + nv), n_w - (k + 1) * (nz + nv) - nz
             block = ca.vertcat(
                 ca.horzcat(A, B, -ca.SX.eye(nz)), ca.horzcat(C, D, ca.SX(C.size1(), nz))
@@ -320,8 +318,6 @@ class CasadiQpStep:
         Q_N, q_N = qp.terminal(X[:, N], reference[:, N])
         hessian.append(Q_N)
         gradient.append(q_N)
-        lbx.append(-np.inf * np.ones(nz))
-        ubx.append(np.inf * np.ones(nz))
         self._data = ca.Function(
             "rti_sparse_qp_data",
             [X, P, F, x_hat, previous, reference, weight, force, slot_data, used, movable],
