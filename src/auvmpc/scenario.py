@@ -231,15 +231,18 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 "not supported on the 6-DOF plant (it simulates the vehicle's six_dof section "
                 "as given; give a vehicle file with other values instead)",
             )
+        # The vehicle's fitness for the 6-DOF plant first: it decides whether anything else
+        # about the scenario (e.g. a weight per thruster) can matter.
+        vehicle = _load_vehicle_relative(scenario.vehicle, base_dir)
+        if vehicle.six_dof is None:
+            raise ConfigError(
+                "vehicle.six_dof",
+                vehicle.name,
+                "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
+            )
         super().__init__(scenario, base_dir)
         model = self.model
         six = model.six_dof
-        if six is None:
-            raise ConfigError(
-                "vehicle.six_dof",
-                model.name,
-                "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
-            )
         if model.heave is None:
             raise ConfigError(
                 "vehicle.heave", model.name, "missing: the depth controller needs a heave section"
