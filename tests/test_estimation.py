@@ -131,6 +131,9 @@ class _ConstantCurrent:
     def force_world(self, t):
         return self.force
 
+    def water_velocity_world(self, t):
+        return None  # the plant step asks since currents can be water velocity; none here
+
     def advance(self):
         pass
 
