@@ -212,3 +212,15 @@ def test_loaded_kind_and_defaults():
     )
     assert resolved.scenario.depth_controller.preview is True
     assert math.isclose(resolved.scenario.initial_depth_m, 1.0)
+
+
+def test_python_api_overrides_and_draws_a_six_dof_run():
+    import auvmpc
+
+    scenario = auvmpc.load_scenario("paper-6dof", {"duration": 5})
+    changed = auvmpc.override(scenario, {"initial_depth_m": 1.2})
+    assert isinstance(changed, ResolvedSixDofScenario)
+    assert changed.scenario.initial_depth_m == 1.2
+    run = auvmpc.simulate(changed)
+    assert run.log.full_state[0, 2] == 1.2
+    assert {"trajectory", "trajectory_3d", "depth_attitude"} <= set(auvmpc.figures(run))

@@ -165,12 +165,28 @@ class SixDofScenario(Scenario):
         "vehicle starts level (phi = theta = 0) with w = p = q = 0",
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _depth_controller_defaults(cls, data: Any) -> Any:
+        """What a depth_controller mapping leaves out: the horizontal controller's sample time
+        and preview (a planned 3-D path is known ahead, as the horizontal reference is)."""
+        if not isinstance(data, dict):
+            return data
+        depth, controller = data.get("depth_controller", {}), data.get("controller", {})
+        if not isinstance(depth, dict) or not isinstance(controller, dict):
+            return data  # the field validation names what is wrong
+        sample_time = controller.get(
+            "sample_time", ControllerConfig.model_fields["sample_time"].get_default()
+        )
+        return {
+            **data,
+            "depth_controller": {"sample_time": sample_time, "preview": True, **depth},
+        }
+
     @model_validator(mode="after")
     def _one_sample_time(self) -> SixDofScenario:
         depth = self.depth_controller
-        if "sample_time" in depth.model_fields_set and not math.isclose(
-            depth.sample_time, self.controller.sample_time
-        ):
+        if not math.isclose(depth.sample_time, self.controller.sample_time):
             raise FieldError(
                 "depth_controller.sample_time",
                 depth.sample_time,
@@ -265,18 +281,12 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 "(helix, lawnmower, waypoints-3d)",
             )
         given = self.given
-        depth = given.depth_controller
-        fill = {"sample_time": given.controller.sample_time, "preview": True}
-        depth = depth.model_copy(
-            update={k: v for k, v in fill.items() if k not in depth.model_fields_set}
-        )
         initial_depth = given.initial_depth_m
         if initial_depth is None:
             initial_depth = float(self.reference.depths([0.0])[0, 0])
         plant_step = given.plant.max_step or plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
         self.scenario = self.scenario.model_copy(
             update={
-                "depth_controller": depth,
                 "initial_depth_m": initial_depth,
                 "plant": self.scenario.plant.model_copy(update={"max_step": plant_step}),
             }
