@@ -67,3 +67,12 @@ def random_limit_case(rng, params, reference, sample_time: float, horizon: int):
     else:  # all at the upper limit, the asymmetric side for bluerov
         previous = np.full(n, high)
     return t0, state, preview, previous
+
+
+# Issue 11's closed-loop bounds on the 6-DOF plant (paper section 4.2), after the transient:
+# the horizontal error within this factor of the same controller's on the 3-DOF plant, the
+# depth RMS error, roll and pitch, and the BlueROV2 helix's horizontal RMS error.
+SIX_DOF_VS_PLANAR_ERROR_FACTOR = 2.0
+SIX_DOF_DEPTH_RMS_TOL_M = 0.05
+SIX_DOF_TILT_LIMIT_RAD = math.radians(10.0)
+HELIX_RMS_TOL_M = 0.1

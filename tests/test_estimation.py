@@ -132,7 +132,7 @@ class _ConstantCurrent:
         return self.force
 
     def water_velocity_world(self, t):
-        return None  # a force, no moving water
+        return None  # the plant step asks since currents can be water velocity; none here
 
     def advance(self):
         pass

@@ -17,6 +17,9 @@ from auvmpc.references import (
     CsvConfig,
     FigureEight,
     FigureEightConfig,
+    HelixConfig,
+    Lawnmower,
+    LawnmowerConfig,
     Line,
     LineConfig,
     PaperOval,
@@ -25,6 +28,7 @@ from auvmpc.references import (
     ReferenceConfig,
     SampledPath,
     WaypointPath,
+    Waypoints3DConfig,
     WaypointsConfig,
     make_reference,
 )
@@ -485,8 +489,14 @@ def test_configs_documented_and_types_listed() -> None:
         LineConfig,
         WaypointsConfig,
         CsvConfig,
+        HelixConfig,
+        LawnmowerConfig,
+        Waypoints3DConfig,
     )
-    assert REFERENCE_TYPES == ("paper-oval", "circle", "figure-eight", "line", "waypoints", "csv")
+    assert REFERENCE_TYPES == (
+        "paper-oval", "circle", "figure-eight", "line", "waypoints", "csv",
+        "helix", "lawnmower", "waypoints-3d",
+    )  # fmt: skip
     for model, name in zip(models, REFERENCE_TYPES, strict=True):
         assert model.model_fields["type"].default == name
         for field_name, field in model.model_fields.items():
@@ -512,3 +522,98 @@ def test_make_reference_builds_each_type(data: dict, cls: type) -> None:
 def test_make_reference_rejects_other_objects() -> None:
     with pytest.raises(TypeError, match="not a reference config"):
         make_reference({"type": "circle"})  # type: ignore[arg-type]
+
+
+# --- 3-D references: depth with exact derivatives ------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        {"type": "helix", "radius": 3.0, "speed": 0.3, "descent_per_turn_m": 1.0},
+        {"type": "lawnmower", "depths_m": [1.0, 2.0, 3.0, 2.0], "legs": 4},
+        {"type": "waypoints-3d", "points": [[0, 0, 1], [10, 0, 2], [10, 10, 2], [0, 10, 0.5]]},
+        {
+            "type": "paper-oval",
+            "depth": {"start_m": 1.0, "changes": [{"time_s": 10, "depth_m": 2, "duration_s": 20}]},
+        },
+    ],
+)
+def test_depth_derivatives_are_exact(data: dict) -> None:
+    """z' and z'' agree with central differences of z and z' (so they are the derivatives)."""
+    ref = make_reference(ADAPTER.validate_python(data))
+    assert ref.has_depth
+    h = 1e-4
+    t = np.linspace(-5.0, 200.0, 4001)
+    rows, ahead, behind = ref.depths(t), ref.depths(t + h), ref.depths(t - h)
+    assert np.allclose((ahead[:, 0] - behind[:, 0]) / (2 * h), rows[:, 1], atol=1e-7)
+    assert np.allclose((ahead[:, 1] - behind[:, 1]) / (2 * h), rows[:, 2], atol=1e-6)
+
+
+def test_helix_descends_one_turn_depth_per_turn() -> None:
+    ref = make_reference(
+        ADAPTER.validate_python(
+            {"type": "helix", "radius": 3.0, "speed": 0.3, "descent_per_turn_m": 1.0}
+        )
+    )
+    turn = 2 * math.pi * 3.0 / 0.3
+    assert ref.depths([0.0, turn])[:, 0] == pytest.approx([1.0, 2.0])
+    assert np.allclose(ref.states([0.0, turn])[:, :2], ref.states([0.0, 0.0])[:, :2])
+
+
+def test_lawnmower_changes_depth_in_the_turns_only() -> None:
+    ref = make_reference(
+        ADAPTER.validate_python({"type": "lawnmower", "legs": 2, "depths_m": [1.0, 2.0]})
+    )
+    assert isinstance(ref, Lawnmower)
+    t = np.linspace(0.0, ref.end_time, 2001)
+    straight = ref.states(t)[:, 5] == 0.0
+    depth = ref.depths(t)
+    assert np.all(depth[straight, 1] == 0.0)
+    assert depth[0, 0] == 1.0 and depth[-1, 0] == 2.0
+
+
+def test_waypoints_3d_reach_each_depth_at_each_waypoint() -> None:
+    ref = make_reference(
+        ADAPTER.validate_python(
+            {"type": "waypoints-3d", "points": [[0, 0, 1], [10, 0, 3], [10, 10, 2]]}
+        )
+    )
+    passing = ref._path.corner_times.mean(axis=1)
+    assert ref.depths([0.0, *passing, ref.end_time])[:, 0] == pytest.approx([1.0, 3.0, 2.0])
+
+
+def test_planar_reference_has_no_depth_and_is_unchanged() -> None:
+    planar = make_reference(ADAPTER.validate_python({"type": "paper-oval"}))
+    deep = make_reference(ADAPTER.validate_python({"type": "paper-oval", "depth": {"start_m": 2}}))
+    assert not planar.has_depth
+    with pytest.raises(ValueError, match="planar reference has no depth"):
+        planar.depths([0.0])
+    t = np.linspace(0.0, 100.0, 201)
+    assert np.array_equal(planar.states(t), deep.states(t))
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ({"type": "lawnmower", "legs": 3, "depths_m": [1, 2]}, "need 1 or 3 values"),
+        ({"type": "lawnmower", "leg_length": 3, "spacing": 4}, "must exceed spacing"),
+        ({"type": "waypoints-3d", "points": [[0, 0, 1], [0, 0, 2]]}, "equals points"),
+        (
+            {
+                "type": "line",
+                "depth": {
+                    "start_m": 1,
+                    "changes": [
+                        {"time_s": 0, "depth_m": 2, "duration_s": 10},
+                        {"time_s": 5, "depth_m": 1, "duration_s": 10},
+                    ],
+                },
+            },
+            "before changes",
+        ),
+    ],
+)
+def test_3d_config_validation(data: dict, match: str) -> None:
+    with pytest.raises(ValidationError, match=match):
+        ADAPTER.validate_python(data)

@@ -59,7 +59,8 @@ def load_scenario(
     -------
     ResolvedScenario or ResolvedDepthScenario
         ``.scenario`` (validated fields), ``.model`` (the controller's vehicle) and, for a
-        horizontal scenario, ``.plant`` (the simulated vehicle).
+        horizontal scenario, ``.plant`` (the simulated vehicle); a ``kind: six-dof`` one is a
+        ``ResolvedSixDofScenario`` (a ResolvedScenario with ``.reference``).
 
     Raises
     ------
@@ -87,6 +88,15 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
 
         try:
             return ResolvedDepthScenario(DepthScenario.model_validate(data), scenario.base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
+    if data.get("kind") == "six-dof":
+        from pydantic import ValidationError
+
+        from auvmpc.scenario import ResolvedSixDofScenario, SixDofScenario
+
+        try:
+            return ResolvedSixDofScenario(SixDofScenario.model_validate(data), scenario.base_dir)
         except ValidationError as error:
             raise format_validation_error(error) from None
     return ResolvedScenario(validate_scenario(data), scenario.base_dir)
@@ -130,16 +140,25 @@ def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:
 
 def figures(run: RunResult) -> dict[str, Figure]:
     """The standard figures of a run (``trajectory``, ``errors``, ``velocities``, ``thrusts``,
-    ``solve_times``; ``depth`` for a depth run), titled with the controller and vehicle."""
+    ``solve_times``; ``depth`` for a depth run; plus ``trajectory_3d``, ``tracking_errors``,
+    ``depth_attitude`` for a 6-DOF run), titled with the controller and vehicle."""
     from auvmpc.plots import figure_depth, run_figures, run_title
 
     scenario = run.scenario
     if isinstance(run, DepthRunResult):
         title = f"{scenario.name}: {scenario.controller.type}"
         return {"depth": figure_depth(run.log, run.resolved.heave_plant, title=title)}
+    from auvmpc.runner import SixDofRunResult
+
     model = run.resolved.model
     radius = scenario.controller.vehicle_radius
-    return run_figures(run.log, scenario.obstacles, radius, model, run_title(scenario, model.name))
+    title = run_title(scenario, model.name)
+    if isinstance(run, SixDofRunResult):  # the horizontal figures, then the 6-DOF ones
+        from auvmpc.plots import six_dof_figures
+
+        drawn = run_figures(run.log.horizontal(), scenario.obstacles, radius, model, title)
+        return {**drawn, **six_dof_figures(run.log, model, title)}
+    return run_figures(run.log, scenario.obstacles, radius, model, title)
 
 
 def save_run(run: Run, folder: str | Path, figures: bool = True) -> Path:

@@ -49,6 +49,7 @@ __all__ = [
     "run_figures",
     "run_title",
     "save_figures",
+    "six_dof_figures",
 ]
 
 REFERENCE_STYLE = {"color": "0.45", "linestyle": "--", "linewidth": 1.3}
@@ -516,6 +517,91 @@ def figure_depth(log, limits, title: str = "") -> Figure:
     axes[-1].set_xlim(log.t[0], log.t[-1])
     axes[-1].set_xlabel(TIME_LABEL)
     _figure_legend(figure, axes)
+    return figure
+
+
+# --- 6-DOF runs (paper section 4.2, Figures 5-6) -------------------------------------------
+
+
+def six_dof_figures(log, limits: VehicleParams, title: str = "") -> dict[str, Figure]:
+    """The 6-DOF run's own figures, keyed by file stem: ``trajectory_3d`` (the paper's Figure
+    5), ``tracking_errors`` (its Figure 6: horizontal position, yaw-rate, surge and sway
+    errors) and ``depth_attitude`` (depth, roll, pitch, vertical thrust).
+
+    Parameters
+    ----------
+    log : auvmpc.sim.six_dof_loop.SixDofLog
+    limits : VehicleParams
+        With a ``heave`` section: the vertical thrust limits drawn.
+    """
+    return {
+        "trajectory_3d": figure_trajectory_3d(log, title),
+        "tracking_errors": figure_tracking_errors(log, title),
+        "depth_attitude": figure_depth_attitude(log, limits, title),
+    }
+
+
+def figure_trajectory_3d(log, title: str = "") -> Figure:
+    """The vehicle's path and the 3-D reference, depth axis pointing down."""
+    figure = _new_figure(7.0, 6.0, title)
+    ax = figure.add_subplot(projection="3d")
+    ax.plot(
+        log.reference[:, 0], log.reference[:, 1], log.depth_reference[:, 0],
+        label="reference", **REFERENCE_STYLE,
+    )  # fmt: skip
+    state = log.full_state
+    ax.plot(state[:, 0], state[:, 1], state[:, 2], label="vehicle (true)", **ACTUAL_STYLE)
+    ax.scatter(*state[0, :3], color=ACTUAL_STYLE["color"], marker="o", label="start")
+    ax.set_xlabel("x north (m)")
+    ax.set_ylabel("y east (m)")
+    ax.set_zlabel("depth z (m, down)")
+    ax.invert_zaxis()
+    figure.legend(loc="outside lower center", ncol=3, fontsize="small", frameon=False)
+    return figure
+
+
+def figure_tracking_errors(log, title: str = "") -> Figure:
+    """Horizontal position error and the yaw-rate, surge and sway errors (true - reference)."""
+    figure, axes = _time_panels(4, title)
+    rows = (
+        (position_error(log), "position error (m)"),
+        (log.state[:, 5] - log.reference[:, 5], "yaw-rate error (rad/s)"),
+        (log.state[:, 3] - log.reference[:, 3], "surge error (m/s)"),
+        (log.state[:, 4] - log.reference[:, 4], "sway error (m/s)"),
+    )
+    for ax, (values, label) in zip(axes, rows, strict=True):
+        ax.plot(log.t, values, **ACTUAL_STYLE)
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.set_ylabel(label)
+    _finish_time_axes(log, axes)
+    return figure
+
+
+def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure:
+    """Depth and its reference, roll and pitch, and the vertical thrusters' forces."""
+    figure, axes = _time_panels(4, title)
+    depth_ax, roll_ax, pitch_ax, thrust_ax = axes
+    depth_ax.plot(log.t, log.depth_reference[:, 0], label="reference", **REFERENCE_STYLE)
+    depth_ax.plot(log.t, log.full_state[:, 2], label="true", **ACTUAL_STYLE)
+    depth_ax.invert_yaxis()
+    depth_ax.set_ylabel("depth z (m, down)")
+    roll_ax.plot(log.t, np.degrees(log.full_state[:, 3]), **ACTUAL_STYLE)
+    roll_ax.set_ylabel("roll phi (deg)")
+    pitch_ax.plot(log.t, np.degrees(log.full_state[:, 4]), **ACTUAL_STYLE)
+    pitch_ax.set_ylabel("pitch theta (deg)")
+    n, steps = log.n_horizontal, log.steps
+    for i in range(n, log.n_thrusters):
+        thrust_ax.step(
+            log.t[:steps], log.thrust[:, i], where="post",
+            color=THRUSTER_COLORS[i % len(THRUSTER_COLORS)], label=f"F{i + 1}",
+        )  # fmt: skip
+    if limits.heave is not None:
+        for bound in limits.heave.thrust_limits:
+            thrust_ax.axhline(bound, **LIMIT_STYLE)
+        thrust_ax.plot([], [], label=f"limits {list(limits.heave.thrust_limits)} N", **LIMIT_STYLE)
+    thrust_ax.set_ylabel("vertical thrust (N)")
+    _figure_legend(figure, axes)
+    _finish_time_axes(log, axes)
     return figure
 
 

@@ -19,6 +19,13 @@ Conventions shared by every reference type:
 - Analytic types (paper-oval, circle, figure-eight, line) extend their formulas to any t; paths
   built from data (waypoints, csv) hold their first point before they start and their last point
   after they end (u_r = 0, r_r = 0, psi_r = heading at that end).
+
+3-D references (for 6-DOF scenarios) add a depth below the surface (NED z, down positive) with
+exact derivatives, :meth:`Reference.depths` -> ``[z, z', z'']``; the state reference above stays
+the horizontal path's, with u_r its horizontal speed. ``helix``, ``lawnmower`` and
+``waypoints-3d`` are 3-D by nature; every planar type takes an optional ``depth`` schedule
+(start depth plus smooth changes), and without one it is exactly the planar reference it was.
+Depth changes are quintic smooth steps in time: z' and z'' continuous, zero at each end.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ from typing import Annotated, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 from scipy.interpolate import CubicSpline
 
 from auvmpc.config import StrictModel
@@ -42,6 +49,15 @@ __all__ = [
     "Circle",
     "CircleConfig",
     "CsvConfig",
+    "DepthChangeConfig",
+    "DepthProfile",
+    "DepthSchedule",
+    "DepthScheduleConfig",
+    "Helix",
+    "HelixConfig",
+    "Lawnmower",
+    "LawnmowerConfig",
+    "LinearDepth",
     "FigureEight",
     "FigureEightConfig",
     "Line",
@@ -52,6 +68,8 @@ __all__ = [
     "ReferenceConfig",
     "SampledPath",
     "WaypointPath",
+    "Waypoints3D",
+    "Waypoints3DConfig",
     "WaypointsConfig",
     "load_track_csv",
     "make_reference",
@@ -83,6 +101,120 @@ _CSV_MIN_ROWS = 4
 # --------------------------------------------------------------------------------------------
 
 Point = tuple[float, float]
+Point3 = tuple[float, float, float]
+
+
+class DepthChangeConfig(StrictModel):
+    """One change of the reference depth: a smooth (quintic) transition over a time window."""
+
+    time_s: float = Field(..., ge=0.0, description="Time the change starts, s.")
+    depth_m: float = Field(..., description="Depth below the surface after the change (NED), m.")
+    duration_s: float = Field(..., gt=0.0, description="Time the change takes, s.")
+
+
+class DepthScheduleConfig(StrictModel):
+    """Depth below the surface over time: a start depth and smooth changes (quintic in time,
+    so depth rate and depth acceleration are continuous and zero at both ends of a change)."""
+
+    start_m: float = Field(..., description="Depth below the surface at t = 0 (NED, down), m.")
+    changes: tuple[DepthChangeConfig, ...] = Field(
+        (), description="Depth changes in time order, none overlapping another."
+    )
+
+    @field_validator("changes")
+    @classmethod
+    def _in_order(cls, changes: tuple[DepthChangeConfig, ...]) -> tuple[DepthChangeConfig, ...]:
+        for i in range(1, len(changes)):
+            previous_end = changes[i - 1].time_s + changes[i - 1].duration_s
+            if changes[i].time_s < previous_end:
+                raise ValueError(
+                    f"changes[{i}] starts at {changes[i].time_s} s, before changes[{i - 1}] "
+                    f"ends ({previous_end} s)"
+                )
+        return changes
+
+
+class HelixConfig(StrictModel):
+    """A helix: a circle in the horizontal plane, descending a fixed depth per turn."""
+
+    type: Literal["helix"] = Field("helix", description="Reference type: helix (3-D).")
+    center: Point = Field((0.0, 0.0), description="Axis position [x, y] in the world frame, m.")
+    radius: float = Field(3.0, gt=0.0, description="Horizontal radius, m.")
+    speed: float = Field(
+        0.3, gt=0.0, description="Horizontal speed (what the horizontal controller tracks), m/s."
+    )
+    descent_per_turn_m: float = Field(
+        1.0, description="Depth gained per full turn, m (negative: climbs)."
+    )
+    start_depth_m: float = Field(1.0, description="Depth below the surface at t = 0, m.")
+    direction: Literal["ccw", "cw"] = Field(
+        "ccw", description="Direction of travel seen from above with x north, y east."
+    )
+    start_angle_deg: float = Field(
+        0.0, description="Angle of the start point seen from the axis, deg from world +x."
+    )
+
+
+class LawnmowerConfig(StrictModel):
+    """A survey pattern: parallel legs joined by half-circle turns, a depth per leg, the depth
+    changing smoothly during each turn."""
+
+    type: Literal["lawnmower"] = Field("lawnmower", description="Reference type: lawnmower (3-D).")
+    start: Point = Field((0.0, 0.0), description="Start of the first leg [x, y], m.")
+    heading_deg: float = Field(0.0, description="Direction of the first leg, deg from world +x.")
+    leg_length: float = Field(20.0, gt=0.0, description="Length of each leg, m.")
+    spacing: float = Field(
+        4.0, gt=0.0, description="Distance between legs (twice the turn radius), m."
+    )
+    legs: int = Field(4, ge=1, description="Number of legs.")
+    first_turn: Literal["ccw", "cw"] = Field(
+        "ccw",
+        description="Direction of the first turn: 'ccw' heading increasing (as a 'ccw' circle).",
+    )
+    speed: float = Field(0.5, gt=0.0, description="Horizontal speed while moving, m/s.")
+    depths_m: tuple[float, ...] = Field(
+        (1.0,),
+        min_length=1,
+        description="Depth below the surface of each leg, m: one value for all, or one per leg.",
+    )
+
+    @model_validator(mode="after")
+    def _fits(self) -> LawnmowerConfig:
+        if len(self.depths_m) not in (1, self.legs):
+            raise ValueError(f"depths_m: need 1 or {self.legs} values (one per leg)")
+        if self.legs > 1 and self.leg_length <= self.spacing:
+            raise ValueError(
+                f"leg_length {self.leg_length} must exceed spacing {self.spacing} (the turns "
+                "take spacing / 2 of each leg)"
+            )
+        return self
+
+
+class Waypoints3DConfig(StrictModel):
+    """Waypoints in 3-D: the horizontal path of ``waypoints`` (circular-arc corners), the depth
+    moving smoothly (quintic in time) from each waypoint's depth to the next's."""
+
+    type: Literal["waypoints-3d"] = Field(
+        "waypoints-3d", description="Reference type: 3-D waypoints."
+    )
+    points: tuple[Point3, ...] = Field(
+        ...,
+        min_length=2,
+        description=(
+            "Waypoints [[x, y, depth], ...] in m (depth below the surface), at least 2, no two "
+            "consecutive at the same [x, y] and no 180 deg reversal in the horizontal plane."
+        ),
+    )
+    speed: float = Field(0.5, gt=0.0, description="Horizontal speed while moving, m/s.")
+    corner_radius: float = Field(
+        1.0, gt=0.0, description="Radius of the horizontal arc at each interior corner, m."
+    )
+
+    @field_validator("points")
+    @classmethod
+    def _horizontal_legs(cls, points: tuple[Point3, ...]) -> tuple[Point3, ...]:
+        _check_legs(tuple((x, y) for x, y, _ in points))
+        return points
 
 
 class PaperOvalConfig(StrictModel):
@@ -90,6 +222,13 @@ class PaperOvalConfig(StrictModel):
 
     type: Literal["paper-oval"] = Field(
         "paper-oval", description="Reference type: the paper's semi-oval track, fixed geometry."
+    )
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
     )
 
 
@@ -106,6 +245,13 @@ class CircleConfig(StrictModel):
     start_angle_deg: float = Field(
         0.0, description="Angle of the start point seen from the center, deg from world +x."
     )
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
+    )
 
 
 class FigureEightConfig(StrictModel):
@@ -119,6 +265,13 @@ class FigureEightConfig(StrictModel):
         10.0, gt=0.0, description="Half-width a of the eight along x, m (half-height is a/2)."
     )
     period: float = Field(200.0, gt=0.0, description="Time for one full eight (both loops), s.")
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
+    )
 
 
 class LineConfig(StrictModel):
@@ -128,6 +281,13 @@ class LineConfig(StrictModel):
     start: Point = Field((0.0, 0.0), description="Position [x, y] at t = 0, m.")
     heading_deg: float = Field(0.0, description="Direction of travel, deg from world +x (CCW).")
     speed: float = Field(0.5, gt=0.0, description="Constant speed, m/s.")
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
+    )
 
 
 class WaypointsConfig(StrictModel):
@@ -151,26 +311,38 @@ class WaypointsConfig(StrictModel):
             "corner whose legs are too short for it."
         ),
     )
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
+    )
 
     @field_validator("points")
     @classmethod
     def _legs_have_direction(cls, points: tuple[Point, ...]) -> tuple[Point, ...]:
-        pts = np.asarray(points, dtype=float)
-        legs = np.diff(pts, axis=0)
-        for i, length in enumerate(np.hypot(legs[:, 0], legs[:, 1])):
-            if length <= _MIN_LEG_LENGTH:
-                raise ValueError(
-                    f"points[{i + 1}] = {list(points[i + 1])} equals points[{i}]; "
-                    "consecutive waypoints must differ"
-                )
-        headings = np.arctan2(legs[:, 1], legs[:, 0])
-        for i, turn in enumerate(_wrap(np.diff(headings))):
-            if abs(turn) >= math.pi - _REVERSAL_TOLERANCE:
-                raise ValueError(
-                    f"the path reverses (180 deg turn) at points[{i + 1}] = {list(points[i + 1])}"
-                    "; no arc can round it, add a waypoint to the side"
-                )
+        _check_legs(points)
         return points
+
+
+def _check_legs(points) -> None:
+    """Consecutive waypoints differ and no leg reverses the previous one (m, [x, y])."""
+    pts = np.asarray(points, dtype=float)
+    legs = np.diff(pts, axis=0)
+    for i, length in enumerate(np.hypot(legs[:, 0], legs[:, 1])):
+        if length <= _MIN_LEG_LENGTH:
+            raise ValueError(
+                f"points[{i + 1}] = {list(points[i + 1])} equals points[{i}]; "
+                "consecutive waypoints must differ"
+            )
+    headings = np.arctan2(legs[:, 1], legs[:, 0])
+    for i, turn in enumerate(_wrap(np.diff(headings))):
+        if abs(turn) >= math.pi - _REVERSAL_TOLERANCE:
+            raise ValueError(
+                f"the path reverses (180 deg turn) at points[{i + 1}] = {list(points[i + 1])}"
+                "; no arc can round it, add a waypoint to the side"
+            )
 
 
 class CsvConfig(StrictModel):
@@ -186,10 +358,25 @@ class CsvConfig(StrictModel):
             "relative to the scenario file's folder."
         ),
     )
+    depth: DepthScheduleConfig | None = Field(
+        None,
+        description=(
+            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
+            "reference is planar."
+        ),
+    )
 
 
 ReferenceConfig = Annotated[
-    PaperOvalConfig | CircleConfig | FigureEightConfig | LineConfig | WaypointsConfig | CsvConfig,
+    PaperOvalConfig
+    | CircleConfig
+    | FigureEightConfig
+    | LineConfig
+    | WaypointsConfig
+    | CsvConfig
+    | HelixConfig
+    | LawnmowerConfig
+    | Waypoints3DConfig,
     Field(discriminator="type"),
 ]
 
@@ -222,6 +409,27 @@ class Reference(ABC):
     def breakpoints(self) -> np.ndarray:
         """Times (s) at which the reference's derivatives may jump (joints, start and end)."""
         return np.empty(0)
+
+    #: The depth reference of a 3-D path, None for a planar one (see :meth:`depths`).
+    depth_profile: DepthProfile | None = None
+
+    @property
+    def has_depth(self) -> bool:
+        """Whether the reference includes a depth (a 3-D path for a 6-DOF scenario)."""
+        return self.depth_profile is not None
+
+    def depths(self, t: ArrayLike) -> np.ndarray:
+        """Depth reference at the given times, with its exact derivatives.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, 3)
+            Rows ``[depth, depth rate, depth acceleration]``: depth below the surface (NED z,
+            down positive) in m, m/s, m/s2.
+        """
+        if self.depth_profile is None:
+            raise ValueError(f"{type(self).__name__}: a planar reference has no depth")
+        return self.depth_profile.evaluate(_as_times(t))
 
     def states(self, t: ArrayLike) -> np.ndarray:
         """Reference states at the given times.
@@ -452,6 +660,8 @@ class WaypointPath(Reference):
         curvatures: list[float] = []  # signed, 1/m
         piece_lengths: list[float] = []
         scale = max(1.0, float(np.max(lengths)))
+        corner_times: list[tuple[float, float]] = []
+        travelled = 0.0  # path length before the current piece, m
         for j in range(n_legs):
             line_length = max(lengths[j] - cut_in[j] - cut_out[j], 0.0)
             if line_length > 1e-12 * scale:  # a leg fully eaten by its corners has no line
@@ -459,11 +669,17 @@ class WaypointPath(Reference):
                 headings.append(float(leg_heading[j]))
                 curvatures.append(0.0)
                 piece_lengths.append(line_length)
-            if j < n_legs - 1 and radius[j] > 0.0:
+            travelled += line_length
+            if j == n_legs - 1:
+                break
+            arc_length = radius[j] * abs(turns[j]) if radius[j] > 0.0 else 0.0
+            corner_times.append((travelled / config.speed, (travelled + arc_length) / config.speed))
+            travelled += arc_length
+            if radius[j] > 0.0:
                 starts.append(pts[j + 1] - cut_out[j] * units[j])
                 headings.append(float(leg_heading[j]))
                 curvatures.append(math.copysign(1.0 / radius[j], turns[j]))
-                piece_lengths.append(radius[j] * abs(turns[j]))
+                piece_lengths.append(arc_length)
 
         self._starts = np.asarray(starts)
         self._headings = np.asarray(headings)
@@ -477,6 +693,9 @@ class WaypointPath(Reference):
         self._final_heading = float(leg_heading[-1])
         #: Radius actually used at each interior waypoint, m (0 where the legs are collinear).
         self.corner_radii = radius
+        #: (m-2, 2) start and end time (s) of the arc at each interior waypoint (equal where
+        #: the legs are collinear and the path passes the waypoint itself).
+        self.corner_times = np.array(corner_times, dtype=float).reshape(-1, 2)
 
     @property
     def end_time(self) -> float | None:
@@ -506,6 +725,181 @@ class WaypointPath(Reference):
         u = np.where(moving, speed, 0.0)
         r = np.where(moving, speed * kappa, 0.0)
         return _assemble(x, y, psi, u, r, t.size)
+
+
+# --------------------------------------------------------------------------------------------
+# Depth profiles (3-D references): depth below the surface, NED z, with exact derivatives
+# --------------------------------------------------------------------------------------------
+
+
+class DepthProfile(ABC):
+    """Depth below the surface as a function of time, vectorised: rows [z, z', z'']."""
+
+    @abstractmethod
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        """(n, 3) depth (m), rate (m/s) and acceleration (m/s2) at a 1-D array of times."""
+
+
+class LinearDepth(DepthProfile):
+    """z = start + rate t for all t (a helix)."""
+
+    def __init__(self, start: float, rate: float) -> None:
+        self.start, self.rate = float(start), float(rate)
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        out = np.zeros((t.size, 3))
+        out[:, 0] = self.start + self.rate * t
+        out[:, 1] = self.rate
+        return out
+
+
+class DepthSchedule(DepthProfile):
+    """A start depth and non-overlapping smooth changes, each a quintic smooth step in time:
+    s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5, tau = (t - t0) / T in [0, 1], whose rate and
+    acceleration vanish at both ends, so z, z' and z'' are continuous everywhere.
+
+    Parameters
+    ----------
+    start : float
+        Depth before the first change, m.
+    changes : sequence of (t0, duration, depth)
+        Start time (s), duration (s, > 0) and depth after the change (m), in time order.
+    """
+
+    def __init__(self, start: float, changes) -> None:
+        self.start = float(start)
+        self.changes = tuple((float(t0), float(T), float(z)) for t0, T, z in changes)
+
+    @classmethod
+    def from_config(cls, config: DepthScheduleConfig) -> DepthSchedule:
+        return cls(config.start_m, [(c.time_s, c.duration_s, c.depth_m) for c in config.changes])
+
+    def evaluate(self, t: np.ndarray) -> np.ndarray:
+        out = np.zeros((t.size, 3))
+        out[:, 0] = self.start
+        level = self.start
+        for t0, duration, depth in self.changes:
+            step = depth - level
+            tau = np.clip((t - t0) / duration, 0.0, 1.0)
+            inside = (t > t0) & (t < t0 + duration)
+            out[:, 0] += step * tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+            out[:, 1] += np.where(inside, step * 30.0 * tau**2 * (1.0 - tau) ** 2 / duration, 0.0)
+            out[:, 2] += np.where(
+                inside,
+                step * 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / (duration * duration),
+                0.0,
+            )
+            level = depth
+        return out
+
+
+# --------------------------------------------------------------------------------------------
+# 3-D references: a horizontal path for the horizontal controller plus a depth profile
+# --------------------------------------------------------------------------------------------
+
+
+class Helix(Reference):
+    """A circle at constant horizontal speed (:class:`Circle`), the depth changing by
+    ``descent_per_turn_m`` per turn: z' = descent speed / (2 pi radius), constant."""
+
+    def __init__(self, config: HelixConfig) -> None:
+        self.config = config
+        self._circle = Circle(
+            CircleConfig(
+                center=config.center,
+                radius=config.radius,
+                speed=config.speed,
+                direction=config.direction,
+                start_angle_deg=config.start_angle_deg,
+            )
+        )
+        rate = config.descent_per_turn_m * config.speed / (_TWO_PI * config.radius)
+        self.depth_profile = LinearDepth(config.start_depth_m, rate)
+
+    def _states(self, t: np.ndarray) -> np.ndarray:
+        return self._circle._states(t)
+
+
+class Lawnmower(Reference):
+    """Parallel legs joined by half-circle turns of radius spacing / 2 (a :class:`WaypointPath`
+    with corner radius spacing / 2, so each turn is two quarter circles), a depth per leg; the
+    depth changes during the turn between two legs (quintic in time)."""
+
+    def __init__(self, config: LawnmowerConfig) -> None:
+        self.config = config
+        heading = math.radians(config.heading_deg)
+        along = np.array([math.cos(heading), math.sin(heading)])
+        side = 1.0 if config.first_turn == "ccw" else -1.0
+        across = side * np.array([-math.sin(heading), math.cos(heading)])
+        points = []
+        begin = np.asarray(config.start, dtype=float)
+        for leg in range(config.legs):
+            end = begin + (1.0 if leg % 2 == 0 else -1.0) * config.leg_length * along
+            points += [begin, end]
+            begin = end + config.spacing * across
+        self._path = WaypointPath(
+            WaypointsConfig(
+                points=tuple((float(x), float(y)) for x, y in points),
+                speed=config.speed,
+                corner_radius=0.5 * config.spacing,
+            )
+        )
+        depths = config.depths_m * (config.legs if len(config.depths_m) == 1 else 1)
+        corners = self._path.corner_times
+        changes = [
+            (corners[2 * i, 0], corners[2 * i + 1, 1] - corners[2 * i, 0], depths[i + 1])
+            for i in range(config.legs - 1)
+            if depths[i + 1] != depths[i]
+        ]
+        self.depth_profile = DepthSchedule(depths[0], changes)
+
+    @property
+    def end_time(self) -> float | None:
+        return self._path.end_time
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        return self._path.breakpoints
+
+    def _states(self, t: np.ndarray) -> np.ndarray:
+        return self._path._states(t)
+
+
+class Waypoints3D(Reference):
+    """The horizontal :class:`WaypointPath` through the waypoints' [x, y]; the depth moves from
+    one waypoint's depth to the next's (quintic in time) between the times the path passes
+    them (the middle of each corner arc; the start and the end)."""
+
+    def __init__(self, config: Waypoints3DConfig) -> None:
+        self.config = config
+        self._path = WaypointPath(
+            WaypointsConfig(
+                points=tuple((x, y) for x, y, _ in config.points),
+                speed=config.speed,
+                corner_radius=config.corner_radius,
+            )
+        )
+        passing = np.concatenate(
+            ([0.0], self._path.corner_times.mean(axis=1), [self._path.end_time])
+        )
+        depths = [depth for _, _, depth in config.points]
+        changes = [
+            (passing[i], passing[i + 1] - passing[i], depths[i + 1])
+            for i in range(len(depths) - 1)
+            if depths[i + 1] != depths[i] and passing[i + 1] > passing[i]
+        ]
+        self.depth_profile = DepthSchedule(depths[0], changes)
+
+    @property
+    def end_time(self) -> float | None:
+        return self._path.end_time
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        return self._path.breakpoints
+
+    def _states(self, t: np.ndarray) -> np.ndarray:
+        return self._path._states(t)
 
 
 # --------------------------------------------------------------------------------------------
@@ -695,6 +1089,14 @@ def make_reference(config: ReferenceConfig, base_dir: Path | None = None) -> Ref
     ConfigError
         For a CSV track that cannot be read (see ``load_track_csv``).
     """
+    reference = _make_planar_or_3d(config, base_dir)
+    depth = getattr(config, "depth", None)  # a planar path's optional depth schedule
+    if depth is not None:
+        reference.depth_profile = DepthSchedule.from_config(depth)
+    return reference
+
+
+def _make_planar_or_3d(config: ReferenceConfig, base_dir: Path | None) -> Reference:
     match config:
         case PaperOvalConfig():
             return PaperOval(config)
@@ -712,4 +1114,10 @@ def make_reference(config: ReferenceConfig, base_dir: Path | None = None) -> Ref
                 path = Path(base_dir) / path
             times, points = load_track_csv(path)
             return SampledPath(times, points)
+        case HelixConfig():
+            return Helix(config)
+        case LawnmowerConfig():
+            return Lawnmower(config)
+        case Waypoints3DConfig():
+            return Waypoints3D(config)
     raise TypeError(f"make_reference: not a reference config: {type(config).__name__}")

@@ -1,5 +1,7 @@
-"""Reproduce the paper's section 4.1: every paper scenario x controller variant, plus the
-inertia-uncertainty sweep, into one folder of run folders, tables and figures."""
+"""Reproduce the paper's section 4: every paper scenario x controller variant, the
+inertia-uncertainty sweep, the depth step (4.3) and the 6-DOF validation (4.2: the same
+controller on the 6-DOF plant and on the 3-DOF plant, side by side), into one folder of run
+folders, tables and figures."""
 
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.depth import STEP_METRIC_KEYS
 from auvmpc.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
 from auvmpc.runner import fill_run_folder, simulate
-from auvmpc.scenario import load_scenario
+from auvmpc.scenario import ResolvedScenario, load_scenario, planar_twin
 from auvmpc.sim.log import SimLog
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
@@ -28,6 +30,10 @@ PAPER_VARIANTS = (
 )  # fmt: skip
 PAPER_SCENARIOS = ("paper-ideal", "paper-disturbed", "paper-obstacles")
 DEPTH_SCENARIOS = ("paper-depth-calm", "paper-depth-waves")  # section 4.3, the tank step
+# Section 4.2: each on the 6-DOF plant and, as its planar twin, on the 3-DOF plant, with the
+# scenario's own controller (the paper's) and the best horizontal one.
+SIX_DOF_SCENARIOS = ("paper-6dof",)
+SIX_DOF_VARIANTS = ("mpc", "ltv-mpc-offset-free")
 # Uncertainty level -1..1 maps to rigid-body yaw inertia -25..+25 % and added -35..+35 %.
 SWEEP_LEVELS = tuple(float(level) for level in np.linspace(-1.0, 1.0, 7))
 SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "ltv-mpc-offset-free", "baseline")
@@ -121,8 +127,16 @@ def _reproduce_into(
         fill_run_folder(result, out_dir / "runs" / name, figures=figures)
         mark_folder(out_dir / "runs" / name, OutputKind.RUN)
         depth_rows.append({"scenario": name, **result.metrics})
+    six_dof_rows = []
+    for name in SIX_DOF_SCENARIOS:
+        for label in SIX_DOF_VARIANTS:
+            if on_run is not None:
+                on_run(len(planned), len(planned), f"{name}--{label}")
+            six_dof_rows += _six_dof_pair(name, label, out_dir, figures)
     if on_run is not None:
         on_run(len(planned), len(planned), "done")
+    atomic_write_text(out_dir / "six_dof.json", json.dumps(six_dof_rows, indent=2))
+    atomic_write_text(out_dir / "six_dof.md", six_dof_markdown(six_dof_rows))
     atomic_write_text(out_dir / "depth.json", json.dumps(depth_rows, indent=2))
     atomic_write_text(out_dir / "depth.md", depth_markdown(depth_rows))
     atomic_write_text(out_dir / "summary.json", json.dumps(rows, indent=2))
@@ -179,6 +193,51 @@ def summary_markdown(rows: Sequence[dict]) -> str:
 def depth_markdown(rows: Sequence[dict]) -> str:
     keys = ("scenario", *STEP_METRIC_KEYS, "max_z_m", "thrust_limit_violations",
             "thrust_rate_violations", "solve_ms_median")  # fmt: skip
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(_cell(row[key]) for key in keys) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+SIX_DOF_KEYS = (
+    "rms_position_error_after_transient_m", "max_position_error_after_transient_m",
+    "rms_heading_error_after_transient_rad", "rms_yaw_rate_error_after_transient_rad_per_s",
+    "rms_surge_error_after_transient_m_per_s", "rms_sway_error_after_transient_m_per_s",
+    "depth_rms_error_after_transient_m", "max_abs_roll_rad", "max_abs_pitch_rad",
+    "thrust_limit_violations", "thrust_rate_violations", "verdict",
+)  # fmt: skip
+
+
+def _six_dof_pair(name: str, label: str, out_dir: Path, figures: bool) -> list[dict]:
+    """One 6-DOF scenario with one controller on the 6-DOF plant and on its planar twin."""
+    resolved = load_scenario(name, CONTROLLER_PRESETS[label])
+    twin = ResolvedScenario(planar_twin(resolved.given), resolved.base_dir)
+    rows = []
+    for plant, run in (("6-DOF", resolved), ("3-DOF", twin)):
+        result = simulate(run)
+        folder = out_dir / "runs" / f"{name}--{label}--{plant}"
+        fill_run_folder(result, folder, figures=figures)
+        mark_folder(folder, OutputKind.RUN)
+        row = {"scenario": name, "controller": label, "plant": plant}
+        row.update(velocity_errors(result.log, run.scenario.transient_s))
+        row.update({key: result.metrics.get(key) for key in SIX_DOF_KEYS if key not in row})
+        rows.append(row)
+    return rows
+
+
+def velocity_errors(log: SimLog, transient_s: float) -> dict[str, float]:
+    """RMS yaw-rate, surge and sway errors after the transient (the paper's Figure 6)."""
+    steady = log.t >= transient_s - 1e-9
+    error = log.state[steady, 3:6] - log.reference[steady, 3:6]
+    rms = np.sqrt(np.mean(error**2, axis=0))
+    return {
+        "rms_surge_error_after_transient_m_per_s": float(rms[0]),
+        "rms_sway_error_after_transient_m_per_s": float(rms[1]),
+        "rms_yaw_rate_error_after_transient_rad_per_s": float(rms[2]),
+    }
+
+
+def six_dof_markdown(rows: Sequence[dict]) -> str:
+    keys = ("scenario", "controller", "plant", *SIX_DOF_KEYS)
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     lines += ["| " + " | ".join(_cell(row[key]) for key in keys) + " |" for row in rows]
     return "\n".join(lines) + "\n"

@@ -25,18 +25,22 @@ from auvmpc.scenario import (
     ControllerType,
     ResolvedDepthScenario,
     ResolvedScenario,
+    ResolvedSixDofScenario,
     Scenario,
+    SixDofScenario,
     scenario_to_dict,
 )
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.loop import closed_loop
-from auvmpc.sim.metrics import compute_metrics
+from auvmpc.sim.metrics import compute_metrics, compute_six_dof_metrics
+from auvmpc.sim.six_dof_loop import SixDofLog
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "DepthRunResult",
     "RunFailed",
     "RunResult",
+    "SixDofRunResult",
     "atomic_write_text",
     "fill_run_folder",
     "make_controller",
@@ -91,6 +95,17 @@ class RunResult(_Finished):
 
     def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
         draw_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
+
+
+@dataclass
+class SixDofRunResult(RunResult):
+    """A finished run on the 6-DOF plant (``kind: six-dof``)."""
+
+    resolved: ResolvedSixDofScenario
+    log: SixDofLog
+
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        draw_six_dof_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
 
 
 @dataclass
@@ -170,6 +185,8 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
             provenance=stopwatch.record(libraries),
             warnings=warnings,
         )
+    if isinstance(resolved, ResolvedSixDofScenario):
+        return _simulate_six_dof(resolved, step, stopwatch, warnings, libraries)
     scenario = resolved.scenario
     disturbance_seed, sensor_seed = np.random.SeedSequence(scenario.seed).spawn(2)
     sample_time = scenario.controller.sample_time
@@ -201,6 +218,64 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
     metrics = compute_metrics(log, resolved.model, scenario.transient_s)
     return RunResult(
         resolved, log, metrics, provenance=stopwatch.record(libraries), warnings=warnings
+    )
+
+
+def _simulate_six_dof(
+    resolved: ResolvedSixDofScenario, step, stopwatch: Stopwatch, warnings, libraries
+) -> SixDofRunResult:
+    """The horizontal controller and the depth MPC on the 6-DOF plant (auvmpc.sim.six_dof_loop).
+
+    Random streams: children 0 and 1 of the scenario seed are the current's and the horizontal
+    sensor's, as in a horizontal scenario (so its planar twin sees the same draws); child 2 is
+    the depth sensor's."""
+    from auvmpc.controllers.depth_mpc import DepthMpc
+    from auvmpc.depth import resolve_heave
+    from auvmpc.environment.currents import WaterCurrent
+    from auvmpc.sim.six_dof_loop import closed_loop_six_dof
+
+    scenario = resolved.scenario
+    current_seed, sensor_seed, depth_seed = np.random.SeedSequence(scenario.seed).spawn(3)
+    sample_time = scenario.controller.sample_time
+    controller = make_controller(scenario, resolved.model)
+    warnings = [*warnings, *getattr(controller, "build_warnings", ())]
+    depth_controller = DepthMpc(
+        resolve_heave(resolved.model, {}), scenario.depth_controller, scenario.water_depth_m
+    )
+    x, y, psi, u, v, r = scenario.initial_state
+    initial = np.array([x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r], float)
+    water = scenario.disturbance.water_current
+    initial_thrust = scenario.initial_thrust
+    sensing = scenario.sensing
+    with threadpool_limits(limits=1, user_api="blas"):
+        log = closed_loop_six_dof(
+            resolved.plant,
+            controller,
+            depth_controller,
+            resolved.reference,
+            duration=scenario.duration,
+            initial_state=initial,
+            current=None
+            if water is None
+            else WaterCurrent(water, sample_time, np.random.default_rng(current_seed)),
+            sensor=SensorNoise(sensing, np.random.default_rng(sensor_seed)),
+            depth_noise=(sensing.depth_std_m, sensing.depth_rate_std_m_per_s),
+            depth_rng=np.random.default_rng(depth_seed),
+            depth_preview=scenario.depth_controller.preview,
+            max_plant_step=scenario.plant.max_step,
+            initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
+            obstacles=scenario.obstacles,
+            vehicle_radius=scenario.controller.vehicle_radius,
+            on_step=step,
+        )
+    _check_finite(log.full_state, scenario)
+    metrics = compute_six_dof_metrics(log, resolved.model, scenario.transient_s)
+    return SixDofRunResult(
+        resolved,
+        log,
+        metrics,
+        provenance=stopwatch.record((*libraries, str(scenario.depth_controller.qp_solver))),
+        warnings=warnings,
     )
 
 
@@ -283,6 +358,24 @@ def draw_figures(
     save_figures(figures, folder, dpi=dpi, fmt=fmt)
 
 
+def draw_six_dof_figures(
+    log: SixDofLog,
+    scenario: SixDofScenario,
+    model: VehicleParams,
+    folder: Path,
+    fmt: str = "png",
+    dpi: int = 120,
+) -> None:
+    from auvmpc.plots import run_figures, run_title, save_figures, six_dof_figures
+
+    title = run_title(scenario, model.name)
+    horizontal = log.horizontal()
+    radius = scenario.controller.vehicle_radius
+    figures = run_figures(horizontal, scenario.obstacles, radius, model, title)
+    figures.update(six_dof_figures(log, model, title))
+    save_figures(figures, folder, dpi=dpi, fmt=fmt)
+
+
 def draw_depth_figures(
     log: DepthLog, scenario: DepthScenario, heave, folder: Path, fmt: str = "png", dpi: int = 120
 ) -> None:
@@ -302,6 +395,14 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
         heave = VehicleParams.model_validate(info["plant"]).heave
         draw_depth_figures(log, scenario, heave, run_dir, fmt, dpi)
         return
+    if info["scenario"].get("kind") == "six-dof":
+        scenario = SixDofScenario.model_validate(info["scenario"])
+        model = VehicleParams.model_validate(info["model"])
+        six_log = SixDofLog.read_csv_six_dof(
+            run_dir / "log.csv", model.n_thrusters, _initial_thrust(info, model)
+        )
+        draw_six_dof_figures(six_log, scenario, model, run_dir, fmt, dpi)
+        return
     info, log = read_run(run_dir)
     draw_figures(
         log,
@@ -313,12 +414,23 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     )
 
 
+def _initial_thrust(info: dict[str, Any], model: VehicleParams) -> np.ndarray:
+    """F(-1) of every 6-DOF thruster of a saved 6-DOF run (vertical ones start at 0)."""
+    six = model.six_dof
+    total = np.zeros(0 if six is None else six.n_thrusters)
+    given = info["scenario"].get("initial_thrust")
+    if given is not None:
+        total[: len(given)] = given
+    return total
+
+
 def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:
     """run.json contents and the log of a saved run folder."""
     run_dir = Path(run_dir)
     info = json.loads((run_dir / "run.json").read_text())
     log = SimLog.read_csv(run_dir / "log.csv")
     initial = info["scenario"].get("initial_thrust")
-    if initial is not None:
-        log.initial_thrust = np.array(initial, dtype=float)
+    if initial is not None:  # a 6-DOF run's vertical thrusters start at 0
+        log.initial_thrust = np.zeros(log.n_thrusters)
+        log.initial_thrust[: len(initial)] = initial
     return info, log

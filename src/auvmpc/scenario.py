@@ -7,11 +7,13 @@ errors that name the field (:class:`auvmpc.errors.ConfigError`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 import yaml
 from pydantic import Field, ValidationError, model_validator
 
@@ -24,11 +26,13 @@ from auvmpc.config import (
     read_yaml_mapping,
 )
 from auvmpc.controllers.config import ControllerConfig, ControllerType
-from auvmpc.depth import DepthScenario, resolve_heave
+from auvmpc.depth import DepthControllerConfig, DepthScenario, resolve_heave
+from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
-from auvmpc.references import ReferenceConfig
+from auvmpc.models.six_dof import plant_step_length
+from auvmpc.references import Reference, ReferenceConfig, make_reference
 from auvmpc.vehicle import (
     VehicleParams,
     check_plant_scale,
@@ -41,10 +45,15 @@ __all__ = [
     "ControllerConfig",
     "ControllerType",
     "PlantConfig",
+    "ResolvedSixDofScenario",
     "Scenario",
+    "SixDofDisturbanceConfig",
+    "SixDofScenario",
+    "SixDofSensingConfig",
     "builtin_scenarios",
     "load_scenario",
     "apply_override",
+    "planar_twin",
 ]
 
 
@@ -71,7 +80,9 @@ class Scenario(StrictModel):
     """One closed-loop experiment, fully specified."""
 
     kind: Literal["horizontal"] = Field(
-        default="horizontal", description="horizontal-plane tracking ('depth': auvmpc.depth)"
+        default="horizontal",
+        description="horizontal-plane tracking ('depth': auvmpc.depth; 'six-dof': the 6-DOF "
+        "plant, auvmpc.sim.six_dof_loop)",
     )
     name: str = Field(description="identifier")
     description: str = Field(default="", description="one line for humans")
@@ -109,6 +120,88 @@ def check_whole_samples(duration: float, sample_time: float, error=ConfigError) 
     steps = duration / sample_time
     if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
         raise error("duration", duration, f"not a whole number of samples of {sample_time} s")
+
+
+class SixDofDisturbanceConfig(StrictModel):
+    """What moves the 6-DOF vehicle that no controller is told about."""
+
+    water_current: WaterCurrentConfig | None = Field(
+        default=None,
+        description="current as water velocity (world NED), acting through the velocity "
+        "relative to the water; a depth profile and a vertical part are allowed here",
+    )
+
+
+class SixDofSensingConfig(SensorNoiseConfig):
+    """Zero-mean Gaussian noise on what the controllers see (the log keeps the truth): the
+    horizontal state as in horizontal scenarios, plus the depth and its rate."""
+
+    depth_std_m: NonNegative = Field(default=0.0, description="depth noise (m)")
+    depth_rate_std_m_per_s: NonNegative = Field(default=0.0, description="depth-rate noise (m/s)")
+
+
+class SixDofScenario(Scenario):
+    """The paper's architecture on the 6-DOF plant (paper section 4.2): the horizontal
+    controller (any ``controller.type``) on [x, y, psi, u, v, r] of the measured 6-DOF state,
+    the depth controller on depth and its rate, roll and pitch left to passive stability.
+    Every field of a horizontal scenario means the same here; ``plant.scale`` is refused (the
+    plant is the vehicle's ``six_dof`` section as given)."""
+
+    kind: Literal["six-dof"] = Field(  # type: ignore[assignment]
+        description="selects this schema: the 6-DOF plant (auvmpc.sim.six_dof_loop)"
+    )
+    disturbance: SixDofDisturbanceConfig = Field(  # type: ignore[assignment]
+        default_factory=SixDofDisturbanceConfig
+    )
+    sensing: SixDofSensingConfig = Field(default_factory=SixDofSensingConfig)  # type: ignore[assignment]
+    depth_controller: DepthControllerConfig = Field(
+        default_factory=DepthControllerConfig,
+        description="the depth MPC (auvmpc.depth); sample_time is the horizontal controller's "
+        "and preview true unless given",
+    )
+    water_depth_m: Annotated[float, Field(gt=0)] = Field(
+        default=100.0, description="depth of the bottom below the surface (m)"
+    )
+    initial_depth_m: float | None = Field(
+        default=None,
+        description="depth below the surface at t = 0 (m); omitted: the reference's; the "
+        "vehicle starts level (phi = theta = 0) with w = p = q = 0",
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _depth_controller_defaults(cls, data: Any) -> Any:
+        """What a depth_controller mapping leaves out: the horizontal controller's sample time
+        and preview (a planned 3-D path is known ahead, as the horizontal reference is)."""
+        if not isinstance(data, dict):
+            return data
+        depth, controller = data.get("depth_controller", {}), data.get("controller", {})
+        if not isinstance(depth, dict) or not isinstance(controller, dict):
+            return data  # the field validation names what is wrong
+        # An omitted horizontal sample time is chosen for the vehicle when the scenario is
+        # resolved (ResolvedSixDofScenario gives the depth controller the same).
+        shared = {} if controller.get("sample_time") is None else {
+            "sample_time": controller["sample_time"]
+        }  # fmt: skip
+        return {**data, "depth_controller": {**shared, "preview": True, **depth}}
+
+    @model_validator(mode="after")
+    def _one_sample_time(self) -> SixDofScenario:
+        if self.controller.sample_time is not None:
+            check_one_sample_time(self.depth_controller.sample_time,
+                                  self.controller.sample_time, FieldError)  # fmt: skip
+        return self
+
+
+def check_one_sample_time(depth: float, horizontal: float, error=ConfigError) -> None:
+    """Raise ``error`` unless the depth controller samples with the horizontal one."""
+    if not math.isclose(depth, horizontal):
+        raise error(
+            "depth_controller.sample_time",
+            depth,
+            f"must equal controller.sample_time ({horizontal} s): the log holds one command "
+            "per thruster per sample",
+        )
 
 
 class ResolvedScenario:
@@ -149,6 +242,100 @@ class ResolvedScenario:
                 )
 
 
+class ResolvedSixDofScenario(ResolvedScenario):
+    """A 6-DOF scenario, its vehicle (which must have ``six_dof`` and ``heave`` sections and
+    vertical thrusters after the horizontal ones) and its 3-D reference."""
+
+    scenario: SixDofScenario
+
+    def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
+        if scenario.plant.scale:
+            raise ConfigError(
+                "plant.scale",
+                dict(scenario.plant.scale),
+                "not supported on the 6-DOF plant (it simulates the vehicle's six_dof section "
+                "as given; give a vehicle file with other values instead)",
+            )
+        # The vehicle's fitness for the 6-DOF plant first: it decides whether anything else
+        # about the scenario (e.g. a weight per thruster) can matter.
+        vehicle = _load_vehicle_relative(scenario.vehicle, base_dir)
+        if vehicle.six_dof is None:
+            raise ConfigError(
+                "vehicle.six_dof",
+                vehicle.name,
+                "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
+            )
+        super().__init__(scenario, base_dir)
+        model = self.model
+        six = model.six_dof
+        if model.heave is None:
+            raise ConfigError(
+                "vehicle.heave", model.name, "missing: the depth controller needs a heave section"
+            )
+        n = model.n_thrusters
+        vertical = np.asarray(six.T)[2, n:]
+        if vertical.size == 0 or not np.any(np.abs(vertical) > 1e-9):
+            raise ConfigError(
+                "vehicle.six_dof.thrusters",
+                six.n_thrusters,
+                f"no vertical thrusters after the {n} horizontal ones: the depth reference "
+                "needs thrusters with a heave (z) component",
+            )
+        self.reference: Reference = make_reference(scenario.reference, base_dir)
+        if not self.reference.has_depth:
+            raise ConfigError(
+                "reference.depth",
+                None,
+                "the 6-DOF plant needs a depth reference: give reference.depth or a 3-D type "
+                "(helix, lawnmower, waypoints-3d)",
+            )
+        given = self.given
+        initial_depth = given.initial_depth_m
+        if initial_depth is None:
+            initial_depth = float(self.reference.depths([0.0])[0, 0])
+        plant_step = given.plant.max_step or plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
+        sample_time = self.scenario.controller.sample_time  # chosen for the vehicle if omitted
+        depth_controller = given.depth_controller
+        if "sample_time" in depth_controller.model_fields_set:
+            check_one_sample_time(depth_controller.sample_time, sample_time)
+        else:
+            depth_controller = depth_controller.model_copy(update={"sample_time": sample_time})
+        self.scenario = self.scenario.model_copy(
+            update={
+                "depth_controller": depth_controller,
+                "initial_depth_m": initial_depth,
+                "plant": self.scenario.plant.model_copy(update={"max_step": plant_step}),
+            }
+        )
+
+
+def planar_twin(scenario: SixDofScenario) -> Scenario:
+    """The same experiment on the 3-DOF plant: same vehicle, horizontal reference, controller,
+    horizontal noise, seed and current (its horizontal part; the random streams line up, so
+    both plants see the same current and the same horizontal noise draws). What only the
+    6-DOF plant has (depth, its controller and sensor) is left out. A current with a depth
+    profile has no planar twin."""
+    water = scenario.disturbance.water_current
+    if water is not None and water.depth_profile:
+        raise ConfigError(
+            "disturbance.water_current.depth_profile",
+            [list(point) for point in water.depth_profile],
+            "a current varying with depth has no planar (3-DOF) twin",
+        )
+    data = scenario.model_dump(
+        mode="json",
+        exclude={"kind", "depth_controller", "water_depth_m", "initial_depth_m", "disturbance"},
+    )
+    data["sensing"] = {"std": list(scenario.sensing.std)}
+    data["plant"] = {"scale": {}}
+    if water is not None:
+        velocity = [*water.velocity_m_per_s[:2], 0.0]
+        current = water.model_copy(update={"velocity_m_per_s": tuple(velocity)})
+        data["disturbance"] = {"water_current": current.model_dump(mode="json")}
+    data["name"] = f"{scenario.name}-planar"
+    return validate_scenario(data)
+
+
 def _load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> VehicleParams:
     """A vehicle named by a scenario; a file path is relative to the scenario's folder."""
     if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
@@ -181,8 +368,9 @@ def load_scenario(
 ) -> ResolvedScenario | ResolvedDepthScenario:
     """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides.
 
-    A file with ``kind: depth`` is a depth experiment (auvmpc.depth); any other is a
-    horizontal-plane scenario."""
+    A file with ``kind: depth`` is a depth experiment (auvmpc.depth), one with
+    ``kind: six-dof`` runs on the 6-DOF plant (:class:`ResolvedSixDofScenario`, a
+    :class:`ResolvedScenario`); any other is a horizontal-plane scenario."""
     text_source = str(source)
     if text_source in builtin_scenarios():
         text = (resources.files("auvmpc.presets") / "scenarios" / f"{text_source}.yaml").read_text()
@@ -202,6 +390,11 @@ def load_scenario(
     if data.get("kind") == "depth":
         try:
             return ResolvedDepthScenario(DepthScenario.model_validate(data), base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
+    if data.get("kind") == "six-dof":
+        try:
+            return ResolvedSixDofScenario(SixDofScenario.model_validate(data), base_dir)
         except ValidationError as error:
             raise format_validation_error(error) from None
     return ResolvedScenario(validate_scenario(data), base_dir)

@@ -32,19 +32,23 @@ class SchemaKind(StrEnum):
 def json_schema(kind: SchemaKind | str) -> dict[str, Any]:
     """JSON Schema (draft 2020-12) of a scenario, vehicle or campaign file.
 
-    A scenario file is either horizontal (``kind: horizontal``, the default) or a depth
-    experiment (``kind: depth``), so the scenario schema is the union of both models.
+    A scenario file is horizontal (``kind: horizontal``, the default), a depth experiment
+    (``kind: depth``) or runs on the 6-DOF plant (``kind: six-dof``), so the scenario schema
+    is the union of the three models.
     Checks that need code (e.g. a duration in whole samples, a controllable thruster
     layout) are not expressible here; the loader still applies them.
     """
     kind = SchemaKind(kind)
     if kind is SchemaKind.SCENARIO:
         from auvmpc.depth import DepthScenario
-        from auvmpc.scenario import Scenario
+        from auvmpc.scenario import Scenario, SixDofScenario
 
-        schema = TypeAdapter(Scenario | DepthScenario).json_schema()
+        schema = TypeAdapter(Scenario | DepthScenario | SixDofScenario).json_schema()
         schema["title"] = "auvmpc scenario"
-        schema["description"] = "A horizontal-plane scenario or a depth experiment (kind: depth)."
+        schema["description"] = (
+            "A horizontal-plane scenario, a depth experiment (kind: depth) or a run on the "
+            "6-DOF plant (kind: six-dof)."
+        )
     elif kind is SchemaKind.VEHICLE:
         from auvmpc.vehicle import VehicleParams
 
@@ -61,6 +65,7 @@ def json_schema(kind: SchemaKind | str) -> dict[str, Any]:
 _SECTIONS = (
     (SchemaKind.SCENARIO, "Scenario files", "Scenario"),
     (SchemaKind.SCENARIO, "Depth scenario files (`kind: depth`)", "DepthScenario"),
+    (SchemaKind.SCENARIO, "6-DOF scenario files (`kind: six-dof`)", "SixDofScenario"),
     (SchemaKind.VEHICLE, "Vehicle files", None),
     (SchemaKind.CAMPAIGN, "Campaign files", None),
 )
@@ -142,11 +147,11 @@ def _model_classes() -> dict[str, type[BaseModel]]:
     """Every pydantic model reachable from the file models, by class name (= schema name)."""
     from auvmpc.campaign.spec import CampaignSpec
     from auvmpc.depth import DepthScenario
-    from auvmpc.scenario import Scenario
+    from auvmpc.scenario import Scenario, SixDofScenario
     from auvmpc.vehicle import VehicleParams
 
     found: dict[str, type[BaseModel]] = {}
-    queue: list[Any] = [Scenario, DepthScenario, VehicleParams, CampaignSpec]
+    queue: list[Any] = [Scenario, DepthScenario, SixDofScenario, VehicleParams, CampaignSpec]
     while queue:
         kind = queue.pop()
         if isinstance(kind, type) and issubclass(kind, BaseModel):

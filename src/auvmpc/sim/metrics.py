@@ -11,7 +11,13 @@ from auvmpc.sim.log import SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 from auvmpc.vehicle import VehicleParams
 
-__all__ = ["compute_metrics", "position_error", "heading_error", "LIMIT_TOLERANCE_N"]
+__all__ = [
+    "compute_metrics",
+    "compute_six_dof_metrics",
+    "position_error",
+    "heading_error",
+    "LIMIT_TOLERANCE_N",
+]
 
 # Slack for float round-off when checking hard limits: far below any physical meaning.
 LIMIT_TOLERANCE_N = 1e-9
@@ -129,3 +135,75 @@ def _rms(values: np.ndarray) -> float | None:
 
 def _percentile(values: np.ndarray, q: float) -> float:
     return float(np.percentile(values, q)) if len(values) else 0.0
+
+
+# A 6-DOF run whose depth stays this far from the reference after the transient, or whose roll
+# or pitch passes this angle, is at best degraded (the horizontal verdict cannot see either).
+DEGRADED_DEPTH_ERROR_M = 0.5
+DEGRADED_TILT_RAD = math.radians(30.0)
+
+
+def compute_six_dof_metrics(
+    log, limits: VehicleParams, transient_s: float = 20.0
+) -> dict[str, float | int | str | None]:
+    """:func:`compute_metrics` of the horizontal part, then every thruster's limits (vertical
+    ones against the ``heave`` section's), depth, roll and pitch.
+
+    Parameters
+    ----------
+    log : auvmpc.sim.six_dof_loop.SixDofLog
+    limits : VehicleParams
+        The nominal vehicle, with ``six_dof`` and ``heave`` sections.
+    """
+    from auvmpc.sim.six_dof_loop import ThrustMapping
+
+    metrics = compute_metrics(log.horizontal(), limits, transient_s)
+    mapping = ThrustMapping(limits, log.sample_time)
+    increments = thrust_increments(log)
+    force = (log.thrust < mapping.lower - LIMIT_TOLERANCE_N) | (
+        log.thrust > mapping.upper + LIMIT_TOLERANCE_N
+    )
+    rate = np.abs(increments) > mapping.max_step + LIMIT_TOLERANCE_N
+    steady = log.t >= transient_s - 1e-9
+    depth_error = log.full_state[:, 2] - log.depth_reference[:, 0]
+    roll, pitch = np.abs(log.full_state[:, 3]), np.abs(log.full_state[:, 4])
+    metrics.update(
+        {
+            "thrust_limit_violations": int(force.sum()),
+            "thrust_rate_violations": int(rate.sum()),
+            "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
+            "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
+            if log.steps
+            else 0.0,
+            "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+            "saturated_thrust_commands": int(log.saturated.sum()),
+            "rms_depth_error_m": _rms(depth_error),
+            "max_depth_error_m": float(np.abs(depth_error).max()),
+            "depth_rms_error_after_transient_m": _rms(depth_error[steady]),
+            "max_depth_error_after_transient_m": float(np.abs(depth_error[steady]).max())
+            if steady.any()
+            else None,
+            "max_abs_roll_rad": float(roll.max()),
+            "max_abs_pitch_rad": float(pitch.max()),
+            "depth_solve_ms_median": _percentile(log.depth_solve_ms, 50),
+            "depth_solve_ms_max": float(log.depth_solve_ms.max()) if log.steps else 0.0,
+            "depth_fallback_steps": sum(s == ControlStatus.FALLBACK for s in log.depth_status),
+        }
+    )
+    trouble = []
+    if metrics["thrust_limit_violations"] or metrics["thrust_rate_violations"]:
+        trouble.append(
+            f"thrust limits violated ({metrics['thrust_limit_violations']} force, "
+            f"{metrics['thrust_rate_violations']} rate)"
+        )
+    depth_after = metrics["max_depth_error_after_transient_m"]
+    if depth_after is not None and depth_after > DEGRADED_DEPTH_ERROR_M:
+        trouble.append(f"depth error {depth_after:.3g} m after the transient")
+    tilt = max(metrics["max_abs_roll_rad"], metrics["max_abs_pitch_rad"])
+    if tilt > DEGRADED_TILT_RAD:
+        trouble.append(f"tilted {math.degrees(tilt):.0f} deg")
+    if trouble and metrics["verdict"] == "ok":
+        metrics["verdict"], metrics["verdict_reason"] = "degraded", "; ".join(trouble)
+    elif trouble:
+        metrics["verdict_reason"] = "; ".join([str(metrics["verdict_reason"]), *trouble])
+    return metrics
