@@ -820,7 +820,24 @@ class Helix(Reference):
         return self._circle._states(t)
 
 
-class Lawnmower(Reference):
+class _AlongWaypoints(Reference):
+    """A 3-D reference whose horizontal part is a :class:`WaypointPath` (``_path``)."""
+
+    _path: WaypointPath
+
+    @property
+    def end_time(self) -> float | None:
+        return self._path.end_time
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        return self._path.breakpoints
+
+    def _states(self, t: np.ndarray) -> np.ndarray:
+        return self._path._states(t)
+
+
+class Lawnmower(_AlongWaypoints):
     """Parallel legs joined by half-circle turns of radius spacing / 2 (a :class:`WaypointPath`
     with corner radius spacing / 2, so each turn is two quarter circles), a depth per leg; the
     depth changes during the turn between two legs (quintic in time)."""
@@ -853,19 +870,8 @@ class Lawnmower(Reference):
         ]
         self.depth_profile = DepthSchedule(depths[0], changes)
 
-    @property
-    def end_time(self) -> float | None:
-        return self._path.end_time
 
-    @property
-    def breakpoints(self) -> np.ndarray:
-        return self._path.breakpoints
-
-    def _states(self, t: np.ndarray) -> np.ndarray:
-        return self._path._states(t)
-
-
-class Waypoints3D(Reference):
+class Waypoints3D(_AlongWaypoints):
     """The horizontal :class:`WaypointPath` through the waypoints' [x, y]; the depth moves from
     one waypoint's depth to the next's (quintic in time) between the times the path passes
     them (the middle of each corner arc; the start and the end)."""
@@ -889,17 +895,6 @@ class Waypoints3D(Reference):
             if depths[i + 1] != depths[i] and passing[i + 1] > passing[i]
         ]
         self.depth_profile = DepthSchedule(depths[0], changes)
-
-    @property
-    def end_time(self) -> float | None:
-        return self._path.end_time
-
-    @property
-    def breakpoints(self) -> np.ndarray:
-        return self._path.breakpoints
-
-    def _states(self, t: np.ndarray) -> np.ndarray:
-        return self._path._states(t)
 
 
 # --------------------------------------------------------------------------------------------

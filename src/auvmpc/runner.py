@@ -105,7 +105,7 @@ class SixDofRunResult(RunResult):
     log: SixDofLog
 
     def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
-        draw_six_dof_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
+        draw_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
 
 
 @dataclass
@@ -350,29 +350,16 @@ def draw_figures(
     fmt: str = "png",
     dpi: int = 120,
 ) -> None:
-    from auvmpc.plots import run_figures, run_title, save_figures
+    """The run's figures; a 6-DOF run's add the 3-D, error and depth/attitude ones."""
+    from auvmpc.plots import run_figures, run_title, save_figures, six_dof_figures
 
     title = run_title(scenario, limits.name)
     radius = scenario.controller.vehicle_radius
-    figures = run_figures(log, scenario.obstacles, radius, limits, title)
-    save_figures(figures, folder, dpi=dpi, fmt=fmt)
-
-
-def draw_six_dof_figures(
-    log: SixDofLog,
-    scenario: SixDofScenario,
-    model: VehicleParams,
-    folder: Path,
-    fmt: str = "png",
-    dpi: int = 120,
-) -> None:
-    from auvmpc.plots import run_figures, run_title, save_figures, six_dof_figures
-
-    title = run_title(scenario, model.name)
-    horizontal = log.horizontal()
-    radius = scenario.controller.vehicle_radius
-    figures = run_figures(horizontal, scenario.obstacles, radius, model, title)
-    figures.update(six_dof_figures(log, model, title))
+    six_dof = isinstance(log, SixDofLog)
+    horizontal = log.horizontal() if six_dof else log
+    figures = run_figures(horizontal, scenario.obstacles, radius, limits, title)
+    if six_dof:
+        figures.update(six_dof_figures(log, limits, title))
     save_figures(figures, folder, dpi=dpi, fmt=fmt)
 
 
@@ -401,7 +388,7 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
         six_log = SixDofLog.read_csv_six_dof(
             run_dir / "log.csv", model.n_thrusters, _initial_thrust(info, model)
         )
-        draw_six_dof_figures(six_log, scenario, model, run_dir, fmt, dpi)
+        draw_figures(six_log, scenario, model, run_dir, fmt, dpi)
         return
     info, log = read_run(run_dir)
     draw_figures(

@@ -23,7 +23,7 @@ from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
 
-__all__ = ["CurrentVariationConfig", "WaterCurrent", "WaterCurrentConfig"]
+__all__ = ["CurrentVariationConfig", "WaterCurrent", "WaterCurrentConfig", "gauss_markov_step"]
 
 
 class CurrentVariationConfig(StrictModel):
@@ -62,6 +62,16 @@ class WaterCurrentConfig(StrictModel):
         return points
 
 
+def gauss_markov_step(
+    value: np.ndarray, std: float, time_constant: float, dt: float, rng: np.random.Generator
+) -> np.ndarray:
+    """A first-order Gauss-Markov process with stationary ``std`` moved on by ``dt``: its
+    exact discretisation, so the statistics do not depend on the step."""
+    decay = math.exp(-dt / time_constant)
+    drive = std * math.sqrt(1.0 - decay * decay)
+    return decay * value + drive * rng.normal(size=np.shape(value))
+
+
 class WaterCurrent:
     """The current of a :class:`WaterCurrentConfig` as the plant sees it (module docstring)."""
 
@@ -83,9 +93,10 @@ class WaterCurrent:
         variation = self.config.variation
         if variation is None or variation.std_m_per_s == 0:
             return
-        decay = math.exp(-self.sample_time / variation.time_constant_s)
-        drive = variation.std_m_per_s * math.sqrt(1.0 - decay * decay)
-        self._variation[:2] = decay * self._variation[:2] + drive * self._rng.normal(size=2)
+        self._variation[:2] = gauss_markov_step(
+            self._variation[:2], variation.std_m_per_s, variation.time_constant_s,
+            self.sample_time, self._rng,
+        )  # fmt: skip
 
     def profile(self, depth_m: float) -> float:
         """The depth factor (1 without a profile)."""

@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
-from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig
+from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig, gauss_markov_step
 
 __all__ = [
     "DisturbanceConfig",
@@ -125,9 +125,10 @@ class WorldDisturbance:
         variation = self.config.current_variation
         if variation is None or variation.std_N == 0:
             return
-        decay = math.exp(-self.sample_time / variation.time_constant_s)
-        drive = variation.std_N * math.sqrt(1.0 - decay * decay)
-        self._variation[:2] = decay * self._variation[:2] + drive * self._rng.normal(size=2)
+        self._variation[:2] = gauss_markov_step(
+            self._variation[:2], variation.std_N, variation.time_constant_s,
+            self.sample_time, self._rng,
+        )  # fmt: skip
 
     def water_velocity_world(self, t: float) -> np.ndarray | None:
         """Horizontal water velocity ``[V_x, V_y]`` (m/s) at time t, or None without one."""

@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from auvmpc.controllers.base import Controller, Observation
+from auvmpc.controllers.base import Controller, ControlResult, Observation
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.references import Reference
@@ -16,7 +16,21 @@ from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
 from auvmpc.sim.plant import PlantStepper, plant_step
 from auvmpc.vehicle import VehicleParams
 
-__all__ = ["closed_loop", "plant_step"]
+__all__ = ["closed_loop", "plant_step", "timed_command"]
+
+
+def timed_command(
+    controller: Controller, observation: Observation, size: int, who: str = "controller"
+) -> tuple[ControlResult, np.ndarray, float]:
+    """``(result, thrust, solve ms)`` of one controller call; an invalid command (wrong size
+    or not finite) raises RuntimeError naming ``who`` and the sample."""
+    started = time.perf_counter()
+    result = controller.compute(observation)
+    solve_ms = 1e3 * (time.perf_counter() - started)
+    thrust = np.asarray(result.thrust, dtype=float)
+    if thrust.shape != (size,) or not np.all(np.isfinite(thrust)):
+        raise RuntimeError(f"{who} returned an invalid command at k={observation.k}: {thrust!r}")
+    return result, thrust, solve_ms
 
 
 def closed_loop(
@@ -70,12 +84,7 @@ def closed_loop(
             reference=reference.states(t + preview_offsets),
             obstacles=visible_obstacles(obstacles, t),
         )
-        started = time.perf_counter()
-        result = controller.compute(observation)
-        log.solve_ms[k] = 1e3 * (time.perf_counter() - started)
-        thrust = np.asarray(result.thrust, dtype=float)
-        if thrust.shape != (n_thrusters,) or not np.all(np.isfinite(thrust)):
-            raise RuntimeError(f"controller returned an invalid command at k={k}: {thrust!r}")
+        result, thrust, log.solve_ms[k] = timed_command(controller, observation, n_thrusters)
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]

@@ -23,7 +23,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +36,7 @@ from auvmpc.environment.obstacles import clearance, visible_obstacles
 from auvmpc.models.six_dof import check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
+from auvmpc.sim.loop import timed_command
 from auvmpc.vehicle import VehicleParams
 
 __all__ = [
@@ -281,12 +281,7 @@ def closed_loop_six_dof(
             reference=reference.states(t + preview),
             obstacles=visible_obstacles(obstacles, t),
         )
-        started = time.perf_counter()
-        result = controller.compute(observation)
-        log.solve_ms[k] = 1e3 * (time.perf_counter() - started)
-        horizontal = np.asarray(result.thrust, dtype=float)
-        if horizontal.shape != (n,) or not np.all(np.isfinite(horizontal)):
-            raise RuntimeError(f"controller returned an invalid command at k={k}: {horizontal!r}")
+        result, horizontal, log.solve_ms[k] = timed_command(controller, observation, n)
 
         measured_depth = state[2] + depth_std * depth_rng.standard_normal()
         measured_rate = depth_rate(state) + rate_std * depth_rng.standard_normal()
@@ -298,12 +293,9 @@ def closed_loop_six_dof(
             state=np.array([-measured_depth, -measured_rate]),
             reference=np.column_stack([-target[:, 0], -target[:, 1]]),
         )
-        started = time.perf_counter()
-        depth_result = depth_controller.compute(depth_observation)
-        log.depth_solve_ms[k] = 1e3 * (time.perf_counter() - started)
-        heave = np.asarray(depth_result.thrust, dtype=float)
-        if heave.shape != (heave_count,) or not np.all(np.isfinite(heave)):
-            raise RuntimeError(f"depth controller returned an invalid command at k={k}: {heave!r}")
+        depth_result, heave, log.depth_solve_ms[k] = timed_command(
+            depth_controller, depth_observation, heave_count, "depth controller"
+        )
 
         demand = np.concatenate([horizontal, mapping.vertical(float(heave.sum()))])
         thrust, log.saturated[k] = mapping.apply(demand, previous)
