@@ -129,4 +129,4 @@ def test_a_depth_run_is_refused(monkeypatch, capsys, tmp_path):
     scenario = load_scenario("paper-depth-calm", ["duration=2", "reference.step_time_s=1"])
     run_dir = write_run(simulate(scenario), tmp_path / "depth", figures=False)
     code, _, err = run_cli(monkeypatch, capsys, "animate", str(run_dir))
-    assert code == 2 and "a depth run; animate takes horizontal runs" in err
+    assert code == 2 and "a depth run; animate takes horizontal and 6-DOF runs" in err

@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 
 from auvmpc.errors import ConfigError
 from auvmpc.models import six_dof
-from auvmpc.runner import redraw, simulate, write_run
+from auvmpc.runner import read_planar_run, redraw, simulate, write_run
 from auvmpc.scenario import ResolvedScenario, ResolvedSixDofScenario, load_scenario, planar_twin
 from auvmpc.sim.six_dof_loop import ThrustMapping
 from auvmpc.vehicle import VehicleParams, load_vehicle
@@ -109,6 +109,15 @@ def test_redraw_a_six_dof_run(short_run, tmp_path):
     redraw(folder)
     for stem in ("trajectory_3d", "tracking_errors", "depth_attitude", "trajectory", "thrusts"):
         assert (folder / f"{stem}.png").stat().st_size > 0
+
+
+def test_compare_and_animate_read_the_horizontal_view_of_a_six_dof_run(short_run):
+    """The planar tools take a 6-DOF run: its horizontal thrusters, its 6-DOF scenario."""
+    info, scenario, model, log = read_planar_run(short_run, "compare")
+    assert scenario.kind == "six-dof"
+    assert log.thrust.shape[1] == model.n_thrusters == 4  # the vertical pair left out
+    assert len(log.initial_thrust) == model.n_thrusters
+    assert info["scenario"]["name"] == "paper-6dof"
 
 
 @pytest.mark.slow

@@ -470,25 +470,16 @@ def animate(
     dpi: Annotated[int, typer.Option("--dpi", help="resolution (6 in square frame)")] = 80,
 ) -> None:
     """Animate a run: vehicle, thrust arrows, reference and horizon, obstacles, clock."""
-    import json
 
     from auvmpc.animation import AnimationSettings, animate_run
-    from auvmpc.runner import read_run
-    from auvmpc.scenario import Scenario
-    from auvmpc.vehicle import VehicleParams
+    from auvmpc.runner import read_planar_run
 
-    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
-        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    if json.loads((run_dir / "run.json").read_text())["scenario"].get("kind") == "depth":
-        raise ConfigError("RUN_DIR", str(run_dir), "a depth run; animate takes horizontal runs")
+    _, scenario, model, log = read_planar_run(run_dir, "animate")
     settings = AnimationSettings(fps=fps, speed=speed, dpi=dpi)
     if out is None:
         out = run_dir / "animation.gif"  # auvmpc's own file in its own folder: replaced
     elif out.exists():
         raise ConfigError("--out", str(out), "exists; remove it or choose another file")
-    info, log = read_run(run_dir)
-    scenario = Scenario.model_validate(info["scenario"])
-    model = VehicleParams.model_validate(info["model"])
     with progress_bar() as progress:
         task = progress.add_task("frames", total=None)
         animate_run(

@@ -71,7 +71,7 @@ def load_compared_runs(
         Fewer than two folders, a folder that is not a horizontal run, or a label count
         that does not match.
     """
-    from auvmpc.runner import read_run
+    from auvmpc.runner import read_planar_run
 
     if len(run_dirs) < 2:
         raise ConfigError("RUN_DIR", [str(d) for d in run_dirs], "compare needs two or more runs")
@@ -79,16 +79,7 @@ def load_compared_runs(
         raise ConfigError("--label", list(labels), f"give one per run ({len(run_dirs)})")
     loaded = []
     for folder in map(Path, run_dirs):
-        if not (folder / "run.json").is_file() or not (folder / "log.csv").is_file():
-            raise ConfigError(
-                "RUN_DIR", str(folder), "not a run folder (needs run.json and log.csv)"
-            )
-        kind = json.loads((folder / "run.json").read_text())["scenario"].get("kind")
-        if kind == "depth":
-            raise ConfigError("RUN_DIR", str(folder), "a depth run; compare takes horizontal runs")
-        info, log = read_run(folder)
-        scenario = Scenario.model_validate(info["scenario"])
-        model = VehicleParams.model_validate(info["model"])
+        info, scenario, model, log = read_planar_run(folder, "compare")
         loaded.append(ComparedRun("", folder, scenario, model, log, info.get("metrics", {})))
     names = list(labels) if labels else _labels(loaded)
     return [replace(run, label=name) for run, name in zip(loaded, names, strict=True)]

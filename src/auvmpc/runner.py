@@ -45,6 +45,7 @@ __all__ = [
     "fill_run_folder",
     "make_controller",
     "read_run",
+    "read_planar_run",
     "redraw",
     "simulate",
     "write_run",
@@ -409,6 +410,32 @@ def _initial_thrust(info: dict[str, Any], model: VehicleParams) -> np.ndarray:
     if given is not None:
         total[: len(given)] = given
     return total
+
+
+def read_planar_run(
+    run_dir: Path, command: str
+) -> tuple[dict[str, Any], Scenario, VehicleParams, SimLog]:
+    """A saved run as ``command`` (animate, compare) reads it: run.json, its scenario and
+    nominal model, and the horizontal log (a 6-DOF run's horizontal view). A folder that is
+    not a run, or a depth run, is refused with one line."""
+    run_dir = Path(run_dir)
+    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
+        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
+    info = json.loads((run_dir / "run.json").read_text())
+    kind = info["scenario"].get("kind")
+    if kind == "depth":
+        raise ConfigError(
+            "RUN_DIR", str(run_dir), f"a depth run; {command} takes horizontal and 6-DOF runs"
+        )
+    model = VehicleParams.model_validate(info["model"])
+    if kind == "six-dof":
+        scenario: Scenario = SixDofScenario.model_validate(info["scenario"])
+        six_log = SixDofLog.read_csv_six_dof(
+            run_dir / "log.csv", model.n_thrusters, _initial_thrust(info, model)
+        )
+        return info, scenario, model, six_log.horizontal()
+    info, log = read_run(run_dir)
+    return info, Scenario.model_validate(info["scenario"]), model, log
 
 
 def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:
