@@ -56,6 +56,7 @@ typedef struct {
     struct d_ocp_qp_ipm_ws ws[MAX_PASSES];
     void *hpipm_memory[MEMORY_SLOTS];
     int memory_used;
+    long bytes; /* allocated by auvmpc_rti_create, all of it (auvmpc_rti_memory_bytes) */
     double *out[N_STAGE_OUT]; /* one stage's data, reused for every stage */
     int out_size[N_STAGE_OUT];
     double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
@@ -71,8 +72,16 @@ typedef struct {
 static void *allocate(Step *s, hpipm_size_t size) {
     if (s->memory_used == MEMORY_SLOTS) return NULL;
     void *memory = calloc(1, size > 0 ? size : 1);
-    if (memory) s->hpipm_memory[s->memory_used++] = memory;
+    if (memory) {
+        s->hpipm_memory[s->memory_used++] = memory;
+        s->bytes += (long) size;
+    }
     return memory;
+}
+
+/* The bytes auvmpc_rti_create allocated for this handle: its own and HPIPM's. */
+long auvmpc_rti_memory_bytes(const void *handle) {
+    return handle ? ((const Step *) handle)->bytes : 0;
 }
 
 void auvmpc_rti_free(void *handle) {
@@ -210,6 +219,11 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
         auvmpc_rti_free(s);
         return NULL;
     }
+    s->bytes += (long) (sizeof(Step) + sizeof(double) * (s->nz + sz_w + 1)
+                        + sizeof(int) * (s->nv + n) + sizeof(casadi_real *) * (sz_arg + sz_res + 2)
+                        + sizeof(casadi_int) * (sz_iw + 1));
+    for (int i = 0; i < N_STAGE_OUT; ++i)
+        s->bytes += (long) sizeof(double) * (s->out_size[i] > 0 ? s->out_size[i] : 1);
     for (int i = 0; i < s->nv; ++i) s->index[i] = i;
     for (int i = 0; i < n; ++i) s->state_index[i] = NX + i;
     for (int k = 0; k < N; ++k) {
