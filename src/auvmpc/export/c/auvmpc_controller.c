@@ -44,6 +44,12 @@ static const double thrust_upper[NT] = AUVMPC_THRUST_UPPER;
 static const double thrust_rate[NT] = AUVMPC_THRUST_RATE;
 static const double stage_weight[NX] = AUVMPC_STAGE_WEIGHT;
 static const double hpipm_settings[] = AUVMPC_HPIPM_SETTINGS;
+#if AUVMPC_OFFSET_FREE
+#define NA (NX + 3) /* the estimator's state [x, y, psi, u, v, r, X, Y, N] */
+static const double process_covariance[NA] = AUVMPC_PROCESS_COVARIANCE;  /* diagonal */
+static const double measurement_covariance[NX] = AUVMPC_MEASUREMENT_COVARIANCE;
+static const double prior_covariance[NA] = AUVMPC_PRIOR_COVARIANCE;
+#endif
 
 typedef struct {
     double states[N + 1][NX];
@@ -69,6 +75,15 @@ static struct {
     double slack[N];
     double max_slack;
     int iterations;
+#if AUVMPC_OFFSET_FREE
+    /* the offset-free EKF on [x; d_world] (estimation.py, AugmentedEkf) */
+    double estimate[NA], covariance[NA][NA];
+    int initialised;
+    const casadi_real *observer_arg[AUVMPC_OBSERVER_SZ_ARG + 1];
+    casadi_real *observer_res[AUVMPC_OBSERVER_SZ_RES + 1];
+    casadi_int observer_iw[AUVMPC_OBSERVER_SZ_IW + 1];
+    casadi_real observer_w[AUVMPC_OBSERVER_SZ_W + 1];
+#endif
     /* the RK4 step's CasADi work */
     const casadi_real *step_arg[AUVMPC_STEP_SZ_ARG + 1];
     casadi_real *step_res[AUVMPC_STEP_SZ_RES + 1];
@@ -91,6 +106,186 @@ static int all_finite(const double *v, int size) {
     return 1;
 }
 
+#if AUVMPC_OFFSET_FREE
+/* -- the offset-free estimator: an EKF on [x; d_world], d a random walk (estimation.py) -- */
+
+static void observer_reset(const double *initial_state) {
+    for (int i = 0; i < NA; ++i) {
+        c.estimate[i] = i < NX ? initial_state[i] : 0.0;
+        for (int j = 0; j < NA; ++j) c.covariance[i][j] = i == j ? prior_covariance[i] : 0.0;
+    }
+    c.initialised = 0;
+}
+
+/* Eigenvalues of the symmetric a (NA x NA) by cyclic Jacobi rotations; with vectors (columns)
+ * when v is not NULL. */
+static void jacobi_eigen(double a[NA][NA], double *values, double v[NA][NA]) {
+    if (v)
+        for (int i = 0; i < NA; ++i)
+            for (int j = 0; j < NA; ++j) v[i][j] = i == j;
+    for (int sweep = 0; sweep < 100; ++sweep) {
+        double off = 0.0, scale = 0.0;
+        for (int i = 0; i < NA; ++i)
+            for (int j = 0; j < NA; ++j) {
+                if (i != j) off += a[i][j] * a[i][j];
+                scale += a[i][j] * a[i][j];
+            }
+        if (off <= 1e-32 * scale) break;
+        for (int p = 0; p < NA - 1; ++p)
+            for (int q = p + 1; q < NA; ++q) {
+                if (a[p][q] == 0.0) continue;
+                double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                double cs = 1.0 / sqrt(t * t + 1.0), sn = t * cs;
+                for (int k = 0; k < NA; ++k) { /* columns p, q */
+                    double kp = a[k][p], kq = a[k][q];
+                    a[k][p] = cs * kp - sn * kq;
+                    a[k][q] = sn * kp + cs * kq;
+                }
+                for (int k = 0; k < NA; ++k) { /* rows p, q */
+                    double pk = a[p][k], qk = a[q][k];
+                    a[p][k] = cs * pk - sn * qk;
+                    a[q][k] = sn * pk + cs * qk;
+                }
+                if (v)
+                    for (int k = 0; k < NA; ++k) {
+                        double kp = v[k][p], kq = v[k][q];
+                        v[k][p] = cs * kp - sn * kq;
+                        v[k][q] = sn * kp + cs * kq;
+                    }
+            }
+    }
+    for (int i = 0; i < NA; ++i) values[i] = a[i][i];
+}
+
+/* The symmetric part of m with its eigenvalues clipped to [floor, ceiling], rebuilt only
+ * when a bound is crossed (estimation.py, condition_covariance); into c.covariance. */
+static void condition_covariance(double m[NA][NA]) {
+    double symmetric[NA][NA], work[NA][NA], vectors[NA][NA], values[NA];
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) symmetric[i][j] = 0.5 * (m[i][j] + m[j][i]);
+    memcpy(work, symmetric, sizeof work);
+    jacobi_eigen(work, values, NULL);
+    double low = values[0], high = values[0];
+    for (int i = 1; i < NA; ++i) {
+        low = fmin(low, values[i]);
+        high = fmax(high, values[i]);
+    }
+    if (low >= AUVMPC_COVARIANCE_FLOOR && high <= AUVMPC_COVARIANCE_CEILING) {
+        memcpy(c.covariance, symmetric, sizeof symmetric);
+        return;
+    }
+    memcpy(work, symmetric, sizeof work);
+    jacobi_eigen(work, values, vectors);
+    for (int i = 0; i < NA; ++i)
+        values[i] = fmin(fmax(values[i], AUVMPC_COVARIANCE_FLOOR), AUVMPC_COVARIANCE_CEILING);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += vectors[i][k] * values[k] * vectors[j][k];
+            work[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) c.covariance[i][j] = 0.5 * (work[i][j] + work[j][i]);
+}
+
+/* Fuse a measurement of [x, y, psi, u, v, r] (AugmentedEkf.correct, Joseph form). */
+static void observer_correct(const double *measured) {
+    double innovation[NX], Sy[NX][NX], L[NX][NX], gain[NA][NX];
+    if (!c.initialised) {
+        memcpy(c.estimate, measured, sizeof(double) * NX);
+        c.initialised = 1;
+    }
+    for (int i = 0; i < NX; ++i) innovation[i] = measured[i] - c.estimate[i];
+    innovation[2] = remainder(innovation[2], TWO_PI);
+    for (int i = 0; i < NX; ++i)
+        for (int j = 0; j < NX; ++j)
+            Sy[i][j] = c.covariance[i][j] + (i == j ? measurement_covariance[i] : 0.0);
+    /* Sy = L L', then gain' = Sy^-1 P[:NX, :] column by column */
+    for (int j = 0; j < NX; ++j) {
+        double d = Sy[j][j];
+        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < NX; ++i) {
+            double e = Sy[i][j];
+            for (int k = 0; k < j; ++k) e -= L[i][k] * L[j][k];
+            L[i][j] = e / L[j][j];
+        }
+    }
+    for (int col = 0; col < NA; ++col) {
+        double y[NX];
+        for (int i = 0; i < NX; ++i) {
+            double e = c.covariance[i][col];
+            for (int k = 0; k < i; ++k) e -= L[i][k] * y[k];
+            y[i] = e / L[i][i];
+        }
+        for (int i = NX - 1; i >= 0; --i) {
+            double e = y[i];
+            for (int k = i + 1; k < NX; ++k) e -= L[k][i] * gain[col][k];
+            gain[col][i] = e / L[i][i];
+        }
+    }
+    for (int i = 0; i < NA; ++i) {
+        double sum = 0.0;
+        for (int j = 0; j < NX; ++j) sum += gain[i][j] * innovation[j];
+        c.estimate[i] = c.estimate[i] + sum;
+    }
+    /* (I - K H) P (I - K H)' + K R K' */
+    double keep[NA][NA], keepP[NA][NA], joseph[NA][NA];
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) keep[i][j] = (i == j) - (j < NX ? gain[i][j] : 0.0);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += keep[i][k] * c.covariance[k][j];
+            keepP[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0, noise = 0.0;
+            for (int k = 0; k < NA; ++k) sum += keepP[i][k] * keep[j][k];
+            for (int k = 0; k < NX; ++k) noise += gain[i][k] * measurement_covariance[k] * gain[j][k];
+            joseph[i][j] = sum + noise;
+        }
+    condition_covariance(joseph);
+}
+
+/* Propagate over one sample with the applied thrust (AugmentedEkf.predict); a non-finite
+ * prediction restarts the filter from its prior, keeping the finite unmeasured estimate. */
+static void observer_predict(const double *thrust) {
+    double next[NA], A[NA * NA], AP[NA][NA], propagated[NA][NA];
+    c.observer_arg[0] = c.estimate;
+    c.observer_arg[1] = thrust;
+    c.observer_res[0] = next;
+    c.observer_res[1] = A; /* column-major: A[i + NA j] */
+    int failed = observer_step(c.observer_arg, c.observer_res, c.observer_iw, c.observer_w, 0);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += A[i + NA * k] * c.covariance[k][j];
+            AP[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += AP[i][k] * A[j + NA * k];
+            propagated[i][j] = sum + (i == j ? process_covariance[i] : 0.0);
+        }
+    if (failed || !all_finite(next, NA) || !all_finite(propagated[0], NA * NA)) {
+        double kept[NX];
+        for (int i = 0; i < NX; ++i) kept[i] = 0.0;
+        double disturbance[3];
+        for (int i = 0; i < 3; ++i)
+            disturbance[i] = isfinite(c.estimate[NX + i]) ? c.estimate[NX + i] : 0.0;
+        observer_reset(kept);
+        for (int i = 0; i < 3; ++i) c.estimate[NX + i] = disturbance[i];
+        return;
+    }
+    memcpy(c.estimate, next, sizeof next);
+    condition_covariance(propagated);
+}
+#endif
+
 int auvmpc_init(const double initial_state[NX], const double initial_thrust[NT]) {
     if (!c.qp) {
         int count = (int) (sizeof hpipm_settings / sizeof hpipm_settings[0]);
@@ -106,7 +301,11 @@ int auvmpc_init(const double initial_state[NX], const double initial_thrust[NT])
 }
 
 void auvmpc_reset(const double initial_state[NX], const double initial_thrust[NT]) {
+#if AUVMPC_OFFSET_FREE
+    observer_reset(initial_state);
+#else
     (void) initial_state; /* the estimator's, when there is one */
+#endif
     memcpy(c.previous, initial_thrust, sizeof c.previous);
     c.has_plan = 0;
     c.has_guess = 0;
@@ -228,8 +427,14 @@ static int shift(const Iterate *from, Iterate *to) {
 /* The back end: a plan from now on in c.iterate, 0 on success (NonlinearMpc.propose). */
 static int propose(const double *measured, const double *reference,
                    const auvmpc_obstacle *obstacles, int count) {
+#if AUVMPC_OFFSET_FREE
+    observer_correct(measured);
+    memcpy(c.state, c.estimate, sizeof c.state);
+    memcpy(c.disturbance, c.estimate + NX, sizeof c.disturbance);
+#else
     memcpy(c.state, measured, sizeof c.state);
     for (int i = 0; i < 3; ++i) c.disturbance[i] = 0.0;
+#endif
     align_reference(reference);
     c.has_next_guess = 0;
     c.max_slack = 0.0;
@@ -295,6 +500,9 @@ auvmpc_status auvmpc_step(const double measured_state[NX],
     /* applied: the warm start moves on (a failure restarts cold) */
     if (c.has_next_guess) c.guess = c.next_guess;
     c.has_guess = c.has_next_guess;
+#if AUVMPC_OFFSET_FREE
+    observer_predict(command);
+#endif
     if (fell_back) return AUVMPC_FALLBACK;
     if (c.max_slack > SLACK_ACTIVE) return AUVMPC_RELAXED;
     return saturated ? AUVMPC_SATURATED : AUVMPC_OK;
