@@ -60,8 +60,8 @@ __all__ = [
 ]
 
 # The controller's own static arrays may take at most this much (bytes); HPIPM's workspace,
-# allocated once at init, comes on top (about 5 times as much, docs/onboard.md). At 4
-# thrusters and 8 obstacle slots this allows a horizon of about 450 samples.
+# allocated once at init, comes on top (docs/onboard.md). At 4 thrusters and 8 obstacle slots
+# this allows a horizon of about 450 samples.
 STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
 # verify-c's pass mark: the largest difference between a C and a Python command (N).
 COMMAND_TOLERANCE_N = 1e-6
@@ -88,7 +88,9 @@ def exported_config(config: ControllerConfig) -> ControllerConfig:
 
 
 def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
-    """The controller's own static arrays (auvmpc_controller.c), bytes, to within a few."""
+    """The controller's arrays that grow with the horizon (auvmpc_controller.c), bytes; the
+    generated functions' work arrays come on top (measured: 17.1 kB in all against 16.6 kB
+    estimated on paper-obstacles; 24.4 against 16.5 kB with the estimator's work)."""
     N, n, S = horizon, thrusters, max(slots, 1)
     nz, nv = _NX + n, n + (1 if slots else 0)
     iterate = (N + 1) * _NX + N * n
@@ -319,7 +321,9 @@ class VerifyResult:
     worst_step: int
     step_us_median: float
     step_us_max: float
-    static_memory_bytes: int
+    step_us_max_after_first: float  # the first step starts cold: 10 SQP steps
+    static_bytes: int  # the controller's static structure
+    workspace_bytes: int  # HPIPM's workspace and the driver's buffers, allocated once at init
     fallbacks: int
 
     @property
@@ -399,7 +403,9 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
         worst_step=int(difference.argmax()),
         step_us_median=float(stats["step_us_median"]),
         step_us_max=float(stats["step_us_max"]),
-        static_memory_bytes=int(stats["static_memory_bytes"]),
+        step_us_max_after_first=float(stats["step_us_max_after_first"]),
+        static_bytes=int(stats["static_bytes"]),
+        workspace_bytes=int(stats["workspace_bytes"]),
         fallbacks=sum(r["status"] == "2" for r in commands),
     )
 

@@ -313,9 +313,9 @@ void auvmpc_reset(const double initial_state[NX], const double initial_thrust[NT
     /* HPIPM keeps its last solution as the next warm start, as in Python. */
 }
 
-long auvmpc_memory_bytes(void) {
-    return (long) sizeof c + (c.qp ? auvmpc_rti_memory_bytes(c.qp) : 0);
-}
+long auvmpc_static_bytes(void) { return (long) sizeof c; }
+
+long auvmpc_workspace_bytes(void) { return c.qp ? auvmpc_rti_memory_bytes(c.qp) : 0; }
 
 int auvmpc_last_iterations(void) { return c.iterations; }
 

@@ -51,8 +51,10 @@ auvmpc_status auvmpc_step(const double measured_state[AUVMPC_NX],
                           const auvmpc_obstacle *obstacles, int obstacle_count,
                           double command[AUVMPC_THRUSTERS]);
 
-/* Static memory of the controller (bytes): its own arrays plus HPIPM's workspace. */
-long auvmpc_memory_bytes(void);
+/* Memory (bytes): the controller's static structure, and HPIPM's workspace (with the
+ * driver's buffers) that auvmpc_init allocates once (0 before). */
+long auvmpc_static_bytes(void);
+long auvmpc_workspace_bytes(void);
 
 /* HPIPM interior-point iterations of the last step (summed over SQP steps and passes). */
 int auvmpc_last_iterations(void);
