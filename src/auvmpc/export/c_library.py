@@ -39,7 +39,7 @@ from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.estimation import covariance_bounds
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.native import compiler
-from auvmpc.outputs import OutputKind, staged_folder
+from auvmpc.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.references import make_reference
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
@@ -273,6 +273,7 @@ def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
     """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
     rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it."""
     config, slots = _check_supported(resolved)
+    check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     hpipm = _casadi_hpipm()
     if hpipm is None:
         raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
