@@ -44,6 +44,9 @@ def test_exported_controller_reproduces_python_commands(tmp_path, scenario, offs
     assert result.fallbacks == 0
     assert result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
     assert 0 < result.static_bytes < result.workspace_bytes
+    # HPIPM's workspace lives in the static arena measured at export (plus its alignment room)
+    record = json.loads((tmp_path / "export" / "export.json").read_text())
+    assert result.workspace_bytes == record["hpipm_arena_bytes"] + 64
 
 
 @pytest.mark.parametrize(

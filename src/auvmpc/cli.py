@@ -555,7 +555,7 @@ def verify_c(
         f"(step {result.worst_step})  fallbacks {result.fallbacks}  "
         f"step median {result.step_us_median:.0f} us  max {result.step_us_max:.0f} us "
         f"({result.step_us_max_after_first:.0f} us after the cold first step)  "
-        f"memory {result.static_bytes} B static + {result.workspace_bytes} B HPIPM at init"
+        f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM"
     )
     if not result.passed:
         errors.print(f"above the tolerance of {COMMAND_TOLERANCE_N:g} N")

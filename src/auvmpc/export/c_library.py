@@ -41,7 +41,7 @@ from auvmpc.models.discrete import horizontal_model
 from auvmpc.native import compiler
 from auvmpc.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.references import make_reference
-from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
+from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
 from auvmpc.solvers.multiple_shooting import (
     _PARKED_OBSTACLE_M,
@@ -149,6 +149,25 @@ def _warning_clean(source: str) -> str:
             names = [re.findall(r"\w+", p)[-1] for p in match["params"].split(",")]
             lines.append("  " + " ".join(f"(void) {name};" for name in names))
     return "\n".join(lines) + "\n"
+
+
+# The arena's room beyond what the driver counts: each of its at most 40 pieces rounded up to
+# 64 bytes, the base aligned, and the six (N + 1)-int temporaries it sizes the QP with.
+_ARENA_PIECES, _ARENA_ALIGN = 40, 64
+
+
+def _arena_bytes(qp, program: MultipleShootingProgram, config: ControllerConfig) -> int | None:
+    """The static arena for the HPIPM driver, measured on the Python controller's compiled
+    step for the same QP; None where that cannot be built (then the export allocates at
+    init)."""
+    step = compiled_qp_step(
+        qp, program.horizon, program.n_thrusters, program.n_slots,
+        hpipm_settings(config.qp_iteration_limit),
+    )  # fmt: skip
+    if step is None:
+        return None
+    temporaries = 6 * (program.horizon + 1) * 4
+    return step.memory_bytes + _ARENA_PIECES * _ARENA_ALIGN + temporaries + _ARENA_ALIGN
 
 
 def _array(values) -> str:
@@ -289,6 +308,10 @@ def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
         makefile = (_TEMPLATES / "Makefile.in").read_text()
         makefile = makefile.replace("@CASADI_DIR@", str(libraries))
         makefile = makefile.replace("@CASADI_VERSION@", ca.__version__)
+        arena = _arena_bytes(qp, program, config)
+        makefile = makefile.replace(
+            "@ARENA_DEFINE@", "" if arena is None else f"-DAUVMPC_ARENA_BYTES={arena}"
+        )
         (folder / "Makefile").write_text(makefile)
         (folder / _DATA).write_text(_replay_data(resolved, program.horizon, program.sample_time))
         record = {
@@ -299,6 +322,7 @@ def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
             "hpipm_include": str(include),
             "hpipm_libraries": str(libraries),
             "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
+            "hpipm_arena_bytes": arena,
         }
         (folder / _RECORD).write_text(json.dumps(record, indent=2) + "\n")
     return Path(out)
@@ -315,7 +339,7 @@ class VerifyResult:
     step_us_max: float
     step_us_max_after_first: float  # the first step starts cold: 10 SQP steps
     static_bytes: int  # the controller's static structure
-    workspace_bytes: int  # HPIPM's workspace and the driver's buffers, allocated once at init
+    workspace_bytes: int  # HPIPM's workspace and the driver's buffers: the static arena
     fallbacks: int
 
     @property

@@ -5,8 +5,8 @@
  * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost
  * and the RK4 step, from the same expressions the Python uses) and auvmpc_config.h (sizes,
  * weights, limits, settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
- * Python controller compiles. Static memory only, but for HPIPM's workspace, allocated once
- * in auvmpc_init (README.md).
+ * Python controller compiles, built here with a static arena for HPIPM's workspace (the
+ * Makefile's ARENA). Static memory only (README.md).
  */
 #include "auvmpc_controller.h"
 

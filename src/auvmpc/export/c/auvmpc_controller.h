@@ -1,7 +1,7 @@
 /* auvmpc's real-time nonlinear MPC (controller label `nmpc`), exported as a C99 library.
  *
- * One controller per program, in static memory: auvmpc_init once (it allocates HPIPM's
- * workspace, the only allocation), then auvmpc_step every AUVMPC_SAMPLE_TIME seconds;
+ * One controller per program, in static memory: auvmpc_init once (it lays HPIPM's workspace
+ * out in a static arena sized at export), then auvmpc_step every AUVMPC_SAMPLE_TIME seconds;
  * auvmpc_reset forgets the history (warm start, fallback plan) as after a restart.
  * Sizes and settings are those of the scenario it was exported from (auvmpc_config.h).
  *
@@ -32,8 +32,8 @@ typedef enum {
     AUVMPC_SATURATED = 3  /* the command was projected into the thrust or rate limits */
 } auvmpc_status;
 
-/* Allocate HPIPM's workspace (once) and reset. 0 on success, -1 if memory ran out or the
- * generated functions disagree with auvmpc_config.h. Calling it again only resets. */
+/* Set HPIPM's workspace up (once) and reset. 0 on success, -1 if its arena is too small or
+ * the generated functions disagree with auvmpc_config.h. Calling it again only resets. */
 int auvmpc_init(const double initial_state[AUVMPC_NX],
                 const double initial_thrust[AUVMPC_THRUSTERS]);
 
@@ -51,8 +51,8 @@ auvmpc_status auvmpc_step(const double measured_state[AUVMPC_NX],
                           const auvmpc_obstacle *obstacles, int obstacle_count,
                           double command[AUVMPC_THRUSTERS]);
 
-/* Memory (bytes): the controller's static structure, and HPIPM's workspace (with the
- * driver's buffers) that auvmpc_init allocates once (0 before). */
+/* Memory (bytes): the controller's static structure, and HPIPM's static arena (its
+ * workspace and the driver's buffers; 0 before auvmpc_init). */
 long auvmpc_static_bytes(void);
 long auvmpc_workspace_bytes(void);
 
