@@ -380,7 +380,7 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     """Build ``export`` with the system C compiler (in a temporary folder), replay
     ``run_dir``'s log.csv through it and compare its commands with the logged ones."""
     export, run_dir = Path(export), Path(run_dir)
-    if own_export(export) is False:
+    if not own_export(export):
         raise ConfigError("DIR", str(export), "not a folder written by auvmpc export-c")
     if not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs log.csv)")
