@@ -33,11 +33,25 @@ def _run(tmp_path, scenario: str, overrides: list[str]):
 
 @needs_cc
 @pytest.mark.parametrize(
-    ("scenario", "offset_free"), [("paper-ideal", "false"), ("paper-obstacles", "true")]
+    ("scenario", "overrides"),
+    [
+        ("paper-ideal", ["controller.offset_free=false"]),
+        ("paper-obstacles", ["controller.offset_free=true"]),
+        # a moving disc, one appearing and vanishing within the run, one fixed
+        (
+            "paper-obstacles",
+            [
+                "obstacles=[{center: [7.0, -9.0], radius: 0.5, velocity: [0.1, -0.2]}, "
+                "{center: [8.0, -6.0], radius: 0.5, appear_time: 1.0, vanish_time: 3.0}, "
+                "{center: [7.0, 2.0], radius: 0.4}]"
+            ],
+        ),
+    ],
 )
-def test_exported_controller_reproduces_python_commands(tmp_path, scenario, offset_free):
-    """Obstacle slots and the offset-free EKF included: every command within the bound."""
-    resolved, run_dir = _run(tmp_path, scenario, [*_FREE, f"controller.offset_free={offset_free}"])
+def test_exported_controller_reproduces_python_commands(tmp_path, scenario, overrides):
+    """Obstacle slots (moving, appearing) and the offset-free EKF included: every command
+    within the bound."""
+    resolved, run_dir = _run(tmp_path, scenario, [*_FREE, *overrides])
     export_c(resolved, tmp_path / "export")
     result = verify_c(tmp_path / "export", run_dir)
     assert result.steps == 10
