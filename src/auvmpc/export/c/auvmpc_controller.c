@@ -24,7 +24,6 @@
 #define NV AUVMPC_NV
 #define SLOT_FIELDS 5
 #define SOLVED 0
-#define NOT_FINITE (-1)
 /* A slack below this is solver tolerance, not a relaxed constraint (m); the projection moving
  * the command by less than this (N) is round-off, not saturation (controllers/shell.py). */
 #define SLACK_ACTIVE 1e-6
@@ -389,7 +388,7 @@ static int solve(const Iterate *guess, int iterations, int cold) {
                                    c.slots[0], c.used, c.movable, c.dz[0], c.dv[0],
                                    &used_iterations);
         c.iterations += used_iterations;
-        if (code == NOT_FINITE || code != SOLVED) return -1;
+        if (code != SOLVED) return -1; /* NOT_FINITE data, an evaluation error, HPIPM failed */
         if (!all_finite(c.dz[0], (N + 1) * NZ) || !all_finite(c.dv[0], N * NV)) return -1;
         for (int k = 0; k < N; ++k)
             for (int i = 0; i < NT; ++i)
