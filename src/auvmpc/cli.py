@@ -507,6 +507,52 @@ def export(
     console.print(f"wrote {export_rosbag2(run_dir, out)}")
 
 
+@app.command("export-c")
+def export_c(
+    scenario: Annotated[str, typer.Argument(help="built-in name or path to a scenario YAML")],
+    out: Annotated[Path, typer.Option("--out", help="folder to write the C library into")],
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
+    ] = None,
+    overwrite: Overwrite = False,
+) -> None:
+    """Write the scenario's real-time controller (nmpc, every move free) as a C99 library."""
+    from auvmpc.export.c_library import export_c as write_export
+    from auvmpc.scenario import load_scenario
+
+    resolved = load_scenario(scenario, set_ or [])
+    console.print(f"wrote {write_export(resolved, out, overwrite=overwrite)}")
+
+
+@app.command("verify-c")
+def verify_c(
+    folder: Annotated[Path, typer.Argument(metavar="DIR", help="a folder written by export-c")],
+    run_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="a run of the same scenario with controller.type=nmpc, "
+            "controller.control_horizon=null"
+        ),
+    ],
+) -> None:
+    """Build an export, replay a run through it, compare with the run's Python commands."""
+    from auvmpc.export.c_library import COMMAND_TOLERANCE_N
+    from auvmpc.export.c_library import verify_c as replay_and_compare
+
+    result = replay_and_compare(folder, run_dir)
+    console.print(
+        f"steps {result.steps}  max |F_C - F_Python| {result.max_difference_n:.3g} N "
+        f"(step {result.worst_step})  fallbacks {result.fallbacks}  "
+        f"step median {result.step_us_median:.0f} us  max {result.step_us_max:.0f} us "
+        f"({result.step_us_max_after_first:.0f} us after the cold first step)  "
+        f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM"
+    )
+    if not result.passed:
+        errors.print(f"above the tolerance of {COMMAND_TOLERANCE_N:g} N")
+        raise typer.Exit(RUN_FAILED_EXIT)
+
+
 @app.command()
 def schema(
     kind: Annotated[str, typer.Argument(help="scenario | vehicle | campaign")] = "scenario",

@@ -56,6 +56,7 @@ class OutputKind(StrEnum):
     RUN = "run"
     REPRODUCE = "reproduce"
     CAMPAIGN = "campaign"
+    EXPORT_C = "export-c"
 
 
 # What each kind of folder holds at its top level, for folders written before the marker
@@ -69,11 +70,13 @@ _LEGACY_NAMES = {
         r"^(results\.sqlite(-wal|-shm|-journal)?|\.campaign\.lock|report[\w.-]*\.(md|json)"
         r"|figures[\w.-]*)$"
     ),
+    OutputKind.EXPORT_C: re.compile(r"^[\w.-]+\.(c|h|txt|json|md)$|^Makefile$"),
 }
 _LEGACY_REQUIRED = {  # any one of these sets of names marks the kind
     OutputKind.RUN: ({"run.json", "log.csv"},),
     OutputKind.REPRODUCE: ({"summary.md", "runs"},),
     OutputKind.CAMPAIGN: ({"results.sqlite"}, {".campaign.lock"}),
+    OutputKind.EXPORT_C: (),  # written with the marker from the start: no older form
 }
 
 
@@ -132,6 +135,7 @@ _NOUN = {
     OutputKind.RUN: "run",
     OutputKind.REPRODUCE: "reproduction",
     OutputKind.CAMPAIGN: "campaign",
+    OutputKind.EXPORT_C: "C export",
 }
 
 

@@ -60,6 +60,8 @@ class CompiledQpStep:
         library.auvmpc_rti_step.restype = ctypes.c_int
         library.auvmpc_rti_step.argtypes = [ctypes.c_void_p] * 15
         library.auvmpc_rti_free.argtypes = [ctypes.c_void_p]
+        library.auvmpc_rti_memory_bytes.restype = ctypes.c_long
+        library.auvmpc_rti_memory_bytes.argtypes = [ctypes.c_void_p]
         values = np.array(settings, dtype=float)
         sizes = (qp.states, qp.inputs, qp.rows)
         self._handle = library.auvmpc_rti_create(
@@ -91,6 +93,12 @@ class CompiledQpStep:
         handle, self._handle = getattr(self, "_handle", None), None
         if handle:
             self._library.auvmpc_rti_free(handle)
+
+    @property
+    def memory_bytes(self) -> int:
+        """What the driver allocated for this controller (bytes): HPIPM's workspace, the QP's
+        data and the stage buffers."""
+        return int(self._library.auvmpc_rti_memory_bytes(self._handle))
 
     def __call__(self, *arrays: np.ndarray) -> tuple[int, int]:
         """(X, P, F, x_hat, F_prev, ref, W, d, slots, used, movable) in the layout of

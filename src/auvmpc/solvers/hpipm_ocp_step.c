@@ -33,6 +33,29 @@
 
 #include "rti_qp_data.h"
 
+/* Memory: calloc and free, or, where the build defines AUVMPC_ARENA_BYTES (auvmpc export-c,
+ * which measures the size at export), a static arena handed out once in 64-byte aligned
+ * pieces and never freed: no heap at all. */
+#ifdef AUVMPC_ARENA_BYTES
+#include <stdint.h>
+static unsigned char arena[AUVMPC_ARENA_BYTES + 64];
+static size_t arena_used;
+static void *zeroed(size_t count, size_t size) {
+    size_t bytes = (count * size + 63) / 64 * 64;
+    size_t offset = (size_t) ((((uintptr_t) arena + 63) / 64 * 64) - (uintptr_t) arena);
+    if (bytes == 0) bytes = 64;
+    if (offset + arena_used + bytes > sizeof arena) return NULL;
+    void *memory = arena + offset + arena_used;
+    arena_used += bytes;
+    memset(memory, 0, bytes);
+    return memory;
+}
+static void release(void *memory) { (void) memory; }
+#else
+#define zeroed calloc
+#define release free
+#endif
+
 #define NX 6
 #define N_STAGE_OUT 16
 #define NOT_FINITE (-1)
@@ -56,6 +79,7 @@ typedef struct {
     struct d_ocp_qp_ipm_ws ws[MAX_PASSES];
     void *hpipm_memory[MEMORY_SLOTS];
     int memory_used;
+    long bytes; /* allocated by auvmpc_rti_create, all of it (auvmpc_rti_memory_bytes) */
     double *out[N_STAGE_OUT]; /* one stage's data, reused for every stage */
     int out_size[N_STAGE_OUT];
     double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
@@ -70,24 +94,36 @@ typedef struct {
 /* Zeroed memory that auvmpc_rti_free releases; NULL when it runs out. */
 static void *allocate(Step *s, hpipm_size_t size) {
     if (s->memory_used == MEMORY_SLOTS) return NULL;
-    void *memory = calloc(1, size > 0 ? size : 1);
-    if (memory) s->hpipm_memory[s->memory_used++] = memory;
+    void *memory = zeroed(1, size > 0 ? size : 1);
+    if (memory) {
+        s->hpipm_memory[s->memory_used++] = memory;
+        s->bytes += (long) size;
+    }
     return memory;
+}
+
+/* The bytes auvmpc_rti_create allocated for this handle: its own and HPIPM's. */
+long auvmpc_rti_memory_bytes(const void *handle) {
+#ifdef AUVMPC_ARENA_BYTES
+    return handle ? (long) sizeof arena : 0; /* all of it, static */
+#else
+    return handle ? ((const Step *) handle)->bytes : 0;
+#endif
 }
 
 void auvmpc_rti_free(void *handle) {
     Step *s = (Step *) handle;
     if (!s) return;
-    for (int i = 0; i < s->memory_used; ++i) free(s->hpipm_memory[i]);
-    for (int i = 0; i < N_STAGE_OUT; ++i) free(s->out[i]);
-    free(s->fixed);
-    free(s->index);
-    free(s->state_index);
-    free(s->arg_work);
-    free(s->res_work);
-    free(s->iw);
-    free(s->w);
-    free(s);
+    for (int i = 0; i < s->memory_used; ++i) release(s->hpipm_memory[i]);
+    for (int i = 0; i < N_STAGE_OUT; ++i) release(s->out[i]);
+    release(s->fixed);
+    release(s->index);
+    release(s->state_index);
+    release(s->arg_work);
+    release(s->res_work);
+    release(s->iw);
+    release(s->w);
+    release(s);
 }
 
 /* Whether a generated output holds `size` values, all of them: CasADi's compressed sparsity
@@ -121,7 +157,7 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     if (passes < 1 || passes > MAX_PASSES
         || count < GENERAL_SETTINGS + SETTINGS_PER_PASS * passes)
         return NULL;
-    Step *s = (Step *) calloc(1, sizeof(Step));
+    Step *s = (Step *) zeroed(1, sizeof(Step));
     if (!s) return NULL;
     s->N = N;
     s->n = n;
@@ -132,9 +168,9 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     s->inf = settings[0];
     s->passes = passes;
 
-    int *nx = calloc(N + 1, sizeof(int)), *nu = calloc(N + 1, sizeof(int));
-    int *nbx = calloc(N + 1, sizeof(int)), *nbu = calloc(N + 1, sizeof(int));
-    int *rows = calloc(N + 1, sizeof(int)), *ns = calloc(N + 1, sizeof(int));
+    int *nx = zeroed(N + 1, sizeof(int)), *nu = zeroed(N + 1, sizeof(int));
+    int *nbx = zeroed(N + 1, sizeof(int)), *nbu = zeroed(N + 1, sizeof(int));
+    int *rows = zeroed(N + 1, sizeof(int)), *ns = zeroed(N + 1, sizeof(int));
     int ok = nx && nu && nbx && nbu && rows && ns;
     if (ok) {
         for (int k = 0; k <= N; ++k) {
@@ -150,7 +186,7 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
         d_ocp_qp_dim_create(N, &s->dim, s->hpipm_memory[s->memory_used - 1]);
         d_ocp_qp_dim_set_all(nx, nu, nbx, nbu, rows, ns, &s->dim);
     }
-    free(nx); free(nu); free(nbx); free(nbu); free(rows); free(ns);
+    release(nx); release(nu); release(nbx); release(nbu); release(rows); release(ns);
     void *qp_memory = ok ? allocate(s, d_ocp_qp_memsize(&s->dim)) : NULL;
     void *sol_memory = qp_memory ? allocate(s, d_ocp_qp_sol_memsize(&s->dim)) : NULL;
     if (!sol_memory) {
@@ -189,12 +225,12 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
 
     for (int i = 0; i < N_STAGE_OUT; ++i) {
         s->out_size[i] = (int) rti_stage_sparsity_out(i)[0] * (int) rti_stage_sparsity_out(i)[1];
-        s->out[i] = calloc(s->out_size[i] > 0 ? s->out_size[i] : 1, sizeof(double));
+        s->out[i] = zeroed(s->out_size[i] > 0 ? s->out_size[i] : 1, sizeof(double));
         if (!s->out[i]) ok = 0;
     }
-    s->fixed = calloc(s->nz, sizeof(double));
-    s->index = calloc(s->nv, sizeof(int));
-    s->state_index = calloc(n, sizeof(int));
+    s->fixed = zeroed(s->nz, sizeof(double));
+    s->index = zeroed(s->nv, sizeof(int));
+    s->state_index = zeroed(n, sizeof(int));
     casadi_int sz_arg, sz_res, sz_iw, sz_w, t_arg, t_res, t_iw, t_w;
     rti_stage_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
     rti_terminal_work(&t_arg, &t_res, &t_iw, &t_w);
@@ -202,14 +238,19 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     if (t_res > sz_res) sz_res = t_res;
     if (t_iw > sz_iw) sz_iw = t_iw;
     if (t_w > sz_w) sz_w = t_w;
-    s->arg_work = calloc(sz_arg + 1, sizeof(casadi_real *));
-    s->res_work = calloc(sz_res + 1, sizeof(casadi_real *));
-    s->iw = calloc(sz_iw + 1, sizeof(casadi_int));
-    s->w = calloc(sz_w + 1, sizeof(casadi_real));
+    s->arg_work = zeroed(sz_arg + 1, sizeof(casadi_real *));
+    s->res_work = zeroed(sz_res + 1, sizeof(casadi_real *));
+    s->iw = zeroed(sz_iw + 1, sizeof(casadi_int));
+    s->w = zeroed(sz_w + 1, sizeof(casadi_real));
     if (!ok || !s->fixed || !s->index || !s->state_index || !s->arg_work || !s->res_work || !s->iw || !s->w) {
         auvmpc_rti_free(s);
         return NULL;
     }
+    s->bytes += (long) (sizeof(Step) + sizeof(double) * (s->nz + sz_w + 1)
+                        + sizeof(int) * (s->nv + n) + sizeof(casadi_real *) * (sz_arg + sz_res + 2)
+                        + sizeof(casadi_int) * (sz_iw + 1));
+    for (int i = 0; i < N_STAGE_OUT; ++i)
+        s->bytes += (long) sizeof(double) * (s->out_size[i] > 0 ? s->out_size[i] : 1);
     for (int i = 0; i < s->nv; ++i) s->index[i] = i;
     for (int i = 0; i < n; ++i) s->state_index[i] = NX + i;
     for (int k = 0; k < N; ++k) {

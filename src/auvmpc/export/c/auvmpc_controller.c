@@ -1,0 +1,508 @@
+/* auvmpc's real-time nonlinear MPC in C: the Python NonlinearMpc (controllers/nmpc.py) with
+ * every move free, its sparse real-time iteration (solvers/sparse_rti.py) and the safety
+ * shell (controllers/shell.py), step for step, so that it reproduces the Python commands.
+ *
+ * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost
+ * and the RK4 step, from the same expressions the Python uses) and auvmpc_config.h (sizes,
+ * weights, limits, settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
+ * Python controller compiles, built here with a static arena for HPIPM's workspace (the
+ * Makefile's ARENA). Static memory only (README.md).
+ */
+#include "auvmpc_controller.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "rti_qp_data.h"
+
+#define NX AUVMPC_NX
+#define N AUVMPC_HORIZON
+#define NT AUVMPC_THRUSTERS
+#define S AUVMPC_OBSTACLE_SLOTS
+#define SA AUVMPC_SLOTS_ALLOC
+#define NZ AUVMPC_NZ
+#define NV AUVMPC_NV
+#define SLOT_FIELDS 5
+#define SOLVED 0
+/* A slack below this is solver tolerance, not a relaxed constraint (m); the projection moving
+ * the command by less than this (N) is round-off, not saturation (controllers/shell.py). */
+#define SLACK_ACTIVE 1e-6
+#define SATURATION_N 1e-6
+#define TWO_PI (2.0 * 3.14159265358979323846)
+
+void *auvmpc_rti_create(int horizon, int n, int slots, int nz, int nv, int ng,
+                        const double *settings, int count);
+int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
+                    const double *x_hat, const double *F_prev, const double *ref,
+                    const double *W, const double *d, const double *slots, const double *used,
+                    const double *movable, double *dz, double *dv, int *iterations);
+long auvmpc_rti_memory_bytes(const void *handle);
+
+static const double thrust_lower[NT] = AUVMPC_THRUST_LOWER;
+static const double thrust_upper[NT] = AUVMPC_THRUST_UPPER;
+static const double thrust_rate[NT] = AUVMPC_THRUST_RATE;
+static const double stage_weight[NX] = AUVMPC_STAGE_WEIGHT;
+static const double hpipm_settings[] = AUVMPC_HPIPM_SETTINGS;
+#if AUVMPC_OFFSET_FREE
+#define NA (NX + 3) /* the estimator's state [x, y, psi, u, v, r, X, Y, N] */
+static const double process_covariance[NA] = AUVMPC_PROCESS_COVARIANCE;  /* diagonal */
+static const double measurement_covariance[NX] = AUVMPC_MEASUREMENT_COVARIANCE;
+static const double prior_covariance[NA] = AUVMPC_PRIOR_COVARIANCE;
+#endif
+
+typedef struct {
+    double states[N + 1][NX];
+    double thrust[N][NT];
+} Iterate;
+
+/* Everything the controller holds: static, sized at export. */
+static struct {
+    void *qp; /* HPIPM's driver, allocated once */
+    double previous[NT];          /* the last applied command, F(-1) */
+    double plan[N][NT];           /* what a fallback follows */
+    int has_plan;
+    Iterate guess, next_guess;    /* where the next solve starts (warm start) */
+    int has_guess, has_next_guess;
+    /* one sample's data */
+    double state[NX], disturbance[3], reference[N + 1][NX];
+    double slots[SA][SLOT_FIELDS], used[SA];
+    double weights[N][NX], movable[N];
+    /* one solve's work */
+    Iterate iterate;
+    double P[N + 1][NT];
+    double dz[N + 1][NZ], dv[N][NV];
+    double slack[N];
+    double max_slack;
+    int iterations;
+#if AUVMPC_OFFSET_FREE
+    /* the offset-free EKF on [x; d_world] (estimation.py, AugmentedEkf) */
+    double estimate[NA], covariance[NA][NA];
+    int initialised;
+    const casadi_real *observer_arg[AUVMPC_OBSERVER_SZ_ARG + 1];
+    casadi_real *observer_res[AUVMPC_OBSERVER_SZ_RES + 1];
+    casadi_int observer_iw[AUVMPC_OBSERVER_SZ_IW + 1];
+    casadi_real observer_w[AUVMPC_OBSERVER_SZ_W + 1];
+#endif
+    /* the RK4 step's CasADi work */
+    const casadi_real *step_arg[AUVMPC_STEP_SZ_ARG + 1];
+    casadi_real *step_res[AUVMPC_STEP_SZ_RES + 1];
+    casadi_int step_iw[AUVMPC_STEP_SZ_IW + 1];
+    casadi_real step_w[AUVMPC_STEP_SZ_W + 1];
+} c;
+
+/* x_next = RK4(x, F, d) over one sample (models/discrete.py). 0 on success. */
+static int model_step(const double *x, const double *F, const double *d, double *x_next) {
+    c.step_arg[0] = x;
+    c.step_arg[1] = F;
+    c.step_arg[2] = d;
+    c.step_res[0] = x_next;
+    return rk4_step(c.step_arg, c.step_res, c.step_iw, c.step_w, 0);
+}
+
+static int all_finite(const double *v, int size) {
+    for (int i = 0; i < size; ++i)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+#if AUVMPC_OFFSET_FREE
+/* -- the offset-free estimator: an EKF on [x; d_world], d a random walk (estimation.py) -- */
+
+static void observer_reset(const double *initial_state) {
+    for (int i = 0; i < NA; ++i) {
+        c.estimate[i] = i < NX ? initial_state[i] : 0.0;
+        for (int j = 0; j < NA; ++j) c.covariance[i][j] = i == j ? prior_covariance[i] : 0.0;
+    }
+    c.initialised = 0;
+}
+
+/* Eigenvalues of the symmetric a (NA x NA) by cyclic Jacobi rotations; with vectors (columns)
+ * when v is not NULL. */
+static void jacobi_eigen(double a[NA][NA], double *values, double v[NA][NA]) {
+    if (v)
+        for (int i = 0; i < NA; ++i)
+            for (int j = 0; j < NA; ++j) v[i][j] = i == j;
+    for (int sweep = 0; sweep < 100; ++sweep) {
+        double off = 0.0, scale = 0.0;
+        for (int i = 0; i < NA; ++i)
+            for (int j = 0; j < NA; ++j) {
+                if (i != j) off += a[i][j] * a[i][j];
+                scale += a[i][j] * a[i][j];
+            }
+        if (off <= 1e-32 * scale) break;
+        for (int p = 0; p < NA - 1; ++p)
+            for (int q = p + 1; q < NA; ++q) {
+                if (a[p][q] == 0.0) continue;
+                double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                double cs = 1.0 / sqrt(t * t + 1.0), sn = t * cs;
+                for (int k = 0; k < NA; ++k) { /* columns p, q */
+                    double kp = a[k][p], kq = a[k][q];
+                    a[k][p] = cs * kp - sn * kq;
+                    a[k][q] = sn * kp + cs * kq;
+                }
+                for (int k = 0; k < NA; ++k) { /* rows p, q */
+                    double pk = a[p][k], qk = a[q][k];
+                    a[p][k] = cs * pk - sn * qk;
+                    a[q][k] = sn * pk + cs * qk;
+                }
+                if (v)
+                    for (int k = 0; k < NA; ++k) {
+                        double kp = v[k][p], kq = v[k][q];
+                        v[k][p] = cs * kp - sn * kq;
+                        v[k][q] = sn * kp + cs * kq;
+                    }
+            }
+    }
+    for (int i = 0; i < NA; ++i) values[i] = a[i][i];
+}
+
+/* The symmetric part of m with its eigenvalues clipped to [floor, ceiling], rebuilt only
+ * when a bound is crossed (estimation.py, condition_covariance); into c.covariance. */
+static void condition_covariance(double m[NA][NA]) {
+    double symmetric[NA][NA], work[NA][NA], vectors[NA][NA], values[NA];
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) symmetric[i][j] = 0.5 * (m[i][j] + m[j][i]);
+    memcpy(work, symmetric, sizeof work);
+    jacobi_eigen(work, values, NULL);
+    double low = values[0], high = values[0];
+    for (int i = 1; i < NA; ++i) {
+        low = fmin(low, values[i]);
+        high = fmax(high, values[i]);
+    }
+    if (low >= AUVMPC_COVARIANCE_FLOOR && high <= AUVMPC_COVARIANCE_CEILING) {
+        memcpy(c.covariance, symmetric, sizeof symmetric);
+        return;
+    }
+    memcpy(work, symmetric, sizeof work);
+    jacobi_eigen(work, values, vectors);
+    for (int i = 0; i < NA; ++i)
+        values[i] = fmin(fmax(values[i], AUVMPC_COVARIANCE_FLOOR), AUVMPC_COVARIANCE_CEILING);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += vectors[i][k] * values[k] * vectors[j][k];
+            work[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) c.covariance[i][j] = 0.5 * (work[i][j] + work[j][i]);
+}
+
+/* Fuse a measurement of [x, y, psi, u, v, r] (AugmentedEkf.correct, Joseph form). */
+static void observer_correct(const double *measured) {
+    double innovation[NX], Sy[NX][NX], L[NX][NX], gain[NA][NX];
+    if (!c.initialised) {
+        memcpy(c.estimate, measured, sizeof(double) * NX);
+        c.initialised = 1;
+    }
+    for (int i = 0; i < NX; ++i) innovation[i] = measured[i] - c.estimate[i];
+    innovation[2] = remainder(innovation[2], TWO_PI);
+    for (int i = 0; i < NX; ++i)
+        for (int j = 0; j < NX; ++j)
+            Sy[i][j] = c.covariance[i][j] + (i == j ? measurement_covariance[i] : 0.0);
+    /* Sy = L L', then gain' = Sy^-1 P[:NX, :] column by column */
+    for (int j = 0; j < NX; ++j) {
+        double d = Sy[j][j];
+        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
+        L[j][j] = sqrt(d);
+        for (int i = j + 1; i < NX; ++i) {
+            double e = Sy[i][j];
+            for (int k = 0; k < j; ++k) e -= L[i][k] * L[j][k];
+            L[i][j] = e / L[j][j];
+        }
+    }
+    for (int col = 0; col < NA; ++col) {
+        double y[NX];
+        for (int i = 0; i < NX; ++i) {
+            double e = c.covariance[i][col];
+            for (int k = 0; k < i; ++k) e -= L[i][k] * y[k];
+            y[i] = e / L[i][i];
+        }
+        for (int i = NX - 1; i >= 0; --i) {
+            double e = y[i];
+            for (int k = i + 1; k < NX; ++k) e -= L[k][i] * gain[col][k];
+            gain[col][i] = e / L[i][i];
+        }
+    }
+    for (int i = 0; i < NA; ++i) {
+        double sum = 0.0;
+        for (int j = 0; j < NX; ++j) sum += gain[i][j] * innovation[j];
+        c.estimate[i] = c.estimate[i] + sum;
+    }
+    /* (I - K H) P (I - K H)' + K R K' */
+    double keep[NA][NA], keepP[NA][NA], joseph[NA][NA];
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) keep[i][j] = (i == j) - (j < NX ? gain[i][j] : 0.0);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += keep[i][k] * c.covariance[k][j];
+            keepP[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0, noise = 0.0;
+            for (int k = 0; k < NA; ++k) sum += keepP[i][k] * keep[j][k];
+            for (int k = 0; k < NX; ++k) noise += gain[i][k] * measurement_covariance[k] * gain[j][k];
+            joseph[i][j] = sum + noise;
+        }
+    condition_covariance(joseph);
+}
+
+/* Propagate over one sample with the applied thrust (AugmentedEkf.predict); a non-finite
+ * prediction restarts the filter from its prior, keeping the finite unmeasured estimate. */
+static void observer_predict(const double *thrust) {
+    double next[NA], A[NA * NA], AP[NA][NA], propagated[NA][NA];
+    c.observer_arg[0] = c.estimate;
+    c.observer_arg[1] = thrust;
+    c.observer_res[0] = next;
+    c.observer_res[1] = A; /* column-major: A[i + NA j] */
+    int failed = observer_step(c.observer_arg, c.observer_res, c.observer_iw, c.observer_w, 0);
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += A[i + NA * k] * c.covariance[k][j];
+            AP[i][j] = sum;
+        }
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) {
+            double sum = 0.0;
+            for (int k = 0; k < NA; ++k) sum += AP[i][k] * A[j + NA * k];
+            propagated[i][j] = sum + (i == j ? process_covariance[i] : 0.0);
+        }
+    if (failed || !all_finite(next, NA) || !all_finite(propagated[0], NA * NA)) {
+        double kept[NX];
+        for (int i = 0; i < NX; ++i) kept[i] = 0.0;
+        double disturbance[3];
+        for (int i = 0; i < 3; ++i)
+            disturbance[i] = isfinite(c.estimate[NX + i]) ? c.estimate[NX + i] : 0.0;
+        observer_reset(kept);
+        for (int i = 0; i < 3; ++i) c.estimate[NX + i] = disturbance[i];
+        return;
+    }
+    memcpy(c.estimate, next, sizeof next);
+    condition_covariance(propagated);
+}
+#endif
+
+int auvmpc_init(const double initial_state[NX], const double initial_thrust[NT]) {
+    if (!c.qp) {
+        int count = (int) (sizeof hpipm_settings / sizeof hpipm_settings[0]);
+        c.qp = auvmpc_rti_create(N, NT, S, NZ, NV, AUVMPC_NG, hpipm_settings, count);
+        if (!c.qp) return -1;
+    }
+    for (int k = 0; k < N; ++k) {
+        for (int i = 0; i < NX; ++i) c.weights[k][i] = k == 0 ? 0.0 : stage_weight[i];
+        c.movable[k] = 1.0; /* every move free */
+    }
+    auvmpc_reset(initial_state, initial_thrust);
+    return 0;
+}
+
+void auvmpc_reset(const double initial_state[NX], const double initial_thrust[NT]) {
+#if AUVMPC_OFFSET_FREE
+    observer_reset(initial_state);
+#else
+    (void) initial_state; /* the estimator's, when there is one */
+#endif
+    memcpy(c.previous, initial_thrust, sizeof c.previous);
+    c.has_plan = 0;
+    c.has_guess = 0;
+    c.has_next_guess = 0;
+    /* HPIPM keeps its last solution as the next warm start, as in Python. */
+}
+
+long auvmpc_static_bytes(void) { return (long) sizeof c; }
+
+long auvmpc_workspace_bytes(void) { return c.qp ? auvmpc_rti_memory_bytes(c.qp) : 0; }
+
+int auvmpc_last_iterations(void) { return c.iterations; }
+
+/* The reference with its heading shifted by 2 pi k to the turn the vehicle is on
+ * (controllers/base.py, align_heading). nearbyint rounds half to even, as numpy. */
+static void align_reference(const double *reference) {
+    double turns = nearbyint((c.state[2] - reference[2]) / TWO_PI);
+    for (int k = 0; k <= N; ++k) {
+        for (int i = 0; i < NX; ++i) c.reference[k][i] = reference[NX * k + i];
+        c.reference[k][2] += TWO_PI * turns;
+    }
+}
+
+/* The nearest obstacles fill the slots, the rest are parked far away, unused
+ * (MultipleShootingProgram.sample). Picked in the order of Python's stable sort by distance:
+ * nearest first, equal distances by their index. */
+static void fill_slots(const auvmpc_obstacle *obstacles, int count) {
+    double last_distance = -1.0;
+    int last_index = -1;
+    for (int o = 0; o < SA; ++o) {
+        c.slots[o][0] = c.state[0] + AUVMPC_PARKED_M;
+        c.slots[o][1] = c.state[1] + AUVMPC_PARKED_M;
+        c.slots[o][2] = c.slots[o][3] = c.slots[o][4] = 0.0;
+        c.used[o] = 0.0;
+    }
+    for (int o = 0; o < S; ++o) {
+        int best = -1;
+        double best_distance = 0.0;
+        for (int j = 0; j < count; ++j) {
+            double d = hypot(obstacles[j].center[0] - c.state[0],
+                             obstacles[j].center[1] - c.state[1]);
+            int after_last = d > last_distance || (d == last_distance && j > last_index);
+            if (after_last && (best < 0 || d < best_distance)) {
+                best = j;
+                best_distance = d;
+            }
+        }
+        if (best < 0) break;
+        const auvmpc_obstacle *ob = &obstacles[best];
+        c.slots[o][0] = ob->center[0];
+        c.slots[o][1] = ob->center[1];
+        c.slots[o][2] = ob->velocity[0];
+        c.slots[o][3] = ob->velocity[1];
+        c.slots[o][4] = ob->radius + AUVMPC_KEEP_OUT_EXTRA;
+        c.used[o] = 1.0;
+        last_distance = best_distance;
+        last_index = best;
+    }
+}
+
+/* The guess without a previous solution: the states on the reference, the last thrust
+ * held (MultipleShootingProgram.reference_guess). */
+static void reference_guess(Iterate *guess) {
+    memcpy(guess->states[0], c.state, sizeof c.state);
+    memcpy(guess->states[1], c.reference[1], sizeof(double) * N * NX);
+    for (int k = 0; k < N; ++k) memcpy(guess->thrust[k], c.previous, sizeof c.previous);
+}
+
+/* `iterations` Gauss-Newton SQP steps from `guess` (SparseRealTimeIteration.solve); 0 and
+ * c.iterate on success. On a cold start the states are re-simulated after each step. */
+static int solve(const Iterate *guess, int iterations, int cold) {
+    Iterate *it = &c.iterate;
+    if (it != guess) *it = *guess;
+    for (int k = 0; k < N; ++k) c.slack[k] = 0.0;
+    for (int pass = 0; pass < iterations; ++pass) {
+        int used_iterations = 0;
+        memcpy(c.P[0], c.previous, sizeof c.previous);
+        memcpy(c.P[1], it->thrust, sizeof it->thrust);
+        int code = auvmpc_rti_step(c.qp, it->states[0], c.P[0], it->thrust[0], c.state,
+                                   c.previous, c.reference[0], c.weights[0], c.disturbance,
+                                   c.slots[0], c.used, c.movable, c.dz[0], c.dv[0],
+                                   &used_iterations);
+        c.iterations += used_iterations;
+        if (code != SOLVED) return -1; /* NOT_FINITE data, an evaluation error, HPIPM failed */
+        if (!all_finite(c.dz[0], (N + 1) * NZ) || !all_finite(c.dv[0], N * NV)) return -1;
+        for (int k = 0; k < N; ++k)
+            for (int i = 0; i < NT; ++i)
+                it->thrust[k][i] = it->thrust[k][i] + c.dz[k][NX + i] + c.dv[k][i];
+        if (S > 0)
+            for (int k = 0; k < N; ++k) c.slack[k] = c.dv[k][NV - 1] / AUVMPC_SLACK_SCALE;
+        if (cold) {
+            memcpy(it->states[0], c.state, sizeof c.state);
+            for (int k = 0; k < N; ++k)
+                if (model_step(it->states[k], it->thrust[k], c.disturbance, it->states[k + 1]))
+                    return -1;
+        } else {
+            for (int k = 0; k <= N; ++k)
+                for (int i = 0; i < NX; ++i) it->states[k][i] = it->states[k][i] + c.dz[k][i];
+        }
+        if (!all_finite(it->states[0], (N + 1) * NX)) return -1;
+    }
+    c.max_slack = 0.0;
+    for (int k = 0; k < N; ++k)
+        if (c.slack[k] > c.max_slack) c.max_slack = c.slack[k];
+    return 0;
+}
+
+/* The iterate one sample on (MultipleShootingProgram.shifted, every move free). */
+static int shift(const Iterate *from, Iterate *to) {
+    double terminal[NX];
+    if (model_step(from->states[N], from->thrust[N - 1], c.disturbance, terminal)) return -1;
+    memmove(to->states[0], from->states[1], sizeof(double) * N * NX);
+    memcpy(to->states[N], terminal, sizeof terminal);
+    memmove(to->thrust[0], from->thrust[1], sizeof(double) * (N - 1) * NT);
+    memcpy(to->thrust[N - 1], from->thrust[N - 1], sizeof(double) * NT);
+    return 0;
+}
+
+/* The back end: a plan from now on in c.iterate, 0 on success (NonlinearMpc.propose). */
+static int propose(const double *measured, const double *reference,
+                   const auvmpc_obstacle *obstacles, int count) {
+#if AUVMPC_OFFSET_FREE
+    observer_correct(measured);
+    memcpy(c.state, c.estimate, sizeof c.state);
+    memcpy(c.disturbance, c.estimate + NX, sizeof c.disturbance);
+#else
+    memcpy(c.state, measured, sizeof c.state);
+    for (int i = 0; i < 3; ++i) c.disturbance[i] = 0.0;
+#endif
+    align_reference(reference);
+    c.has_next_guess = 0;
+    c.max_slack = 0.0;
+    if (!all_finite(c.state, NX) || !all_finite(c.disturbance, 3)
+        || !all_finite(c.reference[0], (N + 1) * NX))
+        return -1;
+    fill_slots(obstacles, count);
+    int cold = !c.has_guess;
+    int iterations = AUVMPC_ITERATIONS;
+    if (cold) {
+        reference_guess(&c.iterate);
+        if (AUVMPC_COLD_ITERATIONS > iterations) iterations = AUVMPC_COLD_ITERATIONS;
+    } else {
+        c.iterate = c.guess;
+        double turns = nearbyint((c.state[2] - c.iterate.states[0][2]) / TWO_PI);
+        if (turns != 0.0)
+            for (int k = 0; k <= N; ++k) c.iterate.states[k][2] += TWO_PI * turns;
+    }
+    int failed = solve(&c.iterate, iterations, cold);
+    if (failed && !cold) { /* the shifted iterate can be what failed: again from the reference */
+        int retry = AUVMPC_ITERATIONS > AUVMPC_COLD_ITERATIONS ? AUVMPC_ITERATIONS
+                                                              : AUVMPC_COLD_ITERATIONS;
+        reference_guess(&c.iterate);
+        failed = solve(&c.iterate, retry, 1);
+    }
+    if (!failed && !shift(&c.iterate, &c.next_guess)) c.has_next_guess = 1;
+    if (!failed && !all_finite(c.iterate.thrust[0], N * NT)) failed = 1;
+    return failed ? -1 : 0;
+}
+
+auvmpc_status auvmpc_step(const double measured_state[NX],
+                          const double reference[(N + 1) * NX],
+                          const auvmpc_obstacle *obstacles, int obstacle_count,
+                          double command[NT]) {
+    double wanted[NT];
+    int fell_back = 1;
+    c.iterations = 0;
+    if (c.qp && !propose(measured_state, reference, obstacles, obstacle_count)) {
+        memcpy(wanted, c.iterate.thrust[0], sizeof wanted);
+        memcpy(c.plan, c.iterate.thrust, sizeof c.plan);
+        c.has_plan = 1;
+        fell_back = 0;
+    } else if (c.has_plan && N > 1) { /* the previous plan's next move, the plan shifted on */
+        memcpy(wanted, c.plan[1], sizeof wanted);
+        memmove(c.plan[0], c.plan[1], sizeof(double) * (N - 1) * NT);
+    } else {
+        memcpy(wanted, c.previous, sizeof wanted);
+    }
+    /* The safety shell's projection into the thrust and thrust-rate box (ActuatorLimits). */
+    int saturated = 0;
+    for (int i = 0; i < NT; ++i) {
+        double step = thrust_rate[i] * AUVMPC_SAMPLE_TIME;
+        double lower = fmax(thrust_lower[i], c.previous[i] - step);
+        double upper = fmin(thrust_upper[i], c.previous[i] + step);
+        if (lower > upper) { /* a previous command outside the force box: the rate wins */
+            double inside = fmin(fmax(c.previous[i], thrust_lower[i]), thrust_upper[i]);
+            lower = upper = fmin(fmax(inside, c.previous[i] - step), c.previous[i] + step);
+        }
+        command[i] = fmin(fmax(wanted[i], lower), upper);
+        if (fabs(command[i] - wanted[i]) > SATURATION_N) saturated = 1;
+    }
+    memcpy(c.previous, command, sizeof c.previous);
+    /* applied: the warm start moves on (a failure restarts cold) */
+    if (c.has_next_guess) c.guess = c.next_guess;
+    c.has_guess = c.has_next_guess;
+#if AUVMPC_OFFSET_FREE
+    observer_predict(command);
+#endif
+    if (fell_back) return AUVMPC_FALLBACK;
+    if (c.max_slack > SLACK_ACTIVE) return AUVMPC_RELAXED;
+    return saturated ? AUVMPC_SATURATED : AUVMPC_OK;
+}

@@ -1,0 +1,140 @@
+/* Replays a run through the exported controller and prints its commands.
+ *
+ *   ./replay RUN_DIR/log.csv replay_data.txt [STEPS] > commands.csv
+ *
+ * log.csv (written by `auvmpc run`) gives the state the controller saw at every sample
+ * (columns x, y, psi, u, v, r: the true state, so the run must be free of sensor noise);
+ * replay_data.txt (written by `auvmpc export-c`) the initial thrust, the reference preview and
+ * the obstacles at every sample, computed as the Python closed loop computes them. stdout:
+ * k, the command per thruster (%.17g), the status and HPIPM's iterations per sample; stderr:
+ * the step time (median, max, max after the cold-started first step, in microseconds) and the
+ * controller's memory (static, and HPIPM's workspace allocated at init).
+ */
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "auvmpc_controller.h"
+
+#define MAX_LINE 65536
+#define MAX_OBSTACLES 256
+#define ROWS ((AUVMPC_HORIZON + 1) * AUVMPC_NX)
+
+static int compare(const void *a, const void *b) {
+    double x = *(const double *) a, y = *(const double *) b;
+    return (x > y) - (x < y);
+}
+
+/* Column indices of x, y, psi, u, v, r in log.csv's header; 0 on success. */
+static int state_columns(const char *header, int columns[AUVMPC_NX]) {
+    static const char *names[AUVMPC_NX] = {"x", "y", "psi", "u", "v", "r"};
+    char line[MAX_LINE];
+    strncpy(line, header, MAX_LINE - 1);
+    line[MAX_LINE - 1] = '\0';
+    for (int i = 0; i < AUVMPC_NX; ++i) columns[i] = -1;
+    int column = 0;
+    for (char *name = strtok(line, ",\r\n"); name; name = strtok(NULL, ",\r\n"), ++column)
+        for (int i = 0; i < AUVMPC_NX; ++i)
+            if (strcmp(name, names[i]) == 0) columns[i] = column;
+    for (int i = 0; i < AUVMPC_NX; ++i)
+        if (columns[i] < 0) return -1;
+    return 0;
+}
+
+static int read_state(const char *row, const int columns[AUVMPC_NX], double state[AUVMPC_NX]) {
+    int column = 0, found = 0;
+    const char *p = row;
+    while (*p && found < AUVMPC_NX) {
+        for (int i = 0; i < AUVMPC_NX; ++i)
+            if (columns[i] == column) {
+                state[i] = strtod(p, NULL);
+                ++found;
+            }
+        p = strchr(p, ',');
+        if (!p) break;
+        ++p;
+        ++column;
+    }
+    return found == AUVMPC_NX ? 0 : -1;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 3 && argc != 4) {
+        fprintf(stderr, "usage: %s LOG_CSV REPLAY_DATA [STEPS]\n", argv[0]);
+        return 2;
+    }
+    FILE *log = fopen(argv[1], "r"), *data = fopen(argv[2], "r");
+    if (!log || !data) {
+        fprintf(stderr, "replay: cannot open %s\n", !log ? argv[1] : argv[2]);
+        return 2;
+    }
+    static char line[MAX_LINE];
+    int columns[AUVMPC_NX], steps, horizon, thrusters;
+    if (!fgets(line, MAX_LINE, log) || state_columns(line, columns)) {
+        fprintf(stderr, "replay: %s has no x, y, psi, u, v, r columns\n", argv[1]);
+        return 2;
+    }
+    if (fscanf(data, " auvmpc-replay 1 steps %d horizon %d thrusters %d", &steps, &horizon,
+               &thrusters) != 3
+        || horizon != AUVMPC_HORIZON || thrusters != AUVMPC_THRUSTERS || steps < 1) {
+        fprintf(stderr, "replay: %s was not written for this export\n", argv[2]);
+        return 2;
+    }
+    if (argc == 4 && atoi(argv[3]) < steps) steps = atoi(argv[3]); /* a shorter run */
+    if (steps < 1) return 2;
+    double initial_thrust[AUVMPC_THRUSTERS], state[AUVMPC_NX];
+    static double reference[ROWS];
+    static auvmpc_obstacle obstacles[MAX_OBSTACLES];
+    for (int i = 0; i < AUVMPC_THRUSTERS; ++i)
+        if (fscanf(data, "%lf", &initial_thrust[i]) != 1) return 2;
+    double *times = malloc(sizeof(double) * (size_t) steps);
+    if (!times) return 2;
+    printf("k");
+    for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",F%d", i + 1);
+    printf(",status,iterations\n");
+    for (int k = 0; k < steps; ++k) {
+        int count;
+        if (!fgets(line, MAX_LINE, log) || read_state(line, columns, state)) {
+            fprintf(stderr, "replay: %s ends before sample %d\n", argv[1], k);
+            return 2;
+        }
+        for (int i = 0; i < ROWS; ++i)
+            if (fscanf(data, "%lf", &reference[i]) != 1) return 2;
+        if (fscanf(data, "%d", &count) != 1 || count < 0 || count > MAX_OBSTACLES) return 2;
+        for (int o = 0; o < count; ++o) {
+            auvmpc_obstacle *ob = &obstacles[o];
+            if (fscanf(data, "%lf %lf %lf %lf %lf", &ob->center[0], &ob->center[1],
+                       &ob->velocity[0], &ob->velocity[1], &ob->radius) != 5)
+                return 2;
+        }
+        if (k == 0 && auvmpc_init(state, initial_thrust)) {
+            fprintf(stderr, "replay: auvmpc_init failed\n");
+            return 1;
+        }
+        double command[AUVMPC_THRUSTERS];
+        struct timespec start, stop;
+        clock_gettime(CLOCK_MONOTONIC, &start);
+        auvmpc_status status = auvmpc_step(state, reference, obstacles, count, command);
+        clock_gettime(CLOCK_MONOTONIC, &stop);
+        times[k] = 1e6 * (double) (stop.tv_sec - start.tv_sec) + 1e-3 * (double) (stop.tv_nsec - start.tv_nsec);
+        printf("%d", k);
+        for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",%.17g", command[i]);
+        printf(",%d,%d\n", (int) status, auvmpc_last_iterations());
+    }
+    double warm_max = 0.0; /* after the first step, which starts cold (10 SQP steps) */
+    for (int k = 1; k < steps; ++k)
+        if (times[k] > warm_max) warm_max = times[k];
+    qsort(times, (size_t) steps, sizeof(double), compare);
+    double median = steps % 2 ? times[steps / 2] : 0.5 * (times[steps / 2 - 1] + times[steps / 2]);
+    fprintf(stderr,
+            "steps %d step_us_median %.1f step_us_max %.1f step_us_max_after_first %.1f "
+            "static_bytes %ld workspace_bytes %ld\n",
+            steps, median, times[steps - 1], warm_max, auvmpc_static_bytes(),
+            auvmpc_workspace_bytes());
+    free(times);
+    fclose(log);
+    fclose(data);
+    return 0;
+}

@@ -1,0 +1,433 @@
+"""The real-time controller ``nmpc`` exported as a standalone C99 library (``auvmpc export-c``).
+
+What is written (docs/onboard.md): CasADi's C code of the stage QP, the terminal cost and the
+RK4 step (``rti_qp_data.c``, generated from the very functions the Python controller
+compiles), auvmpc's HPIPM driver (``hpipm_ocp_step.c``, the file the Python controller
+compiles), the controller and its safety shell (``auvmpc_controller.c``), its header, the
+scenario's sizes and settings (``auvmpc_config.h``), a replay harness (``replay.c``) with the
+scenario's reference preview and obstacles per sample (``replay_data.txt``), a Makefile and a
+README. HPIPM and BLASFEO are linked from the casadi wheel; nothing of theirs is copied.
+
+:func:`verify_c` builds the export in a temporary folder, replays a run folder's states
+through it and compares its commands with the run's (``auvmpc verify-c``).
+
+Supported: a horizontal scenario, a fully actuated vehicle, the real-time iteration with every
+move free (what the bench label ``nmpc`` runs), with or without the offset-free estimator, no
+solve-time limit. Anything else is refused with one line.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.controllers.base import horizontal_limits
+from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
+from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
+from auvmpc.environment.obstacles import visible_obstacles
+from auvmpc.errors import ConfigError, RunFailed
+from auvmpc.estimation import covariance_bounds
+from auvmpc.models.discrete import horizontal_model
+from auvmpc.native import compiler
+from auvmpc.outputs import OutputKind, check_output_folder, staged_folder
+from auvmpc.references import make_reference
+from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
+from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
+from auvmpc.solvers.multiple_shooting import (
+    _PARKED_OBSTACLE_M,
+    MAX_OBSTACLES,
+    MultipleShootingProgram,
+)
+from auvmpc.solvers.sparse_rti import stage_qp
+
+__all__ = [
+    "COMMAND_TOLERANCE_N",
+    "STATIC_MEMORY_LIMIT_BYTES",
+    "VerifyResult",
+    "export_c",
+    "exported_config",
+    "verify_c",
+]
+
+# The controller's own static arrays may take at most this much (bytes); HPIPM's workspace,
+# allocated once at init, comes on top (docs/onboard.md). At 4 thrusters and 8 obstacle slots
+# this allows a horizon of about 450 samples.
+STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
+# verify-c's pass mark: the largest difference between a C and a Python command (N).
+COMMAND_TOLERANCE_N = 1e-6
+
+_TEMPLATES = Path(__file__).with_name("c")
+_DRIVER = Path(__file__).parents[1] / "solvers" / "hpipm_ocp_step.c"
+_COPIED = ("auvmpc_controller.h", "auvmpc_controller.c", "replay.c", "README.md")
+_DATA = "replay_data.txt"
+_RECORD = "export.json"
+_NX = 6
+
+
+def exported_config(config: ControllerConfig) -> ControllerConfig:
+    """The controller a run must use to be reproduced by the export: ``nmpc`` real-time with
+    every move free (control_horizon = prediction_horizon)."""
+    return config.model_copy(
+        update={
+            "type": ControllerType.NMPC,
+            "nmpc_mode": NmpcMode.REAL_TIME,
+            "control_horizon": None,
+            "move_steps": None,
+        }
+    )
+
+
+def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
+    """The controller's arrays that grow with the horizon (auvmpc_controller.c), bytes; the
+    generated functions' work arrays come on top (measured sizeof: 17.1 kB on paper-obstacles,
+    estimated 17.3 kB; 24.4 kB against 17.3 kB with the estimator's CasADi work)."""
+    N, n, S = horizon, thrusters, max(slots, 1)
+    nz, nv = _NX + n, n + (1 if slots else 0)
+    iterates = 3 * ((N + 1) * _NX + N * n)  # guess, next guess, iterate
+    shell = n * (1 + N)  # previous command, fallback plan
+    sample = _NX + 3 + (N + 1) * _NX + 6 * S + N * _NX + N  # state ... weights, movable
+    step = (N + 1) * n + (N + 1) * nz + N * nv + N  # P, dz, dv, slack
+    estimator = 9 + 9 * 9  # estimate, covariance
+    doubles = iterates + shell + sample + step + estimator
+    return 8 * doubles
+
+
+def _check_supported(resolved) -> tuple[ControllerConfig, int]:
+    scenario = resolved.scenario
+    if getattr(scenario, "kind", None) != "horizontal":
+        raise ConfigError("SCENARIO", scenario.name, "export-c takes horizontal scenarios only")
+    model = resolved.model
+    if model.unactuated_direction is not None:
+        raise ConfigError(
+            "vehicle", model.name, "underactuated: export-c supports fully actuated vehicles only"
+        )
+    config = exported_config(scenario.controller)
+    if config.solver_time_limit_ms is not None:
+        raise ConfigError(
+            "controller.solver_time_limit_ms", config.solver_time_limit_ms,
+            "export-c has no solve-time limit (the caller owns the deadline); leave it unset",
+        )  # fmt: skip
+    if config.qp_structure is QpStructure.CONDENSED:
+        raise ConfigError(
+            "controller.qp_structure", "condensed", "export-c exports the sparse QP (HPIPM)"
+        )
+    slots = min(MAX_OBSTACLES, len(scenario.obstacles))
+    needed = static_bytes(config.prediction_horizon, model.n_thrusters, slots)
+    if needed > STATIC_MEMORY_LIMIT_BYTES:
+        raise ConfigError(
+            "controller.prediction_horizon", config.prediction_horizon,
+            f"needs {needed} bytes of static memory, over export-c's limit of "
+            f"{STATIC_MEMORY_LIMIT_BYTES}",
+        )  # fmt: skip
+    return config, slots
+
+
+_DEFINITION = re.compile(
+    r"^(?:static |CASADI_SYMBOL_EXPORT )?[\w\s*]+?\b\w+\((?P<params>[^()]*)\) \{$"
+)
+
+
+def _warning_clean(source: str) -> str:
+    """CasADi's generated C with every parameter marked used, ``(void) name;`` (the
+    functions' shared signature leaves some unused), so that it compiles under -Wall -Wextra
+    -Werror. Nothing it computes changes."""
+    lines = []
+    for line in source.splitlines():
+        lines.append(line)
+        match = _DEFINITION.match(line)
+        if match and match["params"].strip() not in ("", "void"):
+            names = [re.findall(r"\w+", p)[-1] for p in match["params"].split(",")]
+            lines.append("  " + " ".join(f"(void) {name};" for name in names))
+    return "\n".join(lines) + "\n"
+
+
+# The arena's room beyond what the driver counts: each of its at most 40 pieces rounded up to
+# 64 bytes, the base aligned, and the six (N + 1)-int temporaries it sizes the QP with.
+_ARENA_PIECES, _ARENA_ALIGN = 40, 64
+
+
+def _arena_bytes(qp, program: MultipleShootingProgram, config: ControllerConfig) -> int | None:
+    """The static arena for the HPIPM driver, measured on the Python controller's compiled
+    step for the same QP; None where that cannot be built (then the export allocates at
+    init)."""
+    step = compiled_qp_step(
+        qp, program.horizon, program.n_thrusters, program.n_slots,
+        hpipm_settings(config.qp_iteration_limit),
+    )  # fmt: skip
+    if step is None:
+        return None
+    temporaries = 6 * (program.horizon + 1) * 4
+    return step.memory_bytes + _ARENA_PIECES * _ARENA_ALIGN + temporaries + _ARENA_ALIGN
+
+
+def _array(values) -> str:
+    return "{" + ", ".join(f"{float(v):.17g}" for v in np.ravel(values)) + "}"
+
+
+def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfig) -> str:
+    model, ocp = program.model, program.ocp
+    n = program.n_thrusters
+    limits = horizontal_limits(model)
+    step = program.step
+    macros = {
+        "AUVMPC_NX": _NX,
+        "AUVMPC_HORIZON": program.horizon,
+        "AUVMPC_THRUSTERS": n,
+        "AUVMPC_OBSTACLE_SLOTS": program.n_slots,
+        "AUVMPC_SLOTS_ALLOC": max(program.n_slots, 1),
+        "AUVMPC_NZ": qp.states,
+        "AUVMPC_NV": qp.inputs,
+        "AUVMPC_NG": qp.rows,
+        "AUVMPC_SAMPLE_TIME": f"{program.sample_time:.17g}",
+        "AUVMPC_ITERATIONS": config.linearisation_iterations,
+        "AUVMPC_COLD_ITERATIONS": _COLD_START_ITERATIONS,
+        "AUVMPC_KEEP_OUT_EXTRA": f"{ocp.keep_out_extra:.17g}",
+        "AUVMPC_SLACK_SCALE": f"{slack_scale(ocp.slack_penalty):.17g}",
+        "AUVMPC_PARKED_M": f"{_PARKED_OBSTACLE_M:.17g}",
+        "AUVMPC_STEP_SZ_ARG": step.sz_arg(),
+        "AUVMPC_STEP_SZ_RES": step.sz_res(),
+        "AUVMPC_STEP_SZ_IW": step.sz_iw(),
+        "AUVMPC_STEP_SZ_W": step.sz_w(),
+        "AUVMPC_THRUST_LOWER": _array(np.broadcast_to(limits.lower, n)),
+        "AUVMPC_THRUST_UPPER": _array(np.broadcast_to(limits.upper, n)),
+        "AUVMPC_THRUST_RATE": _array(np.broadcast_to(limits.rate, n)),
+        "AUVMPC_STAGE_WEIGHT": _array(ocp.stage_weight),
+        "AUVMPC_HPIPM_SETTINGS": _array(hpipm_settings(config.qp_iteration_limit)),
+        "AUVMPC_OFFSET_FREE": int(config.offset_free),
+    }
+    if config.offset_free:
+        macros.update(_observer_macros(model, config))
+    lines = [
+        f"/* Generated by auvmpc export-c for vehicle {model.name}: sizes and settings. */",
+        "#ifndef AUVMPC_CONFIG_H",
+        "#define AUVMPC_CONFIG_H",
+        "",
+        *(f"#define {name} {value}" for name, value in macros.items()),
+        "",
+        "#endif",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _observer(model, config: ControllerConfig) -> ca.Function:
+    """The estimator's step of [x; d] with its Jacobian, as DisturbanceObserver builds it, the
+    Jacobian dense (column-major 9 x 9) for the C code."""
+    step = horizontal_model(model, config.sample_time, config.model_substeps).augmented_step
+    augmented = ca.SX.sym("z", step.size1_in(0))
+    thrust = ca.SX.sym("F", step.size1_in(1))
+    following, jacobian = step(augmented, thrust)
+    return ca.Function(
+        "observer_step", [augmented, thrust], [ca.densify(following), ca.densify(jacobian)]
+    )
+
+
+def _observer_macros(model, config: ControllerConfig) -> dict[str, object]:
+    """The EKF's covariances and bounds, as DisturbanceObserver computes them."""
+    observer = config.observer.for_vehicle(model)
+    rate = np.array(observer.disturbance_rate_std) ** 2 * config.sample_time
+    measurement = np.square(observer.measurement_std)
+    process = np.concatenate([np.square(observer.state_process_std), rate])
+    prior = np.concatenate([measurement, np.square(observer.initial_disturbance_std)])
+    floor, ceiling = covariance_bounds(np.diag(process), np.diag(measurement), np.diag(prior))
+    step = _observer(model, config)
+    return {
+        "AUVMPC_PROCESS_COVARIANCE": _array(process),
+        "AUVMPC_MEASUREMENT_COVARIANCE": _array(measurement),
+        "AUVMPC_PRIOR_COVARIANCE": _array(prior),
+        "AUVMPC_COVARIANCE_FLOOR": f"{floor:.17g}",
+        "AUVMPC_COVARIANCE_CEILING": f"{ceiling:.17g}",
+        "AUVMPC_OBSERVER_SZ_ARG": step.sz_arg(),
+        "AUVMPC_OBSERVER_SZ_RES": step.sz_res(),
+        "AUVMPC_OBSERVER_SZ_IW": step.sz_iw(),
+        "AUVMPC_OBSERVER_SZ_W": step.sz_w(),
+    }
+
+
+def _replay_data(resolved, horizon: int, sample_time: float) -> str:
+    """The reference preview and the obstacles at every sample, as the closed loop computes
+    them (sim/loop.py), and the initial thrust."""
+    scenario = resolved.scenario
+    steps = int(round(scenario.duration / sample_time))
+    reference = make_reference(scenario.reference, resolved.base_dir)
+    n = resolved.model.n_thrusters
+    initial = np.zeros(n) if scenario.initial_thrust is None else scenario.initial_thrust
+    times = sample_time * np.arange(steps + 1, dtype=float)
+    offsets = sample_time * np.arange(horizon + 1)
+    lines = [f"auvmpc-replay 1 steps {steps} horizon {horizon} thrusters {n}", _row(initial)]
+    for k in range(steps):
+        t = times[k]
+        preview = reference.states(t + offsets)
+        lines.extend(_row(row) for row in preview)
+        obstacles = visible_obstacles(scenario.obstacles, t)
+        lines.append(str(len(obstacles)))
+        lines.extend(_row([*o.center, *o.velocity, o.radius]) for o in obstacles)
+    return "\n".join(lines) + "\n"
+
+
+def _row(values) -> str:
+    return " ".join(f"{float(v):.17g}" for v in np.ravel(values))
+
+
+def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
+    """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
+    rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it."""
+    config, slots = _check_supported(resolved)
+    check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
+    hpipm = _casadi_hpipm()
+    if hpipm is None:
+        raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
+    include, libraries = hpipm
+    model = resolved.model
+    program = MultipleShootingProgram(model, config, slots)
+    qp = stage_qp(program)
+    with staged_folder(out, OutputKind.EXPORT_C, overwrite=overwrite) as folder:
+        generator = ca.CodeGenerator("rti_qp_data.c", {"with_header": True})
+        generator.add(qp.stage)
+        generator.add(qp.terminal)
+        generator.add(program.step)  # rk4_step: the cold-start rollout and the shift
+        if config.offset_free:
+            generator.add(_observer(model, config))  # observer_step: the EKF's prediction
+        generator.generate(str(folder) + os.sep)
+        generated = folder / "rti_qp_data.c"
+        generated.write_text(_warning_clean(generated.read_text()))
+        (folder / "auvmpc_config.h").write_text(_config_header(program, qp, config))
+        for name in _COPIED:
+            shutil.copyfile(_TEMPLATES / name, folder / name)
+        shutil.copyfile(_DRIVER, folder / _DRIVER.name)
+        makefile = (_TEMPLATES / "Makefile.in").read_text()
+        makefile = makefile.replace("@CASADI_DIR@", str(libraries))
+        makefile = makefile.replace("@CASADI_VERSION@", ca.__version__)
+        arena = _arena_bytes(qp, program, config)
+        makefile = makefile.replace(
+            "@ARENA_DEFINE@", "" if arena is None else f"-DAUVMPC_ARENA_BYTES={arena}"
+        )
+        (folder / "Makefile").write_text(makefile)
+        (folder / _DATA).write_text(_replay_data(resolved, program.horizon, program.sample_time))
+        record = {
+            "scenario": resolved.scenario.name,
+            "controller": json.loads(config.model_dump_json()),
+            "model": json.loads(model.model_dump_json()),
+            "casadi": ca.__version__,
+            "hpipm_include": str(include),
+            "hpipm_libraries": str(libraries),
+            "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
+            "hpipm_arena_bytes": arena,
+        }
+        (folder / _RECORD).write_text(json.dumps(record, indent=2) + "\n")
+    return Path(out)
+
+
+@dataclass(frozen=True)
+class VerifyResult:
+    """What ``verify-c`` measured."""
+
+    steps: int
+    max_difference_n: float  # largest |F_C - F_Python| over every step and thruster (N)
+    worst_step: int
+    step_us_median: float
+    step_us_max: float
+    step_us_max_after_first: float  # the first step starts cold: 10 SQP steps
+    static_bytes: int  # the controller's static structure
+    workspace_bytes: int  # HPIPM's workspace and the driver's buffers: the static arena
+    fallbacks: int
+
+    @property
+    def passed(self) -> bool:
+        return self.max_difference_n <= COMMAND_TOLERANCE_N
+
+
+def _check_run(export: Path, run_dir: Path) -> None:
+    """The run must be the exported controller's, on the same vehicle, without sensor noise."""
+    record = json.loads((export / _RECORD).read_text())
+    try:
+        run = json.loads((run_dir / "run.json").read_text())
+    except (OSError, ValueError) as error:
+        raise ConfigError("RUN_DIR", str(run_dir), f"no readable run.json ({error})") from None
+    scenario = run.get("scenario", {})
+    if any(scenario.get("sensing", {}).get("std", [0.0])):
+        raise ConfigError(
+            "RUN_DIR", str(run_dir), "the run has sensor noise; log.csv holds the true states"
+        )
+    controller = ControllerConfig.model_validate(scenario.get("controller", {}))
+    ran = json.loads(exported_config(controller).model_dump_json())
+    if (
+        controller.control_horizon not in (None, controller.prediction_horizon)
+        or ran != record["controller"]
+        or controller.type is not ControllerType.NMPC
+        or controller.nmpc_mode is not NmpcMode.REAL_TIME
+    ):
+        raise ConfigError(
+            "RUN_DIR", str(run_dir),
+            "its controller is not the exported one (run the exported scenario with --set "
+            "controller.type=nmpc --set controller.control_horizon=null)",
+        )  # fmt: skip
+    if run.get("model") != record["model"]:
+        raise ConfigError("RUN_DIR", str(run_dir), "its vehicle model is not the exported one")
+
+
+def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
+    """Build ``export`` with the system C compiler (in a temporary folder), replay
+    ``run_dir``'s log.csv through it and compare its commands with the logged ones."""
+    export, run_dir = Path(export), Path(run_dir)
+    if not own_export(export):
+        raise ConfigError("DIR", str(export), "not a folder written by auvmpc export-c")
+    if not (run_dir / "log.csv").is_file():
+        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs log.csv)")
+    _check_run(export, run_dir)
+    cc = compiler()
+    if cc is None or shutil.which("make") is None:
+        raise ConfigError("DIR", str(export), "needs a C compiler and make on the PATH")
+    with open(run_dir / "log.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    with tempfile.TemporaryDirectory(prefix="auvmpc-verify-c-") as scratch:
+        build = Path(scratch) / "build"
+        shutil.copytree(export, build)
+        made = subprocess.run(
+            ["make", "-s", "-C", str(build), f"CC={cc}"], capture_output=True, text=True
+        )
+        if made.returncode:
+            lines = made.stderr.strip().splitlines()
+            first = next((line for line in lines if "error" in line), "make failed")
+            raise RunFailed(f"the export did not build: {first}")
+        steps = len(rows) - 1  # the last row is the final state, without a command
+        replay = subprocess.run(
+            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(steps)],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        if replay.returncode:
+            raise RunFailed(f"replay failed: {replay.stderr.strip()}")
+    commands = list(csv.DictReader(replay.stdout.splitlines()))
+    stats = dict(zip(*[iter(replay.stderr.split())] * 2, strict=True))
+    thrusters = [name for name in commands[0] if name.startswith("F")]
+    c_thrust = np.array([[float(r[name]) for name in thrusters] for r in commands])
+    py_thrust = np.array([[float(r[name]) for name in thrusters] for r in rows[: len(commands)]])
+    difference = np.abs(c_thrust - py_thrust).max(axis=1)
+    return VerifyResult(
+        steps=len(commands),
+        max_difference_n=float(difference.max()),
+        worst_step=int(difference.argmax()),
+        step_us_median=float(stats["step_us_median"]),
+        step_us_max=float(stats["step_us_max"]),
+        step_us_max_after_first=float(stats["step_us_max_after_first"]),
+        static_bytes=int(stats["static_bytes"]),
+        workspace_bytes=int(stats["workspace_bytes"]),
+        fallbacks=sum(r["status"] == "2" for r in commands),
+    )
+
+
+def own_export(folder: Path) -> bool:
+    """Whether ``folder`` is an export-c folder written by auvmpc."""
+    from auvmpc.outputs import own_kind
+
+    return own_kind(folder) is OutputKind.EXPORT_C and (folder / _RECORD).is_file()

@@ -1,0 +1,102 @@
+"""The real-time nmpc exported to C (auvmpc export-c) reproduces the Python commands (issue 15)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from auvmpc.errors import ConfigError
+from auvmpc.export.c_library import export_c, verify_c
+from auvmpc.native import compiler
+from auvmpc.runner import simulate, write_run
+from auvmpc.scenario import load_scenario
+from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
+from tests.conftest import C_EXPORT_COMMAND_TOL_N
+from tests.test_cli import run_cli
+
+needs_cc = pytest.mark.skipif(
+    compiler() is None or shutil.which("make") is None or _casadi_hpipm() is None,
+    reason="no C compiler, make, or HPIPM in the casadi wheel",
+)
+# Every move free, as export-c exports it; a short run keeps the test quick.
+_FREE = ["controller.type=nmpc", "controller.control_horizon=null", "duration=5"]
+
+
+def _run(tmp_path, scenario: str, overrides: list[str]):
+    resolved = load_scenario(scenario, overrides)
+    run_dir = tmp_path / "run"
+    write_run(simulate(resolved), run_dir, figures=False)
+    return resolved, run_dir
+
+
+@needs_cc
+@pytest.mark.parametrize(
+    ("scenario", "overrides"),
+    [
+        ("paper-ideal", ["controller.offset_free=false"]),
+        ("paper-obstacles", ["controller.offset_free=true"]),
+        # a moving disc, one appearing and vanishing within the run, one fixed
+        (
+            "paper-obstacles",
+            [
+                "obstacles=[{center: [7.0, -9.0], radius: 0.5, velocity: [0.1, -0.2]}, "
+                "{center: [8.0, -6.0], radius: 0.5, appear_time: 1.0, vanish_time: 3.0}, "
+                "{center: [7.0, 2.0], radius: 0.4}]"
+            ],
+        ),
+    ],
+)
+def test_exported_controller_reproduces_python_commands(tmp_path, scenario, overrides):
+    """Obstacle slots (moving, appearing) and the offset-free EKF included: every command
+    within the bound."""
+    resolved, run_dir = _run(tmp_path, scenario, [*_FREE, *overrides])
+    export_c(resolved, tmp_path / "export")
+    result = verify_c(tmp_path / "export", run_dir)
+    assert result.steps == 10
+    assert result.fallbacks == 0
+    assert result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
+    assert 0 < result.static_bytes < result.workspace_bytes
+    # HPIPM's workspace lives in the static arena measured at export (plus its alignment room)
+    record = json.loads((tmp_path / "export" / "export.json").read_text())
+    assert result.workspace_bytes == record["hpipm_arena_bytes"] + 64
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (["vehicle=videoray-pro3", "controller.R=null"], "underactuated"),
+        (["controller.prediction_horizon=1000"], "static memory"),
+        (["controller.solver_time_limit_ms=50"], "solve-time limit"),
+    ],
+)
+def test_unsupported_configurations_refused_in_one_line(
+    tmp_path, monkeypatch, capsys, overrides, message
+):
+    sets = [part for o in overrides for part in ("--set", o)]
+    out = tmp_path / "export"
+    code, _, err = run_cli(monkeypatch, capsys, "export-c", "paper-ideal", "--out", str(out), *sets)
+    assert code == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_export_refuses_a_folder_it_did_not_write(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match="did not write"):
+        export_c(load_scenario("paper-ideal", ["duration=5"]), tmp_path)
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_verify_refuses_a_run_of_another_controller(tmp_path):
+    """A run with move blocking (the scenario's own nc = 2) is not the exported controller."""
+    resolved = load_scenario("paper-ideal", ["duration=5", "controller.offset_free=false"])
+    export_c(resolved, tmp_path / "export")
+    blocked = load_scenario("paper-ideal", ["duration=1", "controller.type=nmpc"])
+    write_run(simulate(blocked), tmp_path / "run", figures=False)
+    with pytest.raises(ConfigError, match="not the exported one"):
+        verify_c(tmp_path / "export", tmp_path / "run")
+    record = json.loads((tmp_path / "export" / "export.json").read_text())
+    assert record["controller"]["control_horizon"] is None
