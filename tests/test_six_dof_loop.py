@@ -233,3 +233,14 @@ def test_python_api_overrides_and_draws_a_six_dof_run():
     run = auvmpc.simulate(changed)
     assert run.log.full_state[0, 2] == 1.2
     assert {"trajectory", "trajectory_3d", "depth_attitude"} <= set(auvmpc.figures(run))
+
+
+@pytest.mark.parametrize("name", ["paper-6dof", "bluerov2-helix"])
+@pytest.mark.parametrize("change", [{"seed": 1}, {"controller.sample_time": 0.25}])
+def test_python_api_overrides_keep_one_sample_time(name, change):
+    """An override re-reads the scenario as written: the depth controller keeps sampling
+    with the horizontal one (a dump of every default once made any override fail)."""
+    import auvmpc
+
+    changed = auvmpc.override(load_scenario(name), change).scenario
+    assert changed.depth_controller.sample_time == changed.controller.sample_time

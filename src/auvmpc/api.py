@@ -76,11 +76,12 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     """A copy of a loaded scenario with more fields changed (the original is untouched)."""
     from auvmpc.depth import DepthScenario
     from auvmpc.errors import format_validation_error
-    from auvmpc.scenario import apply_override, scenario_to_dict, validate_scenario
+    from auvmpc.scenario import apply_override, validate_scenario
 
     # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
-    # must get its own defaults).
-    data = scenario_to_dict(getattr(scenario, "given", scenario.scenario))
+    # must get its own defaults): only the fields its file set.
+    given = getattr(scenario, "given", scenario.scenario)
+    data = given.model_dump(mode="json", exclude_unset=True)
     for text in _override_strings(overrides):
         apply_override(data, text)
     if data.get("kind") == "depth":

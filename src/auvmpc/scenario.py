@@ -171,25 +171,21 @@ class SixDofScenario(Scenario):
     @model_validator(mode="before")
     @classmethod
     def _depth_controller_defaults(cls, data: Any) -> Any:
-        """What a depth_controller mapping leaves out: the horizontal controller's sample time
-        and preview (a planned 3-D path is known ahead, as the horizontal reference is)."""
+        """What a depth_controller mapping leaves out: preview (a planned 3-D path is known
+        ahead, as the horizontal reference is). Its sample time, left out, is the horizontal
+        controller's, given once the vehicle has chosen that (ResolvedSixDofScenario)."""
         if not isinstance(data, dict):
             return data
-        depth, controller = data.get("depth_controller", {}), data.get("controller", {})
-        if not isinstance(depth, dict) or not isinstance(controller, dict):
+        depth = data.get("depth_controller", {})
+        if not isinstance(depth, dict):
             return data  # the field validation names what is wrong
-        # An omitted horizontal sample time is chosen for the vehicle when the scenario is
-        # resolved (ResolvedSixDofScenario gives the depth controller the same).
-        shared = {} if controller.get("sample_time") is None else {
-            "sample_time": controller["sample_time"]
-        }  # fmt: skip
-        return {**data, "depth_controller": {**shared, "preview": True, **depth}}
+        return {**data, "depth_controller": {"preview": True, **depth}}
 
     @model_validator(mode="after")
     def _one_sample_time(self) -> SixDofScenario:
-        if self.controller.sample_time is not None:
-            check_one_sample_time(self.depth_controller.sample_time,
-                                  self.controller.sample_time, FieldError)  # fmt: skip
+        depth = self.depth_controller
+        if self.controller.sample_time is not None and "sample_time" in depth.model_fields_set:
+            check_one_sample_time(depth.sample_time, self.controller.sample_time, FieldError)
         return self
 
 
