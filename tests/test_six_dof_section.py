@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, FieldError
 from auvmpc.vehicle import load_vehicle
 from tests.test_cli import run_cli
 
@@ -136,3 +136,34 @@ def test_the_cli_reports_a_bad_section_in_one_line_with_exit_2(monkeypatch, caps
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     assert "six_dof.center_of_buoyancy" in lines[0] and "above the centre of gravity" in lines[0]
+
+
+def test_six_dof_thrusters_must_start_with_the_horizontal_ones_in_order():
+    """The 6-DOF loop sends the horizontal command to the first six_dof thrusters: two of
+    them swapped would send every command to the wrong one."""
+    data = bluerov_data()
+    thrusters = list(data["six_dof"]["thrusters"])
+    thrusters[0], thrusters[1] = thrusters[1], thrusters[0]
+    data["six_dof"]["thrusters"] = thrusters
+    with pytest.raises(FieldError, match="six_dof.thrusters"):
+        load_vehicle(data).check_six_dof_layout()
+
+
+def test_six_dof_vertical_thrusters_must_be_the_heave_sections():
+    data = bluerov_data()
+    data["six_dof"]["thrusters"] = data["six_dof"]["thrusters"][:-1]
+    with pytest.raises(FieldError, match="heave.thruster_count"):
+        load_vehicle(data).check_six_dof_layout()
+
+
+def test_a_six_dof_scenario_refuses_a_mismatched_layout_in_one_line(tmp_path):
+    from auvmpc.scenario import load_scenario
+
+    data = bluerov_data()
+    thrusters = list(data["six_dof"]["thrusters"])
+    thrusters[0], thrusters[1] = thrusters[1], thrusters[0]
+    data["six_dof"]["thrusters"] = thrusters
+    path = tmp_path / "swapped.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match="vehicle.six_dof.thrusters"):
+        load_scenario("bluerov2-helix", [f"vehicle={path}"])

@@ -261,6 +261,10 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 vehicle.name,
                 "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
             )
+        try:
+            vehicle.check_six_dof_layout()
+        except FieldError as error:
+            raise ConfigError(f"vehicle.{error.field}", error.value, error.reason) from None
         super().__init__(scenario, base_dir)
         model = self.model
         six = model.six_dof

@@ -177,6 +177,36 @@ class VehicleParams(StrictModel):
             )
         return self
 
+    def check_six_dof_layout(self) -> None:
+        """Raise FieldError unless the six_dof thrusters start with the horizontal ones, in
+        order, and the rest are the heave section's. The 6-DOF loop sends the horizontal
+        controller's command to the first and the depth controller's to the rest: otherwise
+        every command goes to the wrong thruster (a review swapped two and the run still
+        "worked", 1.6 m off). Checked where a 6-DOF plant is used, so a file whose 3-DOF
+        thrusters were edited still serves 3-DOF and depth scenarios."""
+        six = self.six_dof
+        if six is None:
+            return
+        n = len(self.thrusters)
+        planar = six.T[np.ix_([0, 1, 5], range(min(n, six.n_thrusters)))]
+        if six.n_thrusters < n or not np.allclose(
+            planar, allocation_matrix(self.thrusters), atol=THRUSTER_LAYOUT_TOL
+        ):
+            raise FieldError(
+                "six_dof.thrusters",
+                six.n_thrusters,
+                f"the first {n} must be the horizontal thrusters of 'thrusters', in that order "
+                "(same surge, sway and yaw columns)",
+            )
+        vertical = six.n_thrusters - n
+        if self.heave is not None and vertical != self.heave.thruster_count:
+            raise FieldError(
+                "six_dof.thrusters",
+                six.n_thrusters,
+                f"{vertical} after the {n} horizontal ones, but heave.thruster_count is "
+                f"{self.heave.thruster_count}",
+            )
+
     @property
     def underactuated(self) -> bool:
         """True when the thrusters cannot make every body-frame force and moment
@@ -312,6 +342,11 @@ def turn_up_time(params: VehicleParams) -> float:
     from rest, damping aside (s): Iz r_top / M_max. The fastest thing an underactuated
     vehicle steers with (0.08 s for the VideoRay and the BlueROV2, 0.27 s for jmse2210)."""
     return params.Iz * top_yaw_rate(params) / float(params.thrust_authority[2])
+
+
+# How closely a six_dof thruster must reproduce its 3-DOF allocation column (N per N, N m
+# per N): positions in mm and directions to 4 decimals, far coarser than round-off.
+THRUSTER_LAYOUT_TOL = 1e-3
 
 
 # Singular values below this fraction of the largest count as zero in the allocation rank:
