@@ -187,6 +187,8 @@ def _inline_jmse(**changes) -> dict:
         (("reference={type: paper-oval}",), "reference.depth"),
         (("plant.scale={Iz_rb: 0.75}",), "plant.scale"),
         (("depth_controller.sample_time=0.1",), "depth_controller.sample_time"),
+        (("initial_depth_m=-5",), "initial_depth_m"),  # above the surface
+        (("water_depth_m=1.8",), "reference.depth"),  # the track dives to 2 m
     ],
 )
 def test_scenarios_the_6dof_plant_cannot_run_are_one_line_errors(

@@ -148,7 +148,9 @@ class HelixConfig(StrictModel):
     )
     start_depth_m: float = Field(1.0, description="Depth below the surface at t = 0, m.")
     direction: Literal["ccw", "cw"] = Field(
-        "ccw", description="Direction of travel seen from above with x north, y east."
+        "ccw",
+        description="ccw: heading increasing (x towards y); seen from above in NED (x north, "
+        "y east) that is clockwise.",
     )
     start_angle_deg: float = Field(
         0.0, description="Angle of the start point seen from the axis, deg from world +x."

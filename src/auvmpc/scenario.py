@@ -119,7 +119,12 @@ def check_whole_samples(duration: float, sample_time: float, error=ConfigError) 
     """Raise ``error`` on ``duration`` unless it is a whole number of samples."""
     steps = duration / sample_time
     if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-        raise error("duration", duration, f"not a whole number of samples of {sample_time} s")
+        raise error(
+            "duration",
+            duration,
+            f"not a whole number of samples of {sample_time} s (controller.sample_time; "
+            "chosen for the vehicle when omitted)",
+        )
 
 
 class SixDofDisturbanceConfig(StrictModel):
@@ -137,7 +142,11 @@ class SixDofSensingConfig(SensorNoiseConfig):
     horizontal state as in horizontal scenarios, plus the depth and its rate."""
 
     depth_std_m: NonNegative = Field(default=0.0, description="depth noise (m)")
-    depth_rate_std_m_per_s: NonNegative = Field(default=0.0, description="depth-rate noise (m/s)")
+    depth_rate_std_m_per_s: NonNegative = Field(
+        default=0.0,
+        description="depth-rate noise (m/s); the depth MPC's filter estimates the rate from "
+        "the measured depth and does not read this measurement yet",
+    )
 
 
 class SixDofScenario(Scenario):
@@ -293,6 +302,21 @@ class ResolvedSixDofScenario(ResolvedScenario):
         initial_depth = given.initial_depth_m
         if initial_depth is None:
             initial_depth = float(self.reference.depths([0.0])[0, 0])
+        bottom = given.water_depth_m
+        if not 0.0 < initial_depth < bottom:
+            raise ConfigError(
+                "initial_depth_m", initial_depth, f"not in the water (0 to {bottom} m below)"
+            )
+        # The reference over the run, at the controller's samples or finer: one out of the
+        # water cannot be tracked and is no test of a controller.
+        times = np.linspace(0.0, scenario.duration, max(2, int(scenario.duration / 0.1) + 1))
+        path_depths = self.reference.depths(times)[:, 0]
+        if path_depths.min() <= 0.0 or path_depths.max() >= bottom:
+            raise ConfigError(
+                "reference.depth",
+                [round(float(path_depths.min()), 3), round(float(path_depths.max()), 3)],
+                f"the reference leaves the water (0 to water_depth_m {bottom} m below)",
+            )
         plant_step = given.plant.max_step or plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
         sample_time = self.scenario.controller.sample_time  # chosen for the vehicle if omitted
         depth_controller = given.depth_controller
