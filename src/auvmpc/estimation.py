@@ -33,6 +33,7 @@ from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "AugmentedEkf",
+    "ConstantVelocityKalman",
     "DisturbanceObserver",
     "ObserverConfig",
     "condition_covariance",
@@ -268,3 +269,62 @@ class DisturbanceObserver:
     def predict(self, applied_thrust: np.ndarray) -> None:
         """Propagate the estimate over one sample with the thrust actually applied."""
         self._filter.predict(applied_thrust)
+
+
+# Smallest measurement variance the obstacle tracker uses (m^2): a noise-free sensor still
+# leaves the innovation covariance invertible.
+_MIN_MEASUREMENT_VARIANCE_M2 = 1e-12
+
+
+class ConstantVelocityKalman:
+    """Kalman filter on an obstacle's world [x, y, vx, vy] from position measurements.
+
+    Constant velocity driven by white acceleration noise of spectral density ``q``
+    (m^2/s^3): over dt, F = [[I, dt I], [0, I]] and Q = q [[dt^3/3 I, dt^2/2 I],
+    [dt^2/2 I, dt I]] (Bar-Shalom, Li, Kirubarajan 2001, sec. 6.2.2). Started at the
+    first measurement with zero velocity of standard deviation ``initial_speed_std``;
+    updates in Joseph form. ``predict`` moves the filter to a later time, ``correct``
+    applies a measurement there, ``predicted`` reads the estimate at a later time
+    without changing the filter (coasting).
+    """
+
+    def __init__(
+        self,
+        position: np.ndarray,
+        t: float,
+        position_std: float,
+        initial_speed_std: float,
+        acceleration_psd: float,
+    ) -> None:
+        self.t = float(t)
+        self.mean = np.concatenate([np.asarray(position, dtype=float), np.zeros(2)])
+        self.R = max(position_std**2, _MIN_MEASUREMENT_VARIANCE_M2) * np.eye(2)
+        self.covariance = np.diag([self.R[0, 0], self.R[1, 1], *(2 * [initial_speed_std**2])])
+        self.q = float(acceleration_psd)
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        F = np.eye(4)
+        F[0, 2] = F[1, 3] = dt
+        blocks = self.q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        return F, np.kron(blocks, np.eye(2))
+
+    def predicted(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(mean (4,), covariance (4, 4)) at ``t`` >= the filter's time, filter unchanged."""
+        F, Q = self._transition(t - self.t)
+        return F @ self.mean, F @ self.covariance @ F.T + Q
+
+    def predict(self, t: float) -> None:
+        """Move the filter to time ``t`` (s)."""
+        self.mean, self.covariance = self.predicted(t)
+        self.t = float(t)
+
+    def correct(self, position: np.ndarray) -> None:
+        """Apply a measured position (2,) at the filter's time."""
+        H = np.eye(2, 4)
+        innovation = np.asarray(position, dtype=float) - H @ self.mean
+        S = H @ self.covariance @ H.T + self.R
+        K = np.linalg.solve(S, H @ self.covariance).T
+        self.mean = self.mean + K @ innovation
+        joseph = np.eye(4) - K @ H
+        P = joseph @ self.covariance @ joseph.T + K @ self.R @ K.T
+        self.covariance = 0.5 * (P + P.T)

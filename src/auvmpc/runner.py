@@ -17,6 +17,7 @@ from auvmpc.controllers.base import Controller
 from auvmpc.controllers.registry import build_controller
 from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.outputs import OutputKind, atomic_write_text, staged_folder
 from auvmpc.provenance import Stopwatch
@@ -189,7 +190,8 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
     if isinstance(resolved, ResolvedSixDofScenario):
         return _simulate_six_dof(resolved, step, stopwatch, warnings, libraries)
     scenario = resolved.scenario
-    disturbance_seed, sensor_seed = np.random.SeedSequence(scenario.seed).spawn(2)
+    # Child 2 (the obstacle sensor's) leaves children 0 and 1 as they were before it.
+    disturbance_seed, sensor_seed, obstacle_seed = np.random.SeedSequence(scenario.seed).spawn(3)
     sample_time = scenario.controller.sample_time
     initial_thrust = scenario.initial_thrust
     # One BLAS thread: a controller step works on small matrices, where a second thread only
@@ -210,13 +212,20 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
             ),
             sensor=SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed)),
             obstacles=scenario.obstacles,
+            perception=None
+            if scenario.obstacle_sensor is None
+            else ObstaclePerception(
+                scenario.obstacle_sensor, scenario.obstacles, np.random.default_rng(obstacle_seed)
+            ),
             vehicle_radius=scenario.controller.vehicle_radius,
             max_plant_step=scenario.plant.max_step,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             on_step=step,
         )
     _check_finite(log.state, scenario)
-    metrics = compute_metrics(log, resolved.model, scenario.transient_s)
+    metrics = compute_metrics(
+        log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
+    )
     return RunResult(
         resolved, log, metrics, provenance=stopwatch.record(libraries), warnings=warnings
     )
@@ -229,14 +238,16 @@ def _simulate_six_dof(
 
     Random streams: children 0 and 1 of the scenario seed are the current's and the horizontal
     sensor's, as in a horizontal scenario (so its planar twin sees the same draws); child 2 is
-    the depth sensor's."""
+    the depth sensor's, child 3 the obstacle sensor's."""
     from auvmpc.controllers.depth_mpc import DepthMpc
     from auvmpc.depth import resolve_heave
     from auvmpc.environment.currents import WaterCurrent
     from auvmpc.sim.six_dof_loop import closed_loop_six_dof
 
     scenario = resolved.scenario
-    current_seed, sensor_seed, depth_seed = np.random.SeedSequence(scenario.seed).spawn(3)
+    current_seed, sensor_seed, depth_seed, obstacle_seed = np.random.SeedSequence(
+        scenario.seed
+    ).spawn(4)
     sample_time = scenario.controller.sample_time
     controller = make_controller(scenario, resolved.model)
     warnings = [*warnings, *getattr(controller, "build_warnings", ())]
@@ -266,11 +277,18 @@ def _simulate_six_dof(
             max_plant_step=scenario.plant.max_step,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             obstacles=scenario.obstacles,
+            perception=None
+            if scenario.obstacle_sensor is None
+            else ObstaclePerception(
+                scenario.obstacle_sensor, scenario.obstacles, np.random.default_rng(obstacle_seed)
+            ),
             vehicle_radius=scenario.controller.vehicle_radius,
             on_step=step,
         )
     _check_finite(log.full_state, scenario)
-    metrics = compute_six_dof_metrics(log, resolved.model, scenario.transient_s)
+    metrics = compute_six_dof_metrics(
+        log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
+    )
     return SixDofRunResult(
         resolved,
         log,

@@ -29,6 +29,7 @@ from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.depth import DepthControllerConfig, DepthScenario, resolve_heave
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
+from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.models.six_dof import plant_step_length
@@ -101,6 +102,11 @@ class Scenario(StrictModel):
         default=None, description="F(-1) per thruster (N); zeros if omitted"
     )
     obstacles: tuple[ObstacleConfig, ...] = Field(default=())
+    obstacle_sensor: ObstacleSensorConfig | None = Field(
+        default=None,
+        description="how the controller perceives the obstacles (range sensor and a "
+        "constant-velocity tracker each); omitted: it knows their position and velocity",
+    )
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
     seed: Annotated[int, Field(ge=0)] = Field(default=0, description="master random seed")
     transient_s: NonNegative = Field(

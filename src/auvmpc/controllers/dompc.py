@@ -258,7 +258,8 @@ class DoMpcController(ShelledController):
             slots = np.tile([_PARKED_OBSTACLE_M, _PARKED_OBSTACLE_M, 0.0], (ny + 1, self._slots, 1))
             times = np.arange(ny + 1) * self.sample_time
             for slot, obstacle in enumerate(observation.obstacles):
-                slots[:, slot, :2] = obstacle.center + np.outer(times, obstacle.velocity)
-                slots[:, slot, 2] = obstacle.radius + self._reach_extra
+                centres, radii = obstacle.predict(times)
+                slots[:, slot, :2] = centres
+                slots[:, slot, 2] = radii + self._reach_extra
             values[self._tvp_index["obstacles"]] = slots.reshape(ny + 1, -1)
         self._tvp.master = ca.DM(values)

@@ -142,7 +142,8 @@ class LinearMpc(IncrementalMpc):
         disc on the path would otherwise stop the vehicle in front of it).
         """
         steps = np.arange(1, self.horizon + 1)
-        centres = obstacle.center + np.outer(steps * self.sample_time, obstacle.velocity)
+        # Step n against the obstacle predicted at t + n Te, with that step's keep-out radius.
+        centres, radii = obstacle.predict(steps * self.sample_time)
         radial = nominal[1:, :2] - centres
         heading = reference[1:, 2]
         tangent = np.column_stack([np.cos(heading), np.sin(heading)])
@@ -151,7 +152,7 @@ class LinearMpc(IncrementalMpc):
         side_sign = np.sign(left[closest] @ radial[closest]) or 1.0
         side = side_sign * left
         normals = _clamp_towards(radial, side, _MAX_NORMAL_ANGLE_FROM_SIDE)
-        reach = obstacle.radius + self.ocp.keep_out_extra
+        reach = radii + self.ocp.keep_out_extra
         offsets = np.einsum("nk,nk->n", normals, centres) + reach
         return normals, offsets
 

@@ -1,4 +1,17 @@
-"""Circular keep-out zones that may appear, move at constant velocity, and vanish."""
+"""Circular keep-out zones that may appear, move, and vanish.
+
+Motion, one of (the fields of the others left at their defaults):
+
+* constant velocity: ``velocity`` (m/s), the centre at ``center + velocity t``;
+* constant turn: ``velocity`` at t = 0 turned at ``turn_rate`` (rad/s, anticlockwise),
+  the centre on a circle of radius |velocity| / turn_rate;
+* waypoints: from ``center`` through ``waypoints`` at ``speed`` (m/s) along the straight
+  legs, then held at the last waypoint.
+
+Motion time counts from ``at_time`` (default 0), whatever ``appear_time`` is: ``center`` is
+where the obstacle is at t = ``at_time`` (a campaign can so sample when an obstacle crosses a
+point of the track without moving the point).
+"""
 
 from __future__ import annotations
 
@@ -19,13 +32,27 @@ __all__ = ["ObstacleConfig", "visible_obstacles", "clearance"]
 class ObstacleConfig(StrictModel):
     """A disc obstacle; ``center`` is where it is at t = 0."""
 
-    center: tuple[float, float] = Field(description="world position at t = 0 (m)")
+    center: tuple[float, float] = Field(description="world position at t = at_time (m)")
     radius: Annotated[float, Field(gt=0)] = Field(description="m")
     velocity: tuple[float, float] = Field(default=(0.0, 0.0), description="world velocity (m/s)")
     appear_time: Annotated[float, Field(ge=0)] = Field(
         default=0.0, description="first time it exists (s)"
     )
     vanish_time: float | None = Field(default=None, description="time it stops existing (s)")
+    at_time: float = Field(
+        default=0.0, description="time at which the obstacle is at ``center`` (s)"
+    )
+    turn_rate: float = Field(
+        default=0.0,
+        description="rate at which ``velocity`` turns (rad/s, anticlockwise): a constant turn",
+    )
+    waypoints: tuple[tuple[float, float], ...] = Field(
+        default=(),
+        description="world points visited after ``center`` at ``speed``, the last one held (m)",
+    )
+    speed: Annotated[float, Field(gt=0)] | None = Field(
+        default=None, description="speed along ``waypoints`` (m/s); only with waypoints"
+    )
 
     @model_validator(mode="after")
     def _ordered_times(self) -> ObstacleConfig:
@@ -35,17 +62,64 @@ class ObstacleConfig(StrictModel):
             )
         return self
 
+    @model_validator(mode="after")
+    def _one_motion(self) -> ObstacleConfig:
+        if self.waypoints and self.speed is None:
+            raise FieldError("speed", None, "waypoints need a speed (m/s)")
+        if self.speed is not None and not self.waypoints:
+            raise FieldError("speed", self.speed, "only meaningful with waypoints")
+        if self.waypoints and (self.velocity != (0.0, 0.0) or self.turn_rate != 0.0):
+            raise FieldError(
+                "waypoints", self.waypoints, "give either waypoints or velocity/turn_rate"
+            )
+        return self
+
     def exists_at(self, t: float) -> bool:
         return self.appear_time <= t and (self.vanish_time is None or t < self.vanish_time)
 
     def center_at(self, t: float) -> np.ndarray:
-        return np.array(self.center) + np.array(self.velocity) * t
+        """World centre at time t (m)."""
+        t = t - self.at_time
+        if self.waypoints:
+            return self._along_waypoints(t)[0]
+        if self.turn_rate == 0.0:
+            return np.array(self.center) + np.array(self.velocity) * t
+        w = self.turn_rate
+        s, c = math.sin(w * t), math.cos(w * t)
+        # Integral of R(w tau) v0 over [0, t] (R: rotation by w tau).
+        travelled = np.array([[s, c - 1.0], [1.0 - c, s]]) / w @ np.array(self.velocity)
+        return np.array(self.center) + travelled
+
+    def velocity_at(self, t: float) -> np.ndarray:
+        """World velocity at time t (m/s)."""
+        t = t - self.at_time
+        if self.waypoints:
+            return self._along_waypoints(t)[1]
+        if self.turn_rate == 0.0:
+            return np.array(self.velocity)
+        s, c = math.sin(self.turn_rate * t), math.cos(self.turn_rate * t)
+        return np.array([[c, -s], [s, c]]) @ np.array(self.velocity)
+
+    def _along_waypoints(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position and velocity ``t`` seconds after leaving ``center`` (held there before)."""
+        points = np.array([self.center, *self.waypoints], dtype=float)
+        remaining = max(t, 0.0) * self.speed
+        for start, end in zip(points[:-1], points[1:], strict=True):
+            leg = end - start
+            length = float(np.hypot(*leg))
+            if length == 0.0:
+                continue
+            if remaining < length:
+                direction = leg / length
+                return start + remaining * direction, self.speed * direction
+            remaining -= length
+        return points[-1], np.zeros(2)
 
 
 def visible_obstacles(obstacles: Sequence[ObstacleConfig], t: float) -> tuple[ObstacleState, ...]:
     """The obstacles that exist at t, as the controller sees them."""
     return tuple(
-        ObstacleState(center=o.center_at(t), radius=o.radius, velocity=np.array(o.velocity))
+        ObstacleState(center=o.center_at(t), radius=o.radius, velocity=o.velocity_at(t))
         for o in obstacles
         if o.exists_at(t)
     )

@@ -10,6 +10,7 @@ import numpy as np
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
@@ -43,6 +44,7 @@ def closed_loop(
     disturbance: WorldDisturbance,
     sensor: SensorNoise,
     obstacles: Sequence[ObstacleConfig] = (),
+    perception: ObstaclePerception | None = None,
     vehicle_radius: float = 0.0,
     max_plant_step: float = 0.05,
     initial_thrust: np.ndarray | None = None,
@@ -54,6 +56,8 @@ def closed_loop(
     its command is applied unaltered and held until the next sample, so the log
     shows the controller's mistakes rather than hiding them. The plant is
     integrated with RK4 at steps no longer than ``max_plant_step`` (sim/plant.py).
+    The controller knows the existing ``obstacles`` exactly, unless ``perception`` (a
+    sensor and its trackers over the same obstacles) says what it perceives of them.
     """
     sample_time = controller.sample_time
     steps = int(round(duration / sample_time))
@@ -82,7 +86,9 @@ def closed_loop(
             t=t,
             state=sensor.measure(state),
             reference=reference.states(t + preview_offsets),
-            obstacles=visible_obstacles(obstacles, t),
+            obstacles=visible_obstacles(obstacles, t)
+            if perception is None
+            else perception.observe(t, state[:2]),
         )
         result, thrust, log.solve_ms[k] = timed_command(controller, observation, n_thrusters)
         log.thrust[k] = thrust

@@ -16,11 +16,19 @@ __all__ = [
     "compute_six_dof_metrics",
     "position_error",
     "heading_error",
+    "path_length",
+    "time_lost",
     "LIMIT_TOLERANCE_N",
+    "MARGIN_TOLERANCE_M",
 ]
 
 # Slack for float round-off when checking hard limits: far below any physical meaning.
 LIMIT_TOLERANCE_N = 1e-9
+# A vehicle riding on its obstacle margin is not inside it (m): the constraints hold at the
+# samples, and the plant drifts ~1 mm past them in between (measured on the encounters).
+MARGIN_TOLERANCE_M = 0.01
+# The reference is "not moving" below this speed (m/s): no along-track direction to lag on.
+_MIN_REFERENCE_SPEED_M_PER_S = 0.01
 
 
 def position_error(log: SimLog) -> np.ndarray:
@@ -44,9 +52,16 @@ def thrust_increments(log: SimLog) -> np.ndarray:
 
 
 def compute_metrics(
-    log: SimLog, limits: VehicleParams, transient_s: float = 20.0
+    log: SimLog,
+    limits: VehicleParams,
+    transient_s: float = 20.0,
+    obstacle_margin_m: float = 0.0,
 ) -> dict[str, float | int | str | None]:
     """All interfaces.md metrics, plus steady-state errors after ``transient_s``.
+
+    ``obstacle_margin_m`` is the clearance the controller was asked to keep beyond the
+    vehicle disc (``controller.obstacle_margin``): ``time_inside_margin_s`` counts the
+    samples closer than that to an obstacle.
 
     ``limits`` supplies the hard thrust and rate limits the log is checked against
     (the controller's nominal vehicle: the limits are the hardware's) and the vehicle
@@ -82,6 +97,13 @@ def compute_metrics(
         "min_obstacle_clearance_m": float(clearance.min())
         if np.isfinite(clearance).any()
         else None,
+        "time_inside_margin_s": float(
+            np.sum(clearance < obstacle_margin_m - MARGIN_TOLERANCE_M) * log.sample_time
+        )
+        if np.isfinite(clearance).any()
+        else None,
+        "detour_m": path_length(log.state[:, :2]) - path_length(log.reference[:, :2]),
+        "time_lost_s": time_lost(log),
         "solve_ms_median": _percentile(solve, 50),
         "solve_ms_p99": _percentile(solve, 99),
         "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
@@ -120,6 +142,33 @@ def compute_metrics(
     return metrics
 
 
+def path_length(points: np.ndarray) -> float:
+    """Length of the polyline through ``points`` (N+1, 2) (m)."""
+    return float(np.sum(np.hypot(*np.diff(points, axis=0).T)))
+
+
+def time_lost(log: SimLog) -> float:
+    """Largest along-track lag behind the reference, in seconds of the reference's own
+    speed (s); 0 when never behind or when the reference does not move.
+
+    The lag at sample k is (p_ref - p) . t_ref, t_ref the reference's unit velocity; it is
+    divided by the reference speed there (samples slower than 1 cm/s are left out).
+    """
+    reference = log.reference
+    velocity = np.column_stack(
+        [
+            np.cos(reference[:, 2]) * reference[:, 3] - np.sin(reference[:, 2]) * reference[:, 4],
+            np.sin(reference[:, 2]) * reference[:, 3] + np.cos(reference[:, 2]) * reference[:, 4],
+        ]
+    )
+    speed = np.hypot(*velocity.T)
+    moving = speed > _MIN_REFERENCE_SPEED_M_PER_S
+    if not moving.any():
+        return 0.0
+    lag = np.einsum("nk,nk->n", reference[moving, :2] - log.state[moving, :2], velocity[moving])
+    return float(max(0.0, np.max(lag / speed[moving] ** 2)))
+
+
 def longest_run(flags: np.ndarray) -> int:
     """Length of the longest stretch of consecutive True values."""
     longest = current = 0
@@ -144,7 +193,7 @@ DEGRADED_TILT_RAD = math.radians(30.0)
 
 
 def compute_six_dof_metrics(
-    log, limits: VehicleParams, transient_s: float = 20.0
+    log, limits: VehicleParams, transient_s: float = 20.0, obstacle_margin_m: float = 0.0
 ) -> dict[str, float | int | str | None]:
     """:func:`compute_metrics` of the horizontal part, then every thruster's limits (vertical
     ones against the ``heave`` section's), depth, roll and pitch.
@@ -157,7 +206,7 @@ def compute_six_dof_metrics(
     """
     from auvmpc.sim.six_dof_loop import ThrustMapping
 
-    metrics = compute_metrics(log.horizontal(), limits, transient_s)
+    metrics = compute_metrics(log.horizontal(), limits, transient_s, obstacle_margin_m)
     mapping = ThrustMapping(limits, log.sample_time)
     increments = thrust_increments(log)
     force = (log.thrust < mapping.lower - LIMIT_TOLERANCE_N) | (

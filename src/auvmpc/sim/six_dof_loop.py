@@ -32,6 +32,7 @@ import numpy as np
 from auvmpc.controllers.base import Controller, Observation
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.disturbances import SensorNoise
+from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import clearance, visible_obstacles
 from auvmpc.models.six_dof import check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.references import Reference
@@ -222,6 +223,7 @@ def closed_loop_six_dof(
     max_plant_step: float,
     initial_thrust: np.ndarray | None = None,
     obstacles=(),
+    perception: ObstaclePerception | None = None,
     vehicle_radius: float = 0.0,
     on_step: Callable[[int, int], None] | None = None,
 ) -> SixDofLog:
@@ -279,7 +281,9 @@ def closed_loop_six_dof(
             t=t,
             state=sensor.measure(horizontal_state(state)),
             reference=reference.states(t + preview),
-            obstacles=visible_obstacles(obstacles, t),
+            obstacles=visible_obstacles(obstacles, t)
+            if perception is None
+            else perception.observe(t, state[:2]),
         )
         result, horizontal, log.solve_ms[k] = timed_command(controller, observation, n)
 

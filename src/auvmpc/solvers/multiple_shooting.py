@@ -219,8 +219,17 @@ class MultipleShootingProgram:
         used = np.zeros(self.n_slots, dtype=bool)
         nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[:2]))
         extra = self.ocp.keep_out_extra
+        steps = self.sample_time * np.arange(1, self.horizon + 1)
         for o, obstacle in enumerate(nearest[: self.n_slots]):
-            slots[o] = [*obstacle.center, *obstacle.velocity, obstacle.radius + extra]
+            # A slot holds one radius for the whole horizon: a tracked obstacle's is its
+            # largest predicted one (the horizon's end; a per-step radius would need a slot
+            # field, which changes the compiled QP layout).
+            radius = (
+                obstacle.radius
+                if obstacle.covariance is None
+                else float(obstacle.predict(steps)[1].max())
+            )
+            slots[o] = [*obstacle.center, *obstacle.velocity, radius + extra]
             used[o] = True
         return Sample(state, previous, reference, disturbance, slots, used)
 
