@@ -212,11 +212,7 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
             ),
             sensor=SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed)),
             obstacles=scenario.obstacles,
-            perception=None
-            if scenario.obstacle_sensor is None
-            else ObstaclePerception(
-                scenario.obstacle_sensor, scenario.obstacles, np.random.default_rng(obstacle_seed)
-            ),
+            perception=_perception(scenario, obstacle_seed),
             vehicle_radius=scenario.controller.vehicle_radius,
             max_plant_step=scenario.plant.max_step,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
@@ -277,11 +273,7 @@ def _simulate_six_dof(
             max_plant_step=scenario.plant.max_step,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             obstacles=scenario.obstacles,
-            perception=None
-            if scenario.obstacle_sensor is None
-            else ObstaclePerception(
-                scenario.obstacle_sensor, scenario.obstacles, np.random.default_rng(obstacle_seed)
-            ),
+            perception=_perception(scenario, obstacle_seed),
             vehicle_radius=scenario.controller.vehicle_radius,
             on_step=step,
         )
@@ -428,6 +420,16 @@ def _initial_thrust(info: dict[str, Any], model: VehicleParams) -> np.ndarray:
     if given is not None:
         total[: len(given)] = given
     return total
+
+
+def _perception(scenario: Scenario, seed) -> ObstaclePerception | None:
+    """What the controller knows of the obstacles: through the scenario's obstacle sensor
+    and trackers, or (no sensor) exactly."""
+    if scenario.obstacle_sensor is None:
+        return None
+    return ObstaclePerception(
+        scenario.obstacle_sensor, scenario.obstacles, np.random.default_rng(seed)
+    )
 
 
 def read_planar_run(
