@@ -166,7 +166,7 @@ def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path,
 def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
     monkeypatch.setenv("AUVMPC_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(native, "_CACHE_LIMIT", 2)
-    old = [tmp_path / f"rti-old{i}.so" for i in range(3)]
+    old = [tmp_path / f"rti-{i:024x}.so" for i in range(3)]  # named as auvmpc names them
     for age, library in enumerate(old):
         library.write_bytes(b"")
         os.utime(library, (1e9 + age, 1e9 + age))
@@ -174,7 +174,7 @@ def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch)
     mine.write_text("not auvmpc's")
     assert SparseRealTimeIteration(_program("jmse2210", ThrustPenalty.ABSOLUTE, 1)).compiled
     kept = sorted(p.name for p in tmp_path.glob("rti-*.so"))
-    assert len(kept) == 2 and "rti-old2.so" in kept, "the newest old one and the new one"
+    assert len(kept) == 2 and old[2].name in kept, "the newest old one and the new one"
     assert mine.read_text() == "not auvmpc's"
 
 
@@ -186,3 +186,20 @@ def test_a_run_without_a_compiler_says_it_took_the_slower_path(monkeypatch):
     run = simulate(load_scenario("paper-ideal", every_move_free, controller="nmpc"))
     assert any("no C compiler" in warning for warning in run.warnings)
     assert run.metrics["fallback_steps"] == 0
+
+
+def test_cache_pruning_deletes_only_libraries_auvmpc_named(tmp_path):
+    """Beyond the cache limit the least recently used libraries go; a user's file that
+    merely starts like one (kind-something.so) stays."""
+    import auvmpc.native as native
+
+    user = tmp_path / "rti-mine.so"
+    user.write_text("not ours")
+    ours = [tmp_path / f"rti-{i:024x}.so" for i in range(native._CACHE_LIMIT + 3)]
+    for age, path in enumerate(ours):
+        path.write_text("")
+        os.utime(path, (age, age))
+    native._prune(tmp_path, "rti")
+    assert user.exists()
+    assert sum(path.exists() for path in ours) == native._CACHE_LIMIT
+    assert not ours[0].exists()  # the oldest went

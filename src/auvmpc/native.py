@@ -20,6 +20,7 @@ import ctypes
 import functools
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -39,6 +40,7 @@ FLAGS = ("-O2", "-fPIC", "-shared", "-Wl,-Bsymbolic")
 # Libraries of one kind kept in the cache folder, the least recently used dropped beyond it:
 # one is 0.1-0.2 MB and a sweep over random vehicles builds one per vehicle.
 _CACHE_LIMIT = 256
+_HASH_DIGITS = 24  # of the configuration's hash in a library's name
 
 
 @functools.cache
@@ -86,7 +88,7 @@ def shared_library(
         " ".join(FLAGS).encode(),
     ):
         digest.update(part)
-    name = f"{kind}-{digest.hexdigest()[:24]}.so"
+    name = f"{kind}-{digest.hexdigest()[:_HASH_DIGITS]}.so"
     with tempfile.TemporaryDirectory(prefix=f"auvmpc-{kind}-") as scratch:
         built = Path(scratch) / name
         command = [cc, *FLAGS, *map(str, sources), *options, "-lm", "-o", str(built)]
@@ -193,6 +195,13 @@ def _prune(folder: Path, kind: str) -> None:
         except FileNotFoundError:
             return 0.0
 
-    libraries = sorted(folder.glob(f"{kind}-*.so"), key=last_use, reverse=True)
+    # Exactly the names shared_library gives (kind, dash, 24 hex digits): a user's own
+    # "kind-something.so" in the same folder is not ours to delete.
+    ours = re.compile(rf"{re.escape(kind)}-[0-9a-f]{{{_HASH_DIGITS}}}\.so")
+    libraries = sorted(
+        (path for path in folder.glob(f"{kind}-*.so") if ours.fullmatch(path.name)),
+        key=last_use,
+        reverse=True,
+    )
     for stale in libraries[_CACHE_LIMIT:]:
         stale.unlink(missing_ok=True)
