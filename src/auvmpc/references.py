@@ -219,12 +219,9 @@ class Waypoints3DConfig(StrictModel):
         return points
 
 
-class PaperOvalConfig(StrictModel):
-    """The paper's semi-oval track (paper-model.md section 5): 100 s, counter-clockwise."""
+class _PlanarPathConfig(StrictModel):
+    """A path in the horizontal plane, which a depth schedule may take down for 6-DOF."""
 
-    type: Literal["paper-oval"] = Field(
-        "paper-oval", description="Reference type: the paper's semi-oval track, fixed geometry."
-    )
     depth: DepthScheduleConfig | None = Field(
         None,
         description=(
@@ -234,7 +231,15 @@ class PaperOvalConfig(StrictModel):
     )
 
 
-class CircleConfig(StrictModel):
+class PaperOvalConfig(_PlanarPathConfig):
+    """The paper's semi-oval track (paper-model.md section 5): 100 s, counter-clockwise."""
+
+    type: Literal["paper-oval"] = Field(
+        "paper-oval", description="Reference type: the paper's semi-oval track, fixed geometry."
+    )
+
+
+class CircleConfig(_PlanarPathConfig):
     """A circle traversed at constant speed."""
 
     type: Literal["circle"] = Field("circle", description="Reference type: circle.")
@@ -247,16 +252,9 @@ class CircleConfig(StrictModel):
     start_angle_deg: float = Field(
         0.0, description="Angle of the start point seen from the center, deg from world +x."
     )
-    depth: DepthScheduleConfig | None = Field(
-        None,
-        description=(
-            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
-            "reference is planar."
-        ),
-    )
 
 
-class FigureEightConfig(StrictModel):
+class FigureEightConfig(_PlanarPathConfig):
     """A lemniscate of Gerono: x = cx + a sin(w t), y = cy + (a/2) sin(2 w t), w = 2 pi/period."""
 
     type: Literal["figure-eight"] = Field("figure-eight", description="Reference type: eight.")
@@ -267,32 +265,18 @@ class FigureEightConfig(StrictModel):
         10.0, gt=0.0, description="Half-width a of the eight along x, m (half-height is a/2)."
     )
     period: float = Field(200.0, gt=0.0, description="Time for one full eight (both loops), s.")
-    depth: DepthScheduleConfig | None = Field(
-        None,
-        description=(
-            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
-            "reference is planar."
-        ),
-    )
 
 
-class LineConfig(StrictModel):
+class LineConfig(_PlanarPathConfig):
     """A straight line at constant speed, defined for all t (also before t = 0)."""
 
     type: Literal["line"] = Field("line", description="Reference type: straight line.")
     start: Point = Field((0.0, 0.0), description="Position [x, y] at t = 0, m.")
     heading_deg: float = Field(0.0, description="Direction of travel, deg from world +x (CCW).")
     speed: float = Field(0.5, gt=0.0, description="Constant speed, m/s.")
-    depth: DepthScheduleConfig | None = Field(
-        None,
-        description=(
-            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
-            "reference is planar."
-        ),
-    )
 
 
-class WaypointsConfig(StrictModel):
+class WaypointsConfig(_PlanarPathConfig):
     """A polyline through waypoints with circular-arc corners, at constant speed."""
 
     type: Literal["waypoints"] = Field("waypoints", description="Reference type: waypoints.")
@@ -311,13 +295,6 @@ class WaypointsConfig(StrictModel):
         description=(
             "Radius of the arc rounding each interior corner, m. Reduced automatically at a "
             "corner whose legs are too short for it."
-        ),
-    )
-    depth: DepthScheduleConfig | None = Field(
-        None,
-        description=(
-            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
-            "reference is planar."
         ),
     )
 
@@ -347,7 +324,7 @@ def _check_legs(points) -> None:
             )
 
 
-class CsvConfig(StrictModel):
+class CsvConfig(_PlanarPathConfig):
     """A track sampled in a CSV file with columns t, x, y, interpolated by a cubic spline."""
 
     type: Literal["csv"] = Field("csv", description="Reference type: track from a CSV file.")
@@ -358,13 +335,6 @@ class CsvConfig(StrictModel):
             "CSV file with header columns t, x, y (s, m, m; other columns ignored), t strictly "
             "increasing and used as simulation time as is, at least 4 rows. A relative path is "
             "relative to the scenario file's folder."
-        ),
-    )
-    depth: DepthScheduleConfig | None = Field(
-        None,
-        description=(
-            "Depth below the surface over time (NED, m), for 6-DOF scenarios; none: the "
-            "reference is planar."
         ),
     )
 

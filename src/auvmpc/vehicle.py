@@ -414,7 +414,8 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, curren
         cos_psi, sin_psi, absolute = ca.cos(psi), ca.sin(psi), ca.fabs
     else:
         tau_u, tau_v, tau_r = params.T @ np.asarray(thrust, dtype=float)
-        cos_psi, sin_psi, absolute = math.cos(psi), math.sin(psi), abs
+        # NumPy's functions: a state of arrays evaluates many states at once.
+        cos_psi, sin_psi, absolute = np.cos(psi), np.sin(psi), np.abs
     if disturbance_body is not None:
         tau_u = tau_u + disturbance_body[0]
         tau_v = tau_v + disturbance_body[1]
@@ -439,7 +440,7 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, curren
     )
     if symbolic:
         return ca.vertcat(*derivative)
-    return np.array(derivative, dtype=float)
+    return np.array(np.broadcast_arrays(*derivative), dtype=float)
 
 
 def _cos(angle):

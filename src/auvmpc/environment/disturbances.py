@@ -102,7 +102,9 @@ class WorldDisturbance:
         self._wave_phase = 0.0
         if config.waves is not None:
             self._wave_phase = float(rng.uniform(0.0, 2.0 * math.pi))
-        # Drawn after the force parts, so that adding a water current leaves their bits alone.
+        # Drawn after the force parts' first draws, so that a scenario without a water current
+        # keeps its bits. (With a varying water current the later force draws interleave with
+        # the current's on this generator.)
         self._water = (
             None
             if config.water_current is None
@@ -138,15 +140,7 @@ class WorldDisturbance:
 
     def force_world(self, t: float) -> np.ndarray:
         """World-frame ``[X, Y, N]`` at time t within the current sample."""
-        force = self._mean + self._variation
-        waves = self.config.waves
-        if waves is not None and waves.amplitude_N > 0:
-            angle = math.radians(waves.direction_deg)
-            magnitude = waves.amplitude_N * math.sin(
-                2.0 * math.pi * t / waves.period_s + self._wave_phase
-            )
-            force = force + magnitude * np.array([math.cos(angle), math.sin(angle), 0.0])
-        return force
+        return self.forces_world(np.array([t]))[0]
 
     def forces_world(self, times: np.ndarray) -> np.ndarray:
         """(len(times), 3): :meth:`force_world` at each time within the current sample."""

@@ -42,6 +42,7 @@ import numpy as np
 
 from auvmpc.integrators import rk4, rk4_step_time_varying
 from auvmpc.models.discrete import StateLayout
+from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.vehicle import VehicleParams, stable_plant_step, steady_speed
 
 __all__ = [
@@ -74,6 +75,13 @@ PITCH_LIMIT_RAD = math.radians(85.0)
 
 class PitchSingularity(ArithmeticError):
     """The Euler-angle kinematics were asked for |theta| beyond PITCH_LIMIT_RAD."""
+
+
+def six_dof_section(params: VehicleParams) -> SixDofParams:
+    """The vehicle's six_dof section; ValueError naming the vehicle if it has none."""
+    if params.six_dof is None:
+        raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+    return params.six_dof
 
 
 def _skew(a):
@@ -111,7 +119,7 @@ def Tzyx(phi, theta):
 
 def coriolis_rigid_body(mass: float, inertia: np.ndarray, r_g: np.ndarray, omega):
     """C_RB(nu), the linear-velocity-independent form (eq. 3.56): depends on omega only."""
-    S_omega, S_rg = _skew(omega), ca.DM(_numeric_skew(r_g))
+    S_omega, S_rg = _skew(omega), ca.DM(skew(r_g))
     upper = ca.horzcat(mass * S_omega, -mass * ca.mtimes(S_omega, S_rg))
     lower = ca.horzcat(mass * ca.mtimes(S_rg, S_omega), -_skew(ca.mtimes(ca.DM(inertia), omega)))
     return ca.vertcat(upper, lower)
@@ -141,10 +149,6 @@ def restoring_forces(weight: float, buoyancy: float, r_g, r_b, phi, theta):
         (z_g * W - z_b * B) * sth + (x_g * W - x_b * B) * cth * cphi,
         -(x_g * W - x_b * B) * cth * sphi - (y_g * W - y_b * B) * sth,
     )
-
-
-def _numeric_skew(a) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def dynamics(state, thrust, params: VehicleParams, current_world=None, current_rate_world=None):
@@ -181,9 +185,7 @@ def _entries(vector):
 
 
 def _expression(params: VehicleParams, state, thrust, current_world, current_rate_world):
-    six = params.six_dof
-    if six is None:
-        raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+    six = six_dof_section(params)
     r_g = np.array(six.center_of_gravity, dtype=float)
     r_b = np.array(six.center_of_buoyancy, dtype=float)
     phi, theta, psi = state[3], state[4], state[5]
@@ -232,8 +234,7 @@ class SixDofModel:
     layout = SIX_DOF
 
     def __init__(self, params: VehicleParams) -> None:
-        if params.six_dof is None:
-            raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+        six_dof_section(params)
         self.params = params
         self.n_thrusters = params.six_dof.n_thrusters
         state, thrust = ca.SX.sym("x", NX), ca.SX.sym("F", self.n_thrusters)
@@ -303,9 +304,7 @@ def plant_step_length(params: VehicleParams, longest: float) -> float:
     6-DOF model's fastest rate: the modes at rest (roll and pitch oscillations, linear
     damping) and the damping of surge, sway, heave and yaw at the speed their full thrust
     authority reaches. (Roll and pitch never reach theirs: the restoring moment holds them.)"""
-    six = params.six_dof
-    if six is None:
-        raise ValueError(f"vehicle {params.name!r} has no six_dof section")
+    six = six_dof_section(params)
     model = six_dof_model(params)
     x = ca.SX.sym("x", NX)
     jacobian = ca.Function(

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from auvmpc.vehicle import VehicleParams, top_yaw_rate
+from auvmpc.vehicle import VehicleParams, body_from_world, dynamics, top_yaw_rate
 
 __all__ = ["CRAB_TURN_FRACTION", "crab_reference"]
 
@@ -95,23 +95,23 @@ def _wrapped(angle: float) -> float:
 
 def _missing_force(model, missing, heading, velocity, acceleration, r, r_dot, disturbance):
     """The component along ``missing`` of the body force and moment the motion needs at
-    each candidate ``heading`` (the model of auvmpc.vehicle.dynamics solved for tau)."""
-    p = model
+    each candidate ``heading``: the model's inertia times the acceleration the path needs
+    less the one auvmpc.vehicle.dynamics gives without thrust."""
     cos_h, sin_h = np.cos(heading), np.sin(heading)
     vx, vy = velocity[:, 0:1], velocity[:, 1:2]
     ax, ay = acceleration[:, 0:1], acceleration[:, 1:2]
-    r, r_dot = r[:, None], r_dot[:, None]
+    r = np.broadcast_to(r[:, None], heading.shape)
     u = vx * cos_h + vy * sin_h
     v = -vx * sin_h + vy * cos_h
-    u_dot = ax * cos_h + ay * sin_h + r * v
-    v_dot = -ax * sin_h + ay * cos_h - r * u
-    d_u = disturbance[0] * cos_h + disturbance[1] * sin_h
-    d_v = -disturbance[0] * sin_h + disturbance[1] * cos_h
-    tau_u = p.m11 * u_dot - p.Xu * u - p.Xuu * np.abs(u) * u - p.m22 * v * r - d_u
-    tau_v = p.m22 * v_dot - p.Yv * v - p.Yvv * np.abs(v) * v + p.m11 * u * r - d_v
-    tau_r = p.Iz * r_dot - p.Nr * r - p.Nrr * np.abs(r) * r - (p.m11 - p.m22) * u * v
-    tau_r = tau_r - disturbance[2]
-    return missing[0] * tau_u + missing[1] * tau_v + missing[2] * tau_r
+    needed = (ax * cos_h + ay * sin_h + r * v, -ax * sin_h + ay * cos_h - r * u, r_dot[:, None])
+    d_u, d_v = body_from_world(disturbance, heading)
+    unforced = dynamics((0.0, 0.0, heading, u, v, r), np.zeros(model.n_thrusters), model,
+                        (d_u, d_v, disturbance[2]))[3:]  # fmt: skip
+    inertia = (model.m11, model.m22, model.Iz)
+    return sum(
+        weight * mass * (want - have)
+        for weight, mass, want, have in zip(missing, inertia, needed, unforced, strict=True)
+    )
 
 
 def _root_nearest_tangent(residual: np.ndarray) -> np.ndarray:
