@@ -207,21 +207,22 @@ class VehicleParams(StrictModel):
                 f"{self.heave.thruster_count}",
             )
 
-    @property
+    @cached_property  # asked by the controllers every step (ocp/underactuated_reference.py)
     def underactuated(self) -> bool:
         """True when the thrusters cannot make every body-frame force and moment
         (allocation rank < 3), e.g. two stern thrusters: no sway force."""
         return allocation_rank(self.T) < 3
 
-    @property
+    @cached_property
     def unactuated_direction(self) -> np.ndarray | None:
         """Unit [f_u, f_v, M_r] direction no thrust combination can produce (orthogonal to
         the allocation's range), or None for a fully actuated vehicle."""
         if not self.underactuated:
             return None
         left, _, _ = np.linalg.svd(self.T)
-        direction = left[:, -1]
-        return direction * np.sign(direction[np.argmax(np.abs(direction))])
+        direction = left[:, -1] * np.sign(left[np.argmax(np.abs(left[:, -1])), -1])
+        direction.setflags(write=False)
+        return direction
 
     def describe_actuation(self) -> str:
         """'fully actuated', or which direction is missing, e.g. 'underactuated: no sway'."""
