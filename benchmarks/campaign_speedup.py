@@ -28,15 +28,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from auvmpc.bench import machine_info
-from auvmpc.campaign import (
+from auvmpc.experiments.bench import machine_info
+from auvmpc.experiments.campaign import (
     NONDETERMINISTIC_COLUMNS,
     load_campaign,
     load_results,
     run_campaign,
     scenario_for_run,
 )
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
 
 
 def timed_campaign(campaign, runs: int, workers: int, folder: Path):

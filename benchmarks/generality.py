@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
+from auvmpc.experiments.run import simulate
+from auvmpc.models.vehicle import VehicleParams, load_vehicle, preset_names
 from auvmpc.references import FigureEightConfig, make_reference
-from auvmpc.runner import simulate
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
-from auvmpc.vehicle import VehicleParams, load_vehicle, preset_names
 
 SPEED_M_PER_S = 0.3
 DURATION_S = 150.0

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
 from auvmpc.scenario import load_scenario
 from auvmpc.solvers.dense_qp import QpProblem, QpSolver, QpSolverName, make_qp_solver
 

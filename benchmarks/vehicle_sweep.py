@@ -3,7 +3,7 @@
     python benchmarks/vehicle_sweep.py --vehicles 100 --workers 2 \
         [--controllers nmpc ltv-mpc-nc30 nmpc-full default] [--disturbed]
 
-Each vehicle comes from :func:`auvmpc.random_vehicles.random_vehicle` (seeded by its index);
+Each vehicle comes from :func:`auvmpc.models.random_vehicles.random_vehicle` (seeded by its index);
 it follows a circle at 0.3 m/s (radius 4 m, or 4 s m for a vehicle of length scale s > 1)
 starting on the circle, with the scenario defaults and every controller's defaults. The table
 gives per controller the vehicles with at least one fallback step, the worst ones, and the
@@ -26,8 +26,8 @@ from generality import TRANSIENT_S, disturb
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.errors import RunFailed
-from auvmpc.random_vehicles import random_vehicle
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
+from auvmpc.models.random_vehicles import random_vehicle
 from auvmpc.scenario import ResolvedScenario, validate_scenario
 
 SPEED_M_PER_S = 0.3

@@ -35,14 +35,14 @@ PAPER_INITIAL_STATE = (7.5, -12.0, math.pi / 2, 0.4, 0.1, 0.02 * math.pi)
 
 @pytest.fixture
 def jmse():
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     return load_vehicle("jmse2210")
 
 
 @pytest.fixture
 def bluerov():
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     return load_vehicle("bluerov2-heavy")
 

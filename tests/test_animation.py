@@ -10,9 +10,9 @@ import pytest
 from PIL import Image
 
 from auvmpc.animation import AnimationSettings, _Scene, frame_rows
-from auvmpc.runner import read_run, simulate, write_run
+from auvmpc.experiments.run import read_run, simulate, write_run
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import Scenario, load_scenario
-from auvmpc.vehicle import VehicleParams
 from tests.test_cli import run_cli
 
 DURATION_S = 10.0

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from auvmpc.campaign import run_campaign
+from auvmpc.experiments.campaign import run_campaign
 from tests.test_cli import run_cli
 
 

@@ -25,10 +25,10 @@ from auvmpc.environment.disturbances import (
     SensorNoiseConfig,
     WorldDisturbance,
 )
+from auvmpc.models.vehicle import VehicleParams, scaled
 from auvmpc.references import CircleConfig, PaperOvalConfig, make_reference
 from auvmpc.sim.loop import closed_loop
 from auvmpc.sim.metrics import compute_metrics
-from auvmpc.vehicle import VehicleParams, scaled
 from tests.conftest import PAPER_INITIAL_STATE
 
 SAMPLE_TIME = 0.5  # s, the paper's Te

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-import auvmpc.bench as bench
-from auvmpc.bench import (
+import auvmpc.experiments.bench as bench
+from auvmpc.errors import ConfigError
+from auvmpc.experiments.bench import (
     CONTROLLER_PRESETS,
     DEFAULT_CONTROLLERS,
     add_speedups,
@@ -23,7 +24,6 @@ from auvmpc.bench import (
     rows_to_json,
     run_benchmark,
 )
-from auvmpc.errors import ConfigError
 from auvmpc.scenario import ControllerType, load_scenario
 
 # The run metrics interfaces.md promises (a contract: spelled out here, not imported).

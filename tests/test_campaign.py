@@ -20,8 +20,9 @@ import pytest
 import yaml
 
 import auvmpc
-from auvmpc import campaign
-from auvmpc.campaign import (
+from auvmpc.errors import ConfigError
+from auvmpc.experiments import campaign
+from auvmpc.experiments.campaign import (
     NONDETERMINISTIC_COLUMNS,
     load_campaign,
     load_results,
@@ -31,8 +32,7 @@ from auvmpc.campaign import (
     scenario_for_run,
     validate_campaign,
 )
-from auvmpc.errors import ConfigError
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
 from auvmpc.scenario import load_scenario
 
 # A short campaign: 40 s of the paper's disturbed scenario with the paper's MPC (~0.1 s
@@ -407,7 +407,7 @@ def test_sigkill_at_any_moment_then_resume_gives_the_uninterrupted_rows(
     command = [
         sys.executable,
         "-m",
-        "auvmpc.campaign",
+        "auvmpc.experiments.campaign",
         str(small_file),
         "--out",
         str(out),

@@ -39,7 +39,7 @@ def run_cli(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
 
 
 def spec_rhs(plant: dict, thrust: np.ndarray, current: tuple[float, float]):
-    """paper-model.md section 1 written out again, independently of auvmpc.vehicle."""
+    """paper-model.md section 1 written out again, independently of auvmpc.models.vehicle."""
     allocation = np.array(
         [
             [math.cos(math.radians(t["angle_deg"])) for t in plant["thrusters"]],

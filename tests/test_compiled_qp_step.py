@@ -13,10 +13,10 @@ import auvmpc.native as native
 import auvmpc.solvers.compiled_qp_step as compiled_qp_step
 from auvmpc.controllers.base import ObstacleState
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.solvers.hpipm import hpipm_settings
 from auvmpc.solvers.multiple_shooting import MultipleShootingProgram
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration, stage_qp
-from auvmpc.vehicle import load_vehicle
 
 pytestmark = pytest.mark.skipif(
     compiled_qp_step.compiler() is None, reason="no C compiler on this machine"

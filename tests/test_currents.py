@@ -11,7 +11,7 @@ from pydantic import ValidationError
 
 from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig
 from auvmpc.models.six_dof import Rzyx, depth_rate, integrate, six_dof_model
-from auvmpc.vehicle import VehicleParams, load_vehicle
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
 
 SHEAR = WaterCurrentConfig(
     velocity_m_per_s=(0.4, -0.2, 0.0), depth_profile=((0.0, 1.0), (10.0, 0.5), (30.0, 0.0))

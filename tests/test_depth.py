@@ -12,9 +12,9 @@ from scipy.integrate import solve_ivp
 
 from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, wave_number
 from auvmpc.errors import ConfigError
-from auvmpc.runner import simulate, write_run
+from auvmpc.experiments.run import simulate, write_run
+from auvmpc.models.vehicle import heave_dynamics, load_vehicle
 from auvmpc.scenario import load_scenario
-from auvmpc.vehicle import heave_dynamics, load_vehicle
 
 # Issue 5: replaying the logged thrust reproduces the logged depth in calm water to 1 mm.
 DEPTH_REPLAY_TOL_M = 1e-3
@@ -76,7 +76,7 @@ def replay_errors(run_dir) -> float:
         rows = list(csv.DictReader(handle))
     names = [c for c in rows[0] if c.startswith("Fz")]
 
-    def rhs(_t, s, total):  # section 8 written out again, independently of auvmpc.vehicle
+    def rhs(_t, s, total):  # section 8 written out again, independently of auvmpc.models.vehicle
         w = s[1]
         force = heave["Zw"] * w + heave["Zww"] * abs(w) * w + total + heave["net_buoyancy_N"]
         return [w, force / heave["m_heave"]]

@@ -39,11 +39,11 @@ from auvmpc.controllers.config import ControllerConfig, ThrustPenalty  # noqa: E
 from auvmpc.controllers.dompc import DoMpcController  # noqa: E402
 from auvmpc.controllers.ltv import LtvMpc  # noqa: E402
 from auvmpc.errors import ConfigError  # noqa: E402
-from auvmpc.integrators import rk4  # noqa: E402
+from auvmpc.experiments.run import simulate  # noqa: E402
+from auvmpc.models.integrators import rk4  # noqa: E402
+from auvmpc.models.vehicle import dynamics  # noqa: E402
 from auvmpc.references import LineConfig, PaperOvalConfig, make_reference  # noqa: E402
-from auvmpc.runner import simulate  # noqa: E402
 from auvmpc.scenario import load_scenario  # noqa: E402
-from auvmpc.vehicle import dynamics  # noqa: E402
 from tests.conftest import PAPER_INITIAL_STATE, ROUND_OFF_TOL  # noqa: E402
 
 SAMPLE_TIME = 0.5  # s, the paper's Te

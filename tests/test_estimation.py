@@ -15,10 +15,10 @@ from auvmpc.estimation import (
     condition_covariance,
     covariance_bounds,
 )
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.scenario import load_scenario
 from auvmpc.sim.loop import plant_step
-from auvmpc.vehicle import load_vehicle
 
 # The filter's estimate of a constant 11.2 N current after 40 s of excitation: the random
 # walk it assumes (1 N/sqrt(s)) keeps a steady-state spread of a few hundredths of a newton.

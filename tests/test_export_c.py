@@ -8,9 +8,9 @@ import shutil
 import pytest
 
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.run import simulate, write_run
 from auvmpc.export.c_library import export_c, verify_c
 from auvmpc.native import compiler
-from auvmpc.runner import simulate, write_run
 from auvmpc.scenario import load_scenario
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
 from tests.conftest import C_EXPORT_COMMAND_TOL_N

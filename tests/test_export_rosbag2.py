@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from auvmpc.run_folder import read_log_frame
-from auvmpc.vehicle import load_vehicle
+from auvmpc.experiments.run_folder import read_log_frame
+from auvmpc.models.vehicle import load_vehicle
 from tests.test_cli import run_cli
 
 rosbags = pytest.importorskip("rosbags")
@@ -115,7 +115,7 @@ def test_paper_obstacles_bag_reads_back_as_the_log(monkeypatch, capsys, tmp_path
         assert len(poses) == min(ny + 1, rows - k)
         assert poses[0].pose.position.x == log["x_ref"][k]
 
-    # The thrusters' wrenches add up to the allocation T @ F of auvmpc.vehicle.
+    # The thrusters' wrenches add up to the allocation T @ F of auvmpc.models.vehicle.
     model = load_vehicle(vehicle)
     applied = log[thrusters].to_numpy()[:-1]
     total = np.zeros((rows - 1, 3))

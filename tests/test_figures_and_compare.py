@@ -14,9 +14,9 @@ import pytest
 from matplotlib.figure import Figure
 
 from auvmpc import plots
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.scenario import load_scenario
 from auvmpc.sim.log import SimLog
-from auvmpc.vehicle import load_vehicle
 from tests.test_cli import run_cli
 
 matplotlib.use("Agg")
@@ -109,7 +109,7 @@ def test_an_unknown_format_is_refused(tmp_path):
 def two_runs(tmp_path_factory):
     """paper-ideal for 5 s by the paper's MPC and by ltv-mpc-nc30 (two bench labels)."""
     from auvmpc.api import controller_overrides
-    from auvmpc.runner import simulate, write_run
+    from auvmpc.experiments.run import simulate, write_run
 
     folder = tmp_path_factory.mktemp("runs")
     runs = []
@@ -128,7 +128,7 @@ def test_compare_overlays_both_controllers_by_name(monkeypatch, capsys, tmp_path
     assert code == 0, err
     names = {p.name for p in out.iterdir()}
     assert {"trajectory.svg", "errors.svg", "thrusts.svg", "metrics.md", "metrics.csv"} <= names
-    from auvmpc.compare import load_compared_runs
+    from auvmpc.experiments.compare import load_compared_runs
     from auvmpc.plots import figure_compare_trajectory
 
     runs = load_compared_runs(two_runs)
@@ -147,7 +147,7 @@ def test_compare_overlays_both_controllers_by_name(monkeypatch, capsys, tmp_path
 
 
 def test_compare_names_duplicates_and_vehicles_apart(tmp_path, two_runs):
-    from auvmpc.compare import load_compared_runs
+    from auvmpc.experiments.compare import load_compared_runs
 
     runs = load_compared_runs([two_runs[0], two_runs[0]])
     assert [r.label for r in runs] == ["mpc (nc 2/ny 30) [mpc]"] * 2
@@ -156,11 +156,11 @@ def test_compare_names_duplicates_and_vehicles_apart(tmp_path, two_runs):
 
 
 def test_compare_on_another_vehicle(tmp_path, monkeypatch, capsys, two_runs):
-    from auvmpc.runner import simulate, write_run
+    from auvmpc.experiments.run import simulate, write_run
 
     result = simulate(load_scenario("paper-ideal", ["duration=5", "vehicle=bluerov2-heavy"]))
     blue = write_run(result, tmp_path / "blue", figures=False)
-    from auvmpc.compare import load_compared_runs
+    from auvmpc.experiments.compare import load_compared_runs
 
     runs = load_compared_runs([two_runs[1], blue])
     assert [r.label.split(", ")[-1] for r in runs] == ["jmse2210", "bluerov2-heavy"]

@@ -10,9 +10,9 @@ from scipy.linalg import expm
 import auvmpc.native as native
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, WaveForceConfig, WorldDisturbance
-from auvmpc.integrators import rk4, rk4_step_time_varying
+from auvmpc.models.integrators import rk4, rk4_step_time_varying
+from auvmpc.models.vehicle import body_from_world, dynamics
 from auvmpc.sim.plant import PlantStepper, plant_step
-from auvmpc.vehicle import body_from_world, dynamics
 from tests.conftest import PLANT_VS_SOLVE_IVP_TOL
 
 A = np.array([[0.0, 1.0], [-4.0, -0.4]])  # lightly damped oscillator

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from auvmpc import interrupts
-from auvmpc.campaign import count_finished, load_results
 from auvmpc.controllers.base import ControlResult, ControlStatus
-from auvmpc.runner import simulate
+from auvmpc.experiments.campaign import count_finished, load_results
+from auvmpc.experiments.run import simulate
 from auvmpc.scenario import load_scenario
 
 # The requirement: the process is gone within 2 s of the signal.
@@ -97,7 +97,9 @@ class _SwallowingController:
 
 def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch):
     controller = _SwallowingController(interrupt_at=3)
-    monkeypatch.setattr("auvmpc.runner.make_controller", lambda scenario, model: controller)
+    monkeypatch.setattr(
+        "auvmpc.experiments.run.make_controller", lambda scenario, model: controller
+    )
     interrupts.reset()
     previous = interrupts.install()
     try:

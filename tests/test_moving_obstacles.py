@@ -24,8 +24,8 @@ from auvmpc.environment.obstacle_sensor import (
 )
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.estimation import ConstantVelocityKalman
+from auvmpc.experiments.run import simulate
 from auvmpc.references import LineConfig, make_reference
-from auvmpc.runner import simulate
 from auvmpc.sim.loop import closed_loop
 from auvmpc.sim.metrics import MARGIN_TOLERANCE_M, path_length
 
@@ -274,7 +274,7 @@ def test_path_length_of_a_polyline():
 
 
 def test_encounter_campaigns_are_valid_and_draw_alike():
-    from auvmpc.campaign import load_campaign, scenario_for_run, validate_campaign
+    from auvmpc.experiments.campaign import load_campaign, scenario_for_run, validate_campaign
 
     predicted, held = load_campaign("encounter"), load_campaign("encounter-constant-position")
     validate_campaign(predicted)

@@ -34,14 +34,14 @@ from auvmpc.controllers.mpc import (
     rk4_discretize,
     sdc_matrix,
 )
-from auvmpc.integrators import rk4, rk4_step
+from auvmpc.experiments.run import simulate
+from auvmpc.models.integrators import rk4, rk4_step
+from auvmpc.models.vehicle import VehicleParams, dynamics, load_vehicle
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
-from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
 from auvmpc.sim.metrics import position_error
 from auvmpc.solvers.dense_qp import QpResult, QpSolver
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp, SparseSolution
-from auvmpc.vehicle import VehicleParams, dynamics, load_vehicle
 from tests.conftest import random_limit_case
 
 SAMPLE_TIME = 0.5  # s, the paper's Te

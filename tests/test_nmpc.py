@@ -29,11 +29,11 @@ from auvmpc.controllers.base import ControlStatus, Observation, ObstacleState
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
 from auvmpc.controllers.ltv import LtvMpc
 from auvmpc.controllers.nmpc import MAX_OBSTACLES, MultipleShootingProgram, NonlinearMpc
-from auvmpc.integrators import rk4
+from auvmpc.experiments.run import RunResult, simulate
+from auvmpc.models.integrators import rk4
+from auvmpc.models.vehicle import body_from_world, dynamics, load_vehicle
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
-from auvmpc.runner import RunResult, simulate
 from auvmpc.scenario import load_scenario
-from auvmpc.vehicle import body_from_world, dynamics, load_vehicle
 from tests.conftest import random_limit_case
 
 SAMPLE_TIME = 0.5  # s, the paper's Te

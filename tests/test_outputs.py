@@ -1,5 +1,5 @@
 """Writing never destroys what auvmpc did not write (issue 12, item 1): the folder rule of
-auvmpc.outputs, through the library and through every command that writes."""
+auvmpc.experiments.outputs, through the library and through every command that writes."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from auvmpc.errors import ConfigError
-from auvmpc.outputs import (
+from auvmpc.experiments.outputs import (
     MARKER,
     OutputKind,
     atomic_write_text,

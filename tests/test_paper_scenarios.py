@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.runner import RunResult, simulate
+from auvmpc.experiments.run import RunResult, simulate
 from auvmpc.scenario import load_scenario
 
 pytestmark = pytest.mark.slow

@@ -13,9 +13,9 @@ from matplotlib.patches import Circle, StepPatch
 
 from auvmpc import plots
 from auvmpc.environment.obstacles import ObstacleConfig, clearance
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.metrics import heading_error, position_error
-from auvmpc.vehicle import load_vehicle
 
 matplotlib.use("Agg")  # tests may pick a backend; the library never does
 

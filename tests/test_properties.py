@@ -26,9 +26,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from auvmpc.errors import ConfigError
-from auvmpc.sanity import preflight
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.scenario import load_scenario
-from auvmpc.vehicle import load_vehicle
+from auvmpc.scenario.sanity import preflight
 from tests.test_cli import run_cli
 
 settings.register_profile(

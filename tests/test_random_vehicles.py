@@ -1,4 +1,4 @@
-"""Random plausible vehicles (auvmpc.random_vehicles) and the fast controllers on them.
+"""Random plausible vehicles (auvmpc.models.random_vehicles) and the fast controllers on them.
 
 The full sweep (100 vehicles, with IPOPT as the reference) is benchmarks/vehicle_sweep.py;
 here a few vehicles from both ends of the mass range and the lightly damped, light-yaw
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
-from auvmpc.random_vehicles import MASS_RANGE_KG, random_vehicle
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
+from auvmpc.models.random_vehicles import MASS_RANGE_KG, random_vehicle
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 
 from auvmpc.errors import ConfigError
-from auvmpc.runner import simulate
-from auvmpc.sanity import (
+from auvmpc.experiments.run import simulate
+from auvmpc.models.vehicle import dynamics
+from auvmpc.scenario import load_scenario
+from auvmpc.scenario.sanity import (
     check_memory,
     feasible_forces,
     largest_surge_thrust,
@@ -25,8 +27,6 @@ from auvmpc.sanity import (
     reference_thrust_needs,
     steady_top_speed,
 )
-from auvmpc.scenario import load_scenario
-from auvmpc.vehicle import dynamics
 from tests.conftest import ROUND_OFF_TOL
 from tests.test_cli import run_cli
 

@@ -97,7 +97,7 @@ def test_bad_input_names_field_and_value(overrides, field, value):
 
 
 def test_negative_mass_in_inline_vehicle(tmp_path):
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     vehicle = load_vehicle("jmse2210").model_dump(mode="json")
     vehicle["mass"] = -16.5
@@ -107,7 +107,7 @@ def test_negative_mass_in_inline_vehicle(tmp_path):
 
 
 def test_vehicle_file_relative_to_scenario(tmp_path):
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     vehicle = load_vehicle("jmse2210").model_dump(mode="json")
     vehicle["name"] = "heavier"

@@ -8,8 +8,8 @@ import pytest
 from auvmpc.controllers.base import ControlStatus, Observation
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.shell import INFO_KEYS, Proposal, ShelledController
+from auvmpc.experiments.run import make_controller
 from auvmpc.references import PaperOvalConfig, make_reference
-from auvmpc.runner import make_controller
 from auvmpc.scenario import load_scenario
 
 # The projection is one np.clip: exact up to the subtraction that checks it.

@@ -17,8 +17,8 @@ from auvmpc.environment.disturbances import (
     WorldDisturbance,
 )
 from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.experiments.run import simulate
 from auvmpc.references import LineConfig, make_reference
-from auvmpc.runner import simulate
 from auvmpc.scenario import load_scenario
 from auvmpc.sim.loop import closed_loop
 from auvmpc.sim.metrics import compute_metrics
@@ -131,7 +131,7 @@ def test_clearance_only_while_an_obstacle_exists(jmse):
 def test_the_log_records_the_disturbance_the_controller_assumed(tmp_path):
     """Offset-free ltv-mpc under a constant 5 N / 3 N current: the logged estimate (what the
     prediction used) settles on the true world force, and survives the CSV round trip."""
-    from auvmpc.runner import simulate
+    from auvmpc.experiments.run import simulate
     from auvmpc.scenario import load_scenario
     from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
 

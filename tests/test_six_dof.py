@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from auvmpc.integrators import rk4
+from auvmpc.models.integrators import rk4
 from auvmpc.models.six_dof import (
     PITCH_LIMIT_RAD,
     PitchSingularity,
@@ -22,8 +22,8 @@ from auvmpc.models.six_dof import (
     six_dof_model,
 )
 from auvmpc.models.six_dof_params import horizontal_equivalent, skew
-from auvmpc.vehicle import VehicleParams, load_vehicle
-from auvmpc.vehicle import dynamics as dynamics_3dof
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
+from auvmpc.models.vehicle import dynamics as dynamics_3dof
 from tests.conftest import (
     DRIFT_VELOCITY_TOL,
     NATURAL_FREQUENCY_REL_TOL,

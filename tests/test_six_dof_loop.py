@@ -15,11 +15,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.run import read_planar_run, redraw, simulate, write_run
 from auvmpc.models import six_dof
-from auvmpc.runner import read_planar_run, redraw, simulate, write_run
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
 from auvmpc.scenario import ResolvedScenario, ResolvedSixDofScenario, load_scenario, planar_twin
 from auvmpc.sim.six_dof_loop import ThrustMapping
-from auvmpc.vehicle import VehicleParams, load_vehicle
 from tests.conftest import (
     HELIX_RMS_TOL_M,
     REPLAY_ANGLE_TOL_RAD,

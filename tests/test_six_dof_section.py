@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from auvmpc.errors import ConfigError, FieldError
-from auvmpc.vehicle import load_vehicle
+from auvmpc.models.vehicle import load_vehicle
 from tests.test_cli import run_cli
 
 

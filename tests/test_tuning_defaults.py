@@ -13,16 +13,16 @@ import yaml
 
 from auvmpc.controllers.config import THRUST_MOVE_COST, ControllerConfig, ThrustPenalty
 from auvmpc.estimation import ObserverConfig
-from auvmpc.integrators import rk4_step
-from auvmpc.random_vehicles import random_vehicle
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
+from auvmpc.models.integrators import rk4_step
+from auvmpc.models.random_vehicles import random_vehicle
+from auvmpc.models.vehicle import dynamics, load_vehicle, preset_names, scaled, stable_plant_step
 from auvmpc.scenario import (
     DEFAULT_PLANT_STEP_S,
     ResolvedScenario,
     load_scenario,
     validate_scenario,
 )
-from auvmpc.vehicle import dynamics, load_vehicle, preset_names, scaled, stable_plant_step
 
 PAPER_R = (0.01, 0.01, 0.01, 0.01)
 # The paper vehicle's former fixed estimator tuning, which the authority fractions stay near:
@@ -178,8 +178,8 @@ def test_an_override_gets_the_new_vehicles_own_defaults():
 
 
 def test_a_campaign_may_scale_a_default_that_depends_on_the_vehicle(tmp_path):
-    from auvmpc.campaign.sampling import scenario_for_run
-    from auvmpc.campaign.spec import load_campaign
+    from auvmpc.experiments.campaign.sampling import scenario_for_run
+    from auvmpc.experiments.campaign.spec import load_campaign
 
     spec = {
         "name": "scaled-weights",

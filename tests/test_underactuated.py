@@ -11,7 +11,7 @@ from auvmpc.controllers.config import BaselineConfig, ControllerConfig
 from auvmpc.controllers.ltv import LtvMpc
 from auvmpc.controllers.mpc import PaperMpc
 from auvmpc.errors import ConfigError
-from auvmpc.vehicle import (
+from auvmpc.models.vehicle import (
     Thruster,
     VehicleParams,
     allocation_matrix,

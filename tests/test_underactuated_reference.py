@@ -17,10 +17,8 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import ObserverConfig
-from auvmpc.ocp.underactuated_reference import CRAB_TURN_FRACTION, crab_reference
-from auvmpc.runner import simulate
-from auvmpc.scenario import ResolvedScenario, validate_scenario
-from auvmpc.vehicle import (
+from auvmpc.experiments.run import simulate
+from auvmpc.models.vehicle import (
     body_from_world,
     dynamics,
     load_vehicle,
@@ -28,6 +26,8 @@ from auvmpc.vehicle import (
     top_yaw_rate,
     turn_up_time,
 )
+from auvmpc.ocp.underactuated_reference import CRAB_TURN_FRACTION, crab_reference
+from auvmpc.scenario import ResolvedScenario, validate_scenario
 
 TE = 0.5
 # The crab angle is a root bracketed on a 1-degree grid and interpolated linearly inside

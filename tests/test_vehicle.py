@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from auvmpc.errors import ConfigError
-from auvmpc.vehicle import (
+from auvmpc.models.vehicle import (
     Thruster,
     VehicleParams,
     allocation_matrix,

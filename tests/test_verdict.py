@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import ControlStatus
+from auvmpc.models.vehicle import top_yaw_rate
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.metrics import compute_metrics, longest_run
 from auvmpc.sim.verdict import (
@@ -16,7 +17,6 @@ from auvmpc.sim.verdict import (
     characteristic_length_m,
     relative_heading_turns,
 )
-from auvmpc.vehicle import top_yaw_rate
 
 SAMPLE_TIME = 0.5
 TRANSIENT_S = 20.0
@@ -50,7 +50,7 @@ def metrics_of(log, params):
 
 @pytest.fixture(params=["jmse2210", "bluerov2-heavy"])
 def vehicle(request):
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     return load_vehicle(request.param)
 
@@ -144,7 +144,7 @@ def _offset_after_transient(log, distance_m: float) -> None:
     ("vehicle_name", "expected"), [("jmse2210", "ok"), ("bluerov2-heavy", "degraded")]
 )
 def test_the_same_error_is_judged_against_the_vehicle_size(vehicle_name, expected):
-    from auvmpc.vehicle import load_vehicle
+    from auvmpc.models.vehicle import load_vehicle
 
     params = load_vehicle(vehicle_name)
     log = circle_log(params)

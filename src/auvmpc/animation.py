@@ -27,6 +27,7 @@ from matplotlib.patches import Circle, Polygon
 
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.plots import (
     ACTUAL_STYLE,
     OBSTACLE_EDGE,
@@ -37,7 +38,6 @@ from auvmpc.plots import (
 )
 from auvmpc.scenario import Scenario
 from auvmpc.sim.log import SimLog
-from auvmpc.vehicle import VehicleParams
 
 __all__ = ["AnimationFormat", "AnimationSettings", "animate_run", "ffmpeg_path", "frame_rows"]
 

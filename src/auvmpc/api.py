@@ -27,7 +27,7 @@ import auvmpc  # noqa: E402 -- the package names the public API once (re-exporte
 from auvmpc.controllers.base import Controller
 from auvmpc.depth import DepthLog
 from auvmpc.errors import ConfigError
-from auvmpc.runner import DepthRunResult, RunResult, make_controller
+from auvmpc.experiments.run import DepthRunResult, RunResult, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
 from auvmpc.sim.log import SimLog
 
@@ -120,7 +120,7 @@ def simulate(scenario: Scenario | str, on_step: Callable[[int, int], None] | Non
         ``.log`` (time-major arrays), ``.metrics`` (the names of run.json) and
         ``.scenario``.
     """
-    from auvmpc.runner import simulate as run
+    from auvmpc.experiments.run import simulate as run
 
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
@@ -133,7 +133,7 @@ def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:
     The thrust of the last row is NaN (the command on row k is applied over
     [t_k, t_k+1)); numbers are exactly the simulated ones.
     """
-    from auvmpc.run_folder import read_log_frame
+    from auvmpc.experiments.run_folder import read_log_frame
 
     log = run.log if isinstance(run, RunResult | DepthRunResult) else run
     return read_log_frame(io.StringIO(log.to_csv_text()))
@@ -149,7 +149,7 @@ def figures(run: RunResult) -> dict[str, Figure]:
     if isinstance(run, DepthRunResult):
         title = f"{scenario.name}: {scenario.controller.type}"
         return {"depth": figure_depth(run.log, run.resolved.heave_plant, title=title)}
-    from auvmpc.runner import SixDofRunResult
+    from auvmpc.experiments.run import SixDofRunResult
 
     model = run.resolved.model
     radius = scenario.controller.vehicle_radius
@@ -164,14 +164,14 @@ def figures(run: RunResult) -> dict[str, Figure]:
 
 def save_run(run: Run, folder: str | Path, figures: bool = True) -> Path:
     """Write the run folder (``log.csv``, ``run.json``, PNG figures), as ``auvmpc run --out``."""
-    from auvmpc.runner import write_run
+    from auvmpc.experiments.run import write_run
 
     return write_run(run, Path(folder), figures=figures)
 
 
 def load_run(folder: str | Path) -> tuple[dict[str, Any], pd.DataFrame]:
     """``run.json`` (as a dict) and ``log.csv`` (as a DataFrame) of a saved run folder."""
-    from auvmpc.run_folder import read_run_tables
+    from auvmpc.experiments.run_folder import read_run_tables
 
     tables = read_run_tables(Path(folder))
     return tables.info, tables.log

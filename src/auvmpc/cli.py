@@ -138,14 +138,14 @@ def run(
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
     from auvmpc.api import controller_overrides
-    from auvmpc.outputs import OutputKind, check_output_folder
-    from auvmpc.runner import simulate, write_run
+    from auvmpc.experiments.outputs import OutputKind, check_output_folder
+    from auvmpc.experiments.run import simulate, write_run
     from auvmpc.scenario import load_scenario
 
     check_figure_options(figure_format, dpi, option="--figure-format")
     overrides = [*controller_overrides(controller), *(set_ or [])]
     if from_campaign is not None:
-        from auvmpc.campaign import scenario_for_run
+        from auvmpc.experiments.campaign import scenario_for_run
 
         if scenario is not None:
             raise ConfigError("SCENARIO", scenario, "give a scenario or --from-campaign, not both")
@@ -193,8 +193,8 @@ def reproduce(
     overwrite: Overwrite = False,
 ) -> None:
     """Reproduce the paper's simulations (section 4.1) into one folder."""
-    from auvmpc.outputs import OutputKind, check_output_folder
-    from auvmpc.reproduce import reproduce as run_all
+    from auvmpc.experiments.outputs import OutputKind, check_output_folder
+    from auvmpc.experiments.reproduce import reproduce as run_all
 
     check_output_folder(out, OutputKind.REPRODUCE, overwrite=overwrite)
 
@@ -230,7 +230,7 @@ def bench(
     ] = False,
 ) -> None:
     """Time controllers x scenarios on one core: per-step median/p99/max, wall time, metrics."""
-    from auvmpc.bench import (
+    from auvmpc.experiments.bench import (
         DEFAULT_CONTROLLERS,
         DEFAULT_SCENARIOS,
         format_table,
@@ -238,7 +238,7 @@ def bench(
         rows_to_json,
         run_benchmark,
     )
-    from auvmpc.outputs import atomic_write_text, check_output_file
+    from auvmpc.experiments.outputs import atomic_write_text, check_output_file
 
     if json_file is not None:
         check_output_file(json_file, overwrite=overwrite, option="--json")
@@ -311,9 +311,9 @@ def campaign(
     ] = False,
 ) -> None:
     """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
-    from auvmpc.campaign import campaign_report as make_report
-    from auvmpc.campaign import count_finished, load_campaign, run_campaign
-    from auvmpc.outputs import OutputKind, check_output_folder
+    from auvmpc.experiments.campaign import campaign_report as make_report
+    from auvmpc.experiments.campaign import count_finished, load_campaign, run_campaign
+    from auvmpc.experiments.outputs import OutputKind, check_output_folder
 
     check_output_folder(out, OutputKind.CAMPAIGN, overwrite=overwrite, resume=True)
     loaded = load_campaign(file)
@@ -369,7 +369,7 @@ def campaign_report(
     figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
 ) -> None:
     """Success rate with a 95 % interval, metric percentiles, worst runs, plots."""
-    from auvmpc.campaign import campaign_report as make_report
+    from auvmpc.experiments.campaign import campaign_report as make_report
 
     result = make_report(
         out,
@@ -395,7 +395,7 @@ def scenarios() -> None:
 @app.command()
 def vehicles() -> None:
     """List the built-in vehicle presets."""
-    from auvmpc.vehicle import load_vehicle, preset_names
+    from auvmpc.models.vehicle import load_vehicle, preset_names
 
     for name in preset_names():
         console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
@@ -421,8 +421,8 @@ def plot(
     dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
-    from auvmpc.outputs import OutputKind, record_written, require_own_folder
-    from auvmpc.runner import redraw
+    from auvmpc.experiments.outputs import OutputKind, record_written, require_own_folder
+    from auvmpc.experiments.run import redraw
 
     require_own_folder(run_dir, OutputKind.RUN, "RUN_DIR")
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
@@ -447,7 +447,7 @@ def compare(
     dpi: Dpi = 120,
 ) -> None:
     """Overlay runs (trajectories, errors, thrusts) and tabulate their metrics."""
-    from auvmpc.compare import compare_runs, load_compared_runs, metrics_markdown
+    from auvmpc.experiments.compare import compare_runs, load_compared_runs, metrics_markdown
 
     check_figure_options(fmt, dpi)
     runs = load_compared_runs(run_dirs, label)
@@ -472,7 +472,7 @@ def animate(
     """Animate a run: vehicle, thrust arrows, reference and horizon, obstacles, clock."""
 
     from auvmpc.animation import AnimationSettings, animate_run
-    from auvmpc.runner import read_planar_run
+    from auvmpc.experiments.run import read_planar_run
 
     _, scenario, model, log = read_planar_run(run_dir, "animate")
     settings = AnimationSettings(fps=fps, speed=speed, dpi=dpi)
@@ -564,7 +564,7 @@ def schema(
     """Print the JSON Schema of a scenario, vehicle or campaign file (from the pydantic models)."""
     import json
 
-    from auvmpc.schema import SchemaKind, json_schema, reference_markdown
+    from auvmpc.scenario.json_schema import SchemaKind, json_schema, reference_markdown
 
     if markdown:
         sys.stdout.write(reference_markdown())

@@ -23,9 +23,9 @@ from auvmpc.controllers.base import ControlStatus, Observation
 from auvmpc.controllers.config import ThrustPenalty
 from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, WaveType, wave_number
 from auvmpc.errors import FieldError
-from auvmpc.integrators import rk4_step_time_varying
+from auvmpc.models.integrators import rk4_step_time_varying
+from auvmpc.models.vehicle import HeaveParams, VehicleParams, heave_dynamics
 from auvmpc.solvers.dense_qp import QpSolverName
-from auvmpc.vehicle import HeaveParams, VehicleParams, heave_dynamics
 
 __all__ = [
     "DepthScenario",

@@ -11,7 +11,7 @@ every step: a recorded signal raises :class:`Interrupted` there, before any resu
 exists. CasADi also prints a ``WARNING("KeyboardInterruptException")`` line on stderr
 (through Python's ``sys.stderr``); once we know why, it is noise, and that one line is
 dropped so that an interrupted command prints one line. Nothing half-written is left
-either (:mod:`auvmpc.outputs` stages every folder). The command line reports what was
+either (:mod:`auvmpc.experiments.outputs` stages every folder). The command line reports what was
 kept and exits ``128 + signal`` (130 for SIGINT, 143 for SIGTERM).
 """
 

@@ -26,9 +26,9 @@ from numpy.typing import ArrayLike
 
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.metrics import LIMIT_TOLERANCE_N, heading_error, position_error, thrust_increments
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "figure_depth",

@@ -9,9 +9,9 @@ from enum import StrEnum
 
 import numpy as np
 
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import ActuatorLimits
 from auvmpc.ocp.underactuated_reference import crab_reference
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "ActuatorLimits",

@@ -2,7 +2,8 @@
 
 The yardstick every MPC in this package must beat, so it is a good classical design rather
 than a strawman ("computed-torque" tracking, i.e. feedback linearisation with the nominal
-model, plus integral action). State, frames and units as in :mod:`auvmpc.vehicle`. Per sample:
+model, plus integral action). State, frames and units as in :mod:`auvmpc.models.vehicle`.
+Per sample:
 
 1. Errors. The world position error ``e = p - p_r`` is resolved in the reference (path)
    frame into along-track and cross-track parts. The heading error
@@ -53,7 +54,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
-from auvmpc.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]
 

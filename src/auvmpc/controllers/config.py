@@ -13,9 +13,9 @@ from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.models.discrete import HORIZONTAL
+from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates, turn_up_time
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
-from auvmpc.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates, turn_up_time
 
 __all__ = [
     "CONTROLLER_PRESETS",

@@ -15,10 +15,10 @@ import numpy as np
 
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import AugmentedEkf
-from auvmpc.integrators import rk4
+from auvmpc.models.integrators import rk4
+from auvmpc.models.vehicle import HeaveParams, heave_dynamics
 from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
-from auvmpc.vehicle import HeaveParams, heave_dynamics
 
 __all__ = ["DepthMpc"]
 

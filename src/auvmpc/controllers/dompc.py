@@ -42,9 +42,9 @@ from auvmpc.controllers.base import Observation, align_heading
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
-from auvmpc.integrators import rk4
+from auvmpc.models.integrators import rk4
+from auvmpc.models.vehicle import VehicleParams, dynamics
 from auvmpc.ocp.tracking import ThrustPenalty
-from auvmpc.vehicle import VehicleParams, dynamics
 
 __all__ = ["DoMpcController"]
 

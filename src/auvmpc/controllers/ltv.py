@@ -15,8 +15,8 @@ import numpy as np
 from auvmpc.controllers.config import ControllerConfig, QpStructure
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
-from auvmpc.vehicle import VehicleParams
 
 __all__ = ["LtvMpc", "linearised_rollout"]
 

@@ -30,8 +30,8 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.vehicle import VehicleParams, body_from_world
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
-from auvmpc.vehicle import VehicleParams, body_from_world
 
 __all__ = [
     "AffinePrediction",

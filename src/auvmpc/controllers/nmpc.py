@@ -70,6 +70,7 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
 from auvmpc.solvers.ipopt import IpoptSolver
 from auvmpc.solvers.multiple_shooting import (
@@ -81,7 +82,6 @@ from auvmpc.solvers.multiple_shooting import (
     Sample,
 )
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
-from auvmpc.vehicle import VehicleParams
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]
 

@@ -7,7 +7,7 @@ import importlib
 
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.controllers.shell import ShelledController
-from auvmpc.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["REGISTRY", "build_controller"]
 

@@ -37,9 +37,9 @@ from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.estimation import covariance_bounds
+from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.native import compiler
-from auvmpc.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.references import make_reference
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
@@ -428,6 +428,6 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
 
 def own_export(folder: Path) -> bool:
     """Whether ``folder`` is an export-c folder written by auvmpc."""
-    from auvmpc.outputs import own_kind
+    from auvmpc.experiments.outputs import own_kind
 
     return own_kind(folder) is OutputKind.EXPORT_C and (folder / _RECORD).is_file()

@@ -7,7 +7,7 @@ every message definition, so Foxglove and PlotJuggler open it without ROS at all
 
 Frames: ``world`` is the plane auvmpc plots (x right, y up, heading psi counter-clockwise
 from +x; z up in depth runs), ``base_link`` is the vehicle body (x forward, the thrusters'
-y). The planar equations of ``auvmpc.vehicle`` read the same in a z-up or a NED world, so
+y). The planar equations of ``auvmpc.models.vehicle`` read the same in a z-up or a NED world, so
 positions, heading and velocities are written exactly as logged. Stamps are the
 simulation time (t = 0 is the start, 1970-01-01 in tools that show dates).
 
@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from auvmpc.errors import ConfigError
-from auvmpc.run_folder import RunTables, read_run_tables
+from auvmpc.experiments.run_folder import RunTables, read_run_tables
 
 __all__ = ["TOPICS", "export_rosbag2"]
 

@@ -18,9 +18,9 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.codegen import compiled
-from auvmpc.integrators import rk4
+from auvmpc.models.integrators import rk4
+from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics
 from auvmpc.native import native_function
-from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
 __all__ = ["HORIZONTAL", "DiscreteModel", "StateLayout", "horizontal_model"]
 

@@ -40,10 +40,10 @@ from collections.abc import Callable
 import casadi as ca
 import numpy as np
 
-from auvmpc.integrators import rk4, rk4_step_time_varying
 from auvmpc.models.discrete import StateLayout
+from auvmpc.models.integrators import rk4, rk4_step_time_varying
 from auvmpc.models.six_dof_params import SixDofParams, skew
-from auvmpc.vehicle import VehicleParams, stable_plant_step, steady_speed
+from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
 __all__ = [
     "PITCH_LIMIT_RAD",
@@ -300,7 +300,7 @@ ACCURATE_RATE_STEP = 0.1
 
 def plant_step_length(params: VehicleParams, longest: float) -> float:
     """The longest RK4 step (at most ``longest``, and no longer than the 3-DOF plant's
-    :func:`auvmpc.vehicle.stable_plant_step`) with h |lambda| <= ACCURATE_RATE_STEP for the
+    :func:`auvmpc.models.vehicle.stable_plant_step`) with h |lambda| <= ACCURATE_RATE_STEP for the
     6-DOF model's fastest rate: the modes at rest (roll and pitch oscillations, linear
     damping) and the damping of surge, sway, heave and yaw at the speed their full thrust
     authority reaches. (Roll and pitch never reach theirs: the restoring moment holds them.)"""

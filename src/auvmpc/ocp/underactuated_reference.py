@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from auvmpc.vehicle import VehicleParams, body_from_world, dynamics, top_yaw_rate
+from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics, top_yaw_rate
 
 __all__ = ["CRAB_TURN_FRACTION", "crab_reference"]
 
@@ -96,7 +96,7 @@ def _wrapped(angle: float) -> float:
 def _missing_force(model, missing, heading, velocity, acceleration, r, r_dot, disturbance):
     """The component along ``missing`` of the body force and moment the motion needs at
     each candidate ``heading``: the model's inertia times the acceleration the path needs
-    less the one auvmpc.vehicle.dynamics gives without thrust."""
+    less the one auvmpc.models.vehicle.dynamics gives without thrust."""
     cos_h, sin_h = np.cos(heading), np.sin(heading)
     vx, vy = velocity[:, 0:1], velocity[:, 1:2]
     ax, ay = acceleration[:, 0:1], acceleration[:, 1:2]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from auvmpc.vehicle import STATE_NAMES
+from auvmpc.models.vehicle import STATE_NAMES
 
 __all__ = ["ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
 

@@ -12,10 +12,10 @@ from auvmpc.controllers.base import Controller, ControlResult, Observation
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
 from auvmpc.sim.plant import PlantStepper, plant_step
-from auvmpc.vehicle import VehicleParams
 
 __all__ = ["closed_loop", "plant_step", "timed_command"]
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 
 from auvmpc.controllers.base import ControlStatus
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "compute_metrics",

@@ -1,5 +1,5 @@
 """The simulated vehicle over one zero-order-hold sample: RK4 sub-steps of the 3-DOF model
-(auvmpc.vehicle) under the world-frame disturbance, evaluated where each sub-step asks, and
+(auvmpc.models.vehicle) under the world-frame disturbance, evaluated where each sub-step asks, and
 the water current (held over the sample, like the force's slow part).
 
 Two implementations of the same arithmetic: :func:`plant_step` in NumPy, and
@@ -17,9 +17,9 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.environment.disturbances import WorldDisturbance
-from auvmpc.integrators import rk4_step_time_varying
+from auvmpc.models.integrators import rk4_step_time_varying
+from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics
 from auvmpc.native import NativeFunction, native_function
-from auvmpc.vehicle import VehicleParams, body_from_world, dynamics
 
 __all__ = ["PlantStepper", "plant_step", "stage_times"]
 

@@ -35,10 +35,10 @@ from auvmpc.environment.disturbances import SensorNoise
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import clearance, visible_obstacles
 from auvmpc.models.six_dof import check_pitch, depth_rate, integrate, six_dof_model
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
 from auvmpc.sim.loop import timed_command
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "EXTRA_STATE_NAMES",

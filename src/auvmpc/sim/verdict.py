@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.vehicle import VehicleParams, top_yaw_rate
+from auvmpc.models.vehicle import VehicleParams, top_yaw_rate
 
 __all__ = [
     "Verdict",

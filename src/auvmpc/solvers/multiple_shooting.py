@@ -19,8 +19,8 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
-from auvmpc.vehicle import VehicleParams
 
 if TYPE_CHECKING:  # read, never imported at run time: solvers sit below controllers
     from auvmpc.controllers.base import ObstacleState

@@ -17,7 +17,7 @@ with their reasons, are in ``docs/sanity-checks.md``:
   one sample: warning (a minimum-norm allocation estimate; the vehicle lags there).
 
 The thrust the reference needs is the 3-DOF model solved for the force (inverse
-dynamics, :mod:`auvmpc.vehicle`) along the reference at the controller's samples, for
+dynamics, :mod:`auvmpc.models.vehicle`) along the reference at the controller's samples, for
 the simulated plant, with no disturbance.
 """
 
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "available_memory_bytes",

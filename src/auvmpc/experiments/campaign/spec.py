@@ -1,6 +1,6 @@
 """Campaign files: constants, the schema, loading, and the exact YAML text of a value.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from auvmpc.scenario import (
 if TYPE_CHECKING:
     pass
 
-from auvmpc.campaign.criterion import (
+from auvmpc.experiments.campaign.criterion import (
     _is_number,
     parse_criterion,
 )

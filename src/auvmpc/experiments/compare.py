@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import Scenario
 from auvmpc.sim.log import SimLog
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "COMPARED_METRICS",
@@ -71,7 +71,7 @@ def load_compared_runs(
         Fewer than two folders, a folder that is not a horizontal run, or a label count
         that does not match.
     """
-    from auvmpc.runner import read_planar_run
+    from auvmpc.experiments.run import read_planar_run
 
     if len(run_dirs) < 2:
         raise ConfigError("RUN_DIR", [str(d) for d in run_dirs], "compare needs two or more runs")

@@ -1,4 +1,5 @@
-"""``python -m auvmpc.campaign FILE --out DIR [--workers N] [--runs N] [--scheduler ADDR]``:
+"""``python -m auvmpc.experiments.campaign FILE --out DIR [--workers N] [--runs N]
+[--scheduler ADDR]``:
 a minimal entry point without the CLI's dependencies (the kill-and-resume tests use it)."""
 
 from __future__ import annotations
@@ -9,16 +10,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from auvmpc import interrupts
-from auvmpc.campaign.execute import run_campaign
-from auvmpc.campaign.spec import RESULTS_FILE
-from auvmpc.campaign.store import count_finished
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.campaign.execute import run_campaign
+from auvmpc.experiments.campaign.spec import RESULTS_FILE
+from auvmpc.experiments.campaign.store import count_finished
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Minimal entry point without the CLI's dependencies; returns the exit code."""
     parser = argparse.ArgumentParser(
-        prog="python -m auvmpc.campaign", description="Run or resume a robustness campaign."
+        prog="python -m auvmpc.experiments.campaign",
+        description="Run or resume a robustness campaign.",
     )
     parser.add_argument("campaign", help="built-in campaign name or campaign YAML")
     parser.add_argument("--out", required=True, type=Path, help="campaign folder")

@@ -1,6 +1,6 @@
 """The success criterion: a small, safe expression language over result columns.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations

@@ -16,8 +16,8 @@ import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.depth import STEP_METRIC_KEYS
-from auvmpc.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
-from auvmpc.runner import fill_run_folder, simulate
+from auvmpc.experiments.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
+from auvmpc.experiments.run import fill_run_folder, simulate
 from auvmpc.scenario import ResolvedScenario, load_scenario, planar_twin
 from auvmpc.sim.log import SimLog
 
@@ -92,7 +92,7 @@ def reproduce(
     """Run everything; write run folders, summary.csv/.md/.json and the sweep figure.
 
     ``out_dir`` must be new, empty, or an earlier reproduction (then only with
-    ``overwrite``); it appears only when everything is written (:mod:`auvmpc.outputs`).
+    ``overwrite``); it appears only when everything is written (:mod:`auvmpc.experiments.outputs`).
     """
     with staged_folder(out_dir, OutputKind.REPRODUCE, overwrite=overwrite) as staging:
         return _reproduce_into(staging, include_sweep, figures, on_run)

@@ -1,7 +1,7 @@
 """Sampling: each run's parameters as a pure function of (master seed, run index),
 and the validation of a whole campaign before any run.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ from auvmpc.scenario import (
 if TYPE_CHECKING:
     pass
 
-from auvmpc.campaign.criterion import (
+from auvmpc.experiments.campaign.criterion import (
     _is_number,
 )
-from auvmpc.campaign.spec import (
+from auvmpc.experiments.campaign.spec import (
     ApplyMode,
     Campaign,
     CampaignSpec,
@@ -230,8 +230,8 @@ def scenario_for_run(
     campaign_or_dir: Campaign | str | Path, index: int, overrides: Sequence[str] = ()
 ) -> ResolvedScenario:
     """Run ``index`` of a campaign (or of the campaign stored in a results folder),
-    resolved and ready for :func:`auvmpc.runner.simulate`; ``overrides`` apply last."""
-    from auvmpc.campaign.store import stored_campaign  # store imports this module
+    resolved and ready for :func:`auvmpc.experiments.run.simulate`; ``overrides`` apply last."""
+    from auvmpc.experiments.campaign.store import stored_campaign  # store imports this module
 
     campaign = (
         campaign_or_dir

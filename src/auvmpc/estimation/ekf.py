@@ -29,7 +29,7 @@ from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
-from auvmpc.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
     "AugmentedEkf",

@@ -19,8 +19,9 @@ from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.errors import ConfigError, RunFailed
-from auvmpc.outputs import OutputKind, atomic_write_text, staged_folder
-from auvmpc.provenance import Stopwatch
+from auvmpc.experiments.outputs import OutputKind, atomic_write_text, staged_folder
+from auvmpc.experiments.provenance import Stopwatch
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import make_reference
 from auvmpc.scenario import (
     ControllerType,
@@ -35,7 +36,6 @@ from auvmpc.sim.log import SimLog
 from auvmpc.sim.loop import closed_loop
 from auvmpc.sim.metrics import compute_metrics, compute_six_dof_metrics
 from auvmpc.sim.six_dof_loop import SixDofLog
-from auvmpc.vehicle import VehicleParams
 
 __all__ = [
     "DepthRunResult",
@@ -135,12 +135,12 @@ def simulate(
 ) -> RunResult | DepthRunResult:
     """Run the scenario once. Randomness comes from children of the scenario seed.
 
-    Checked first (:mod:`auvmpc.sanity`): the sizes fit in memory and the scenario is
+    Checked first (:mod:`auvmpc.scenario.sanity`): the sizes fit in memory and the scenario is
     physically possible; what is doubtful but possible becomes ``warnings``. A SIGINT or
     SIGTERM stops the loop after the current step (:mod:`auvmpc.interrupts`), even one a
     compiled solver swallowed, so no result is ever built from an interrupted run.
     """
-    from auvmpc.sanity import preflight
+    from auvmpc.scenario.sanity import preflight
 
     stopwatch = Stopwatch()
     warnings = preflight(resolved)
@@ -328,7 +328,7 @@ def write_run(
     """Write log.csv, run.json and figures into ``out_dir``, all or nothing.
 
     ``out_dir`` must be new, empty, or an earlier run folder of auvmpc's and then only
-    with ``overwrite`` (:mod:`auvmpc.outputs`); it is written in a hidden staging folder
+    with ``overwrite`` (:mod:`auvmpc.experiments.outputs`); it is written in a hidden staging folder
     renamed into place when complete, so an interrupted write leaves nothing that looks done.
     """
     with staged_folder(out_dir, OutputKind.RUN, overwrite=overwrite) as staging:

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from auvmpc.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["MASS_RANGE_KG", "random_vehicle"]
 
@@ -48,7 +48,7 @@ def random_vehicle(rng: np.random.Generator, name: str = "random") -> VehiclePar
     return VehicleParams(
         name=name,
         description=f"random vehicle, {mass:.1f} kg",
-        source="auvmpc.random_vehicles (BlueROV2 Heavy scaled, ratios randomised)",
+        source="auvmpc.models.random_vehicles (BlueROV2 Heavy scaled, ratios randomised)",
         mass=mass,
         m11=mass * (1.0 + rng.uniform(0.1, 0.6)),
         m22=mass * (1.0 + rng.uniform(0.3, 1.2)),

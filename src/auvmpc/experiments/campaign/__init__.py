@@ -23,22 +23,22 @@ report), ``criterion`` (success expressions).
 
 from __future__ import annotations
 
-from auvmpc.campaign.criterion import (
+from auvmpc.experiments.campaign.criterion import (
     Criterion,
     parse_criterion,
     wilson_interval,
 )
-from auvmpc.campaign.execute import (
+from auvmpc.experiments.campaign.execute import (
     CampaignSummary,
     execute_run,
     run_campaign,
 )
-from auvmpc.campaign.report import (
+from auvmpc.experiments.campaign.report import (
     CampaignReport,
     campaign_report,
     load_results,
 )
-from auvmpc.campaign.sampling import (
+from auvmpc.experiments.campaign.sampling import (
     RunSample,
     reproduce_command,
     run_overrides,
@@ -46,7 +46,7 @@ from auvmpc.campaign.sampling import (
     scenario_for_run,
     validate_campaign,
 )
-from auvmpc.campaign.spec import (
+from auvmpc.experiments.campaign.spec import (
     MAX_WORKER_DEATHS,
     NONDETERMINISTIC_COLUMNS,
     RESULTS_FILE,
@@ -57,7 +57,7 @@ from auvmpc.campaign.spec import (
     builtin_campaigns,
     load_campaign,
 )
-from auvmpc.campaign.store import (
+from auvmpc.experiments.campaign.store import (
     count_finished,
     stored_campaign,
     stored_sessions,

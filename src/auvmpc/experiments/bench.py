@@ -33,7 +33,7 @@ from rich.table import Table
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.errors import ConfigError
-from auvmpc.runner import simulate
+from auvmpc.experiments.run import simulate
 from auvmpc.scenario import ControllerType, ResolvedScenario, builtin_scenarios, load_scenario
 
 __all__ = [

@@ -1,6 +1,6 @@
 """Results storage: one SQLite file, written only by the coordinating process.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from auvmpc.errors import ConfigError
 if TYPE_CHECKING:
     pass
 
-from auvmpc.campaign.spec import (
+from auvmpc.experiments.campaign.spec import (
     LOCK_FILE,
     RESULTS_FILE,
     Campaign,

@@ -50,11 +50,11 @@ def json_schema(kind: SchemaKind | str) -> dict[str, Any]:
             "6-DOF plant (kind: six-dof)."
         )
     elif kind is SchemaKind.VEHICLE:
-        from auvmpc.vehicle import VehicleParams
+        from auvmpc.models.vehicle import VehicleParams
 
         schema = VehicleParams.model_json_schema()
     else:
-        from auvmpc.campaign.spec import CampaignSpec
+        from auvmpc.experiments.campaign.spec import CampaignSpec
 
         schema = CampaignSpec.model_json_schema()
     return {"$schema": JSON_SCHEMA_DIALECT, **schema}
@@ -145,10 +145,10 @@ def _references(node: Any) -> Iterator[str]:
 
 def _model_classes() -> dict[str, type[BaseModel]]:
     """Every pydantic model reachable from the file models, by class name (= schema name)."""
-    from auvmpc.campaign.spec import CampaignSpec
     from auvmpc.depth import DepthScenario
+    from auvmpc.experiments.campaign.spec import CampaignSpec
+    from auvmpc.models.vehicle import VehicleParams
     from auvmpc.scenario import Scenario, SixDofScenario
-    from auvmpc.vehicle import VehicleParams
 
     found: dict[str, type[BaseModel]] = {}
     queue: list[Any] = [Scenario, DepthScenario, SixDofScenario, VehicleParams, CampaignSpec]

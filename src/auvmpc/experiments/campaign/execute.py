@@ -1,6 +1,6 @@
 """Running a campaign: one run on a worker, the local process pool, Dask.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from auvmpc.errors import ConfigError
 if TYPE_CHECKING:
     pass
 
-from auvmpc.campaign.sampling import (
+from auvmpc.experiments.campaign.sampling import (
     plan_run,
     sample_run,
     validate_campaign,
 )
-from auvmpc.campaign.spec import (
+from auvmpc.experiments.campaign.spec import (
     MAX_WORKER_DEATHS,
     Campaign,
     CampaignSpec,
@@ -40,12 +40,12 @@ from auvmpc.campaign.spec import (
     _with_implicit_overrides,
     load_campaign,
 )
-from auvmpc.campaign.store import (
+from auvmpc.experiments.campaign.store import (
     _exclusive,
     _Store,
 )
-from auvmpc.outputs import prepare_campaign_folder
-from auvmpc.provenance import Stopwatch
+from auvmpc.experiments.outputs import prepare_campaign_folder
+from auvmpc.experiments.provenance import Stopwatch
 
 
 @functools.lru_cache(maxsize=4)
@@ -75,7 +75,7 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
         columns), ``metrics`` (empty when failed), ``error``, ``traceback``, ``wall_s``,
         ``worker`` (host:pid).
     """
-    from auvmpc.runner import simulate
+    from auvmpc.experiments.run import simulate
 
     campaign = _campaign_from_payload(payload)
     sample = sample_run(campaign, index)
@@ -178,7 +178,7 @@ def run_campaign(
         ``on_progress(done, total)`` once before the first run and after each stored run.
     overwrite : bool
         Discard an earlier campaign folder at ``out_dir`` and start over (only one that
-        auvmpc wrote, :mod:`auvmpc.outputs`). Without it such a folder is resumed.
+        auvmpc wrote, :mod:`auvmpc.experiments.outputs`). Without it such a folder is resumed.
 
     Raises
     ------
@@ -325,7 +325,7 @@ def _execute_local(
 
 
 def _worker_ready() -> int:
-    import auvmpc.runner  # noqa: F401  (the import a first run would otherwise pay)
+    import auvmpc.experiments.run  # noqa: F401  (the import a first run would otherwise pay)
 
     return os.getpid()
 

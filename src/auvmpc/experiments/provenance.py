@@ -39,7 +39,7 @@ def command_line() -> str:
 def git_revision() -> str | None:
     """The commit of the auvmpc checkout this code runs from (``+dirty`` with local
     changes), or None when it is installed from a package or git is unavailable."""
-    source = Path(__file__).resolve().parent
+    source = Path(__file__).resolve().parents[1]  # the auvmpc package folder
     try:
         head = subprocess.run(
             ["git", "-C", str(source), "rev-parse", "HEAD"],

@@ -1,6 +1,6 @@
 """Results as a DataFrame, and the campaign report.
 
-Part of :mod:`auvmpc.campaign` (docs/campaigns.md).
+Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 """
 
 from __future__ import annotations
@@ -25,16 +25,16 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-from auvmpc.campaign.criterion import (
+from auvmpc.experiments.campaign.criterion import (
     Criterion,
     _is_number,
     parse_criterion,
     wilson_interval,
 )
-from auvmpc.campaign.sampling import (
+from auvmpc.experiments.campaign.sampling import (
     reproduce_command,
 )
-from auvmpc.campaign.spec import (
+from auvmpc.experiments.campaign.spec import (
     FIGURES_DIR,
     PERCENTILES,
     REPORT_FILE,
@@ -42,7 +42,7 @@ from auvmpc.campaign.spec import (
     TIMING_METRICS,
     Campaign,
 )
-from auvmpc.campaign.store import (
+from auvmpc.experiments.campaign.store import (
     _connect,
     _results_path,
     stored_campaign,
@@ -174,7 +174,7 @@ def campaign_report(
         criterion other than the campaign file's, ``report-<criterion>.md``, ``.json`` and
         ``figures-<criterion>/`` next to them (:func:`report_names`), never over them.
     """
-    from auvmpc.outputs import atomic_write_text
+    from auvmpc.experiments.outputs import atomic_write_text
 
     out = Path(out_dir)
     campaign = stored_campaign(out)

@@ -1,0 +1,5 @@
+"""State and disturbance estimation: the offset-free EKF, the disturbance observer and the
+obstacle tracker's Kalman filter (:mod:`.ekf`)."""
+
+from auvmpc.estimation.ekf import *  # noqa: F403 -- the package is the module's public names
+from auvmpc.estimation.ekf import __all__  # noqa: F401

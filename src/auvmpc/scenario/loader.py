@@ -1,0 +1,156 @@
+"""Loading a scenario: a built-in name or a YAML file, command-line overrides, its kind."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from auvmpc.config import (
+    builtin_descriptions,
+    load_yaml,
+    read_text_file,
+    read_yaml_mapping,
+)
+from auvmpc.depth import DepthScenario
+from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.scenario.model import Scenario, SixDofScenario
+from auvmpc.scenario.resolved import (
+    ResolvedDepthScenario,
+    ResolvedScenario,
+    ResolvedSixDofScenario,
+)
+
+__all__ = [
+    "apply_override",
+    "builtin_scenarios",
+    "load_scenario",
+    "planar_twin",
+    "scenario_to_dict",
+    "validate_scenario",
+]
+
+
+def planar_twin(scenario: SixDofScenario) -> Scenario:
+    """The same experiment on the 3-DOF plant: same vehicle, horizontal reference, controller,
+    horizontal noise, seed and current (its horizontal part; the random streams line up, so
+    both plants see the same current and the same horizontal noise draws). What only the
+    6-DOF plant has (depth, its controller and sensor) is left out. A current with a depth
+    profile has no planar twin."""
+    water = scenario.disturbance.water_current
+    if water is not None and water.depth_profile:
+        raise ConfigError(
+            "disturbance.water_current.depth_profile",
+            [list(point) for point in water.depth_profile],
+            "a current varying with depth has no planar (3-DOF) twin",
+        )
+    data = scenario.model_dump(
+        mode="json",
+        exclude={"kind", "depth_controller", "water_depth_m", "initial_depth_m", "disturbance"},
+    )
+    data["sensing"] = {"std": list(scenario.sensing.std)}
+    data["plant"] = {"scale": {}}
+    if water is not None:
+        velocity = [*water.velocity_m_per_s[:2], 0.0]
+        current = water.model_copy(update={"velocity_m_per_s": tuple(velocity)})
+        data["disturbance"] = {"water_current": current.model_dump(mode="json")}
+    data["name"] = f"{scenario.name}-planar"
+    return validate_scenario(data)
+
+
+def builtin_scenarios() -> dict[str, str]:
+    """Built-in scenario names and their one-line descriptions."""
+    return builtin_descriptions("scenarios")
+
+
+def load_scenario(
+    source: str | Path, overrides: Sequence[str] = ()
+) -> ResolvedScenario | ResolvedDepthScenario:
+    """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides.
+
+    A file with ``kind: depth`` is a depth experiment (auvmpc.depth), one with
+    ``kind: six-dof`` runs on the 6-DOF plant (:class:`ResolvedSixDofScenario`, a
+    :class:`ResolvedScenario`); any other is a horizontal-plane scenario."""
+    text_source = str(source)
+    if text_source in builtin_scenarios():
+        text = (resources.files("auvmpc.presets") / "scenarios" / f"{text_source}.yaml").read_text()
+        base_dir = Path.cwd()
+    else:
+        path = Path(text_source)
+        if not path.exists():
+            raise ConfigError(
+                "scenario",
+                text_source,
+                f"no such file or built-in; built-ins: {list(builtin_scenarios())}",
+            )
+        text, base_dir = read_text_file(path, "scenario", "scenario file"), path.resolve().parent
+    data = read_yaml_mapping(text, "scenario", text_source, "scenario fields")
+    for override in overrides:
+        apply_override(data, override)
+    if data.get("kind") == "depth":
+        try:
+            return ResolvedDepthScenario(DepthScenario.model_validate(data), base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
+    if data.get("kind") == "six-dof":
+        try:
+            return ResolvedSixDofScenario(SixDofScenario.model_validate(data), base_dir)
+        except ValidationError as error:
+            raise format_validation_error(error) from None
+    return ResolvedScenario(validate_scenario(data), base_dir)
+
+
+def validate_scenario(data: dict[str, Any]) -> Scenario:
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error) from None
+
+
+def apply_override(data: dict[str, Any], override: str) -> None:
+    """Set ``a.b.0.c=value`` in a nested mapping; the value is read as YAML."""
+    path, separator, raw_value = override.partition("=")
+    if not separator or not path:
+        raise ConfigError("--set", override, "expected field=value")
+    try:
+        value = load_yaml(raw_value)
+    except yaml.YAMLError as error:
+        problem = str(getattr(error, "problem", "") or "")
+        detail = f": {problem}" if problem.startswith("duplicate key") else ""
+        raise ConfigError(path, raw_value, f"value is not valid YAML{detail}") from None
+    keys = path.split(".")
+    node: Any = data
+    for depth, key in enumerate(keys):
+        last = depth == len(keys) - 1
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise ConfigError(
+                    ".".join(keys[: depth + 1]), key, f"no such list index (length {len(node)})"
+                )
+            index: Any = int(key)
+        elif isinstance(node, dict):
+            index = key
+        else:
+            raise ConfigError(".".join(keys[:depth]), node, "is not a mapping or list")
+        if last:
+            node[index] = value
+        else:
+            if isinstance(node, dict) and (index not in node or node[index] is None):
+                if keys[depth + 1].isdigit():  # a list the document leaves at its default
+                    raise ConfigError(
+                        ".".join(keys[: depth + 2]),
+                        keys[depth + 1],
+                        f"no such list index ({'.'.join(keys[: depth + 1])} is not given, "
+                        "so it has no items to set; give the whole list)",
+                    )
+                node[index] = {}
+            node = node[index]
+
+
+def scenario_to_dict(scenario: Scenario | DepthScenario) -> dict[str, Any]:
+    """JSON-ready, fully resolved form (defaults filled in)."""
+    return scenario.model_dump(mode="json")

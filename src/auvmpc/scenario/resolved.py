@@ -1,0 +1,182 @@
+"""A scenario plus what its names point at: the nominal model, the simulated plant, the
+settings chosen for the vehicle, and the checks that need the vehicle.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from auvmpc.depth import DepthScenario, resolve_heave
+from auvmpc.errors import ConfigError, FieldError
+from auvmpc.models.six_dof import plant_step_length
+from auvmpc.models.vehicle import (
+    VehicleParams,
+    check_plant_scale,
+    load_vehicle,
+    scaled,
+    stable_plant_step,
+)
+from auvmpc.references import Reference, make_reference
+from auvmpc.scenario.model import (
+    DEFAULT_PLANT_STEP_S,
+    Scenario,
+    SixDofScenario,
+    check_one_sample_time,
+    check_whole_samples,
+)
+
+__all__ = [
+    "ResolvedDepthScenario",
+    "ResolvedScenario",
+    "ResolvedSixDofScenario",
+    "load_vehicle_relative",
+]
+
+
+class ResolvedScenario:
+    """A scenario plus what its names point at: the nominal model and the simulated plant."""
+
+    def __init__(self, scenario: Scenario, base_dir: Path) -> None:
+        self.given = scenario  # as written: what overrides apply to
+        self.scenario = scenario  # below: with what the vehicle decides filled in
+        self.base_dir = base_dir
+        self.model: VehicleParams = load_vehicle_relative(scenario.vehicle, base_dir)
+        check_plant_scale(scenario.plant.scale)
+        self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
+        n = self.model.n_thrusters
+        weights = scenario.controller.R
+        if weights is not None and len(weights) not in (1, n):
+            raise ConfigError(
+                "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
+            )
+        # What the scenario left out is filled in for its vehicle here, so the run's record
+        # (run.json's scenario) holds every value the controller used. Overrides apply to
+        # ``given``: a filled-in value must not outlive a change of vehicle or sample time.
+        plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
+        self.scenario = scenario = scenario.model_copy(
+            update={
+                "controller": scenario.controller.for_vehicle(self.model),
+                "plant": scenario.plant.model_copy(update={"max_step": plant_step}),
+            }
+        )
+        check_whole_samples(scenario.duration, scenario.controller.sample_time)
+        initial = scenario.initial_thrust
+        if initial is not None:
+            if len(initial) != n:
+                raise ConfigError("initial_thrust", list(initial), f"need {n} values")
+            low, high = self.model.thrust_limits
+            if not all(low <= value <= high for value in initial):
+                raise ConfigError(
+                    "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
+                )
+
+
+class ResolvedSixDofScenario(ResolvedScenario):
+    """A 6-DOF scenario, its vehicle (which must have ``six_dof`` and ``heave`` sections and
+    vertical thrusters after the horizontal ones) and its 3-D reference."""
+
+    scenario: SixDofScenario
+
+    def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
+        if scenario.plant.scale:
+            raise ConfigError(
+                "plant.scale",
+                dict(scenario.plant.scale),
+                "not supported on the 6-DOF plant (it simulates the vehicle's six_dof section "
+                "as given; give a vehicle file with other values instead)",
+            )
+        # The vehicle's fitness for the 6-DOF plant first: it decides whether anything else
+        # about the scenario (e.g. a weight per thruster) can matter.
+        vehicle = load_vehicle_relative(scenario.vehicle, base_dir)
+        if vehicle.six_dof is None:
+            raise ConfigError(
+                "vehicle.six_dof",
+                vehicle.name,
+                "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
+            )
+        try:
+            vehicle.check_six_dof_layout()
+        except FieldError as error:
+            raise ConfigError(f"vehicle.{error.field}", error.value, error.reason) from None
+        super().__init__(scenario, base_dir)
+        model = self.model
+        six = model.six_dof
+        if model.heave is None:
+            raise ConfigError(
+                "vehicle.heave", model.name, "missing: the depth controller needs a heave section"
+            )
+        n = model.n_thrusters
+        vertical = np.asarray(six.T)[2, n:]
+        if vertical.size == 0 or not np.any(np.abs(vertical) > 1e-9):
+            raise ConfigError(
+                "vehicle.six_dof.thrusters",
+                six.n_thrusters,
+                f"no vertical thrusters after the {n} horizontal ones: the depth reference "
+                "needs thrusters with a heave (z) component",
+            )
+        self.reference: Reference = make_reference(scenario.reference, base_dir)
+        if not self.reference.has_depth:
+            raise ConfigError(
+                "reference.depth",
+                None,
+                "the 6-DOF plant needs a depth reference: give reference.depth or a 3-D type "
+                "(helix, lawnmower, waypoints-3d)",
+            )
+        given = self.given
+        initial_depth = given.initial_depth_m
+        if initial_depth is None:
+            initial_depth = float(self.reference.depths([0.0])[0, 0])
+        bottom = given.water_depth_m
+        if not 0.0 < initial_depth < bottom:
+            raise ConfigError(
+                "initial_depth_m", initial_depth, f"not in the water (0 to {bottom} m below)"
+            )
+        # The reference over the run, at the controller's samples or finer: one out of the
+        # water cannot be tracked and is no test of a controller.
+        times = np.linspace(0.0, scenario.duration, max(2, int(scenario.duration / 0.1) + 1))
+        path_depths = self.reference.depths(times)[:, 0]
+        if path_depths.min() <= 0.0 or path_depths.max() >= bottom:
+            raise ConfigError(
+                "reference.depth",
+                [round(float(path_depths.min()), 3), round(float(path_depths.max()), 3)],
+                f"the reference leaves the water (0 to water_depth_m {bottom} m below)",
+            )
+        plant_step = given.plant.max_step or plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
+        sample_time = self.scenario.controller.sample_time  # chosen for the vehicle if omitted
+        depth_controller = given.depth_controller
+        if "sample_time" in depth_controller.model_fields_set:
+            check_one_sample_time(depth_controller.sample_time, sample_time)
+        else:
+            depth_controller = depth_controller.model_copy(update={"sample_time": sample_time})
+        self.scenario = self.scenario.model_copy(
+            update={
+                "depth_controller": depth_controller,
+                "initial_depth_m": initial_depth,
+                "plant": self.scenario.plant.model_copy(update={"max_step": plant_step}),
+            }
+        )
+
+
+def load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> VehicleParams:
+    """A vehicle named by a scenario; a file path is relative to the scenario's folder."""
+    if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
+        vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
+    return load_vehicle(vehicle)
+
+
+class ResolvedDepthScenario:
+    """A depth scenario (``kind: depth``) and its vehicle."""
+
+    def __init__(self, scenario: DepthScenario, base_dir: Path) -> None:
+        self.scenario = scenario
+        self.base_dir = base_dir
+        self.model: VehicleParams = load_vehicle_relative(scenario.vehicle, base_dir)
+        check_plant_scale(scenario.plant.scale, "depth")
+        try:
+            self.heave_model = resolve_heave(self.model, {})
+            self.heave_plant = resolve_heave(self.model, scenario.plant.scale)
+        except FieldError as error:
+            raise ConfigError(error.field, error.value, error.reason) from None
