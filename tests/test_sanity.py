@@ -131,6 +131,19 @@ def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
     assert "thrust_rate_limit x sample_time = 2.5 N" in warning
 
 
+def test_a_depth_the_planar_plant_cannot_follow_is_a_warning():
+    """A 3-D path in a horizontal-plane scenario: the run tracks its horizontal path and says
+    that the depth is not followed, where the depth changes; a constant depth is no news."""
+    lawnmower = "reference={type: lawnmower, leg_length: 10, spacing: 4, legs: 2, speed: 0.5"
+    changing = load_scenario("paper-ideal", ["duration=40", f"{lawnmower}, depths_m: [1, 3]}}"])
+    (warning,) = preflight(changing)
+    assert warning.startswith("reference: its depth changes (1 to 3 m)")
+    assert "kind: six-dof" in warning
+    constant = load_scenario("paper-ideal", ["duration=40", f"{lawnmower}, depths_m: [2]}}"])
+    assert preflight(constant) == []
+    assert preflight(load_scenario("bluerov2-helix")) == []  # 6-DOF: the depth is tracked
+
+
 @pytest.mark.parametrize("vehicle", ["jmse", "bluerov"])
 def test_feasibility_agrees_with_a_linear_program(vehicle, request):
     """The closed-form null-space interval test against scipy's LP on random forces."""

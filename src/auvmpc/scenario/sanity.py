@@ -15,6 +15,8 @@ with their reasons, are in ``docs/sanity-checks.md``:
   tight for its speed): warning (a steady-turn estimate; sideslip can help);
 - a reference whose thrust needs change faster than ``thrust_rate_limit`` allows within
   one sample: warning (a minimum-norm allocation estimate; the vehicle lags there).
+- a reference whose depth changes in a horizontal-plane scenario: warning (the 3-DOF
+  plant follows its horizontal path only).
 
 The thrust the reference needs is the 3-DOF model solved for the force (inverse
 dynamics, :mod:`auvmpc.models.vehicle`) along the reference at the controller's samples, for
@@ -31,7 +33,12 @@ import numpy as np
 
 from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
+from auvmpc.scenario import (
+    ResolvedDepthScenario,
+    ResolvedScenario,
+    ResolvedSixDofScenario,
+    Scenario,
+)
 
 __all__ = [
     "available_memory_bytes",
@@ -264,8 +271,17 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     sample_time = scenario.controller.sample_time
     steps = int(round(scenario.duration / sample_time))
     t = sample_time * np.arange(steps + 1)
-    states = make_reference(scenario.reference, resolved.base_dir).states(t)
+    reference = make_reference(scenario.reference, resolved.base_dir)
+    states = reference.states(t)
     warnings: list[str] = []
+    if reference.has_depth and not isinstance(resolved, ResolvedSixDofScenario):
+        depths = reference.depths(t)[:, 0]
+        if np.ptp(depths) > 0.0:
+            warnings.append(
+                f"reference: its depth changes ({depths.min():.3g} to {depths.max():.3g} m) "
+                "but a horizontal-plane scenario tracks only its horizontal path; give "
+                "kind: six-dof to follow the depth too"
+            )
     speed = np.hypot(states[:, 3], states[:, 4])
     top = steady_top_speed(plant)
     fastest = int(np.argmax(speed))
