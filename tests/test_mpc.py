@@ -774,6 +774,29 @@ def test_obstacle_appearing_on_the_path_is_never_touched(controller_type, appear
     _assert_no_violations(result.metrics)
 
 
+def test_corrected_half_planes_move_out_by_the_error_against_them():
+    """soft_rows with a correction: b_n + max(0, a_n . e_n), the normals unchanged."""
+    model = load_vehicle("jmse2210")
+    controller = PaperMpc(model, _config("mpc", control_horizon=2))
+    reference = _oval_preview(20.0)
+    state = reference[0]
+    nominal = np.tile(state, (HORIZON + 1, 1))
+    nominal[:, 0] += 0.25 * np.arange(HORIZON + 1)
+    obstacle = ObstacleState(center=state[:2] + [4.0, 1.0], radius=0.5, velocity=np.zeros(2))
+    observation = _observation(state, reference, 20.0, (obstacle,))
+    error = np.zeros((HORIZON, 2))
+    error[4:6], error[6:9] = [0.3, -0.4], [-0.3, 0.4]  # against some half-planes, along others
+    plain = controller.soft_rows(nominal, reference, observation)
+    corrected = controller.soft_rows(nominal, reference, observation, (error,))
+    np.testing.assert_array_equal(corrected.steps, plain.steps)
+    np.testing.assert_array_equal(corrected.coefficients, plain.coefficients)
+    against = np.einsum("rk,rk->r", plain.coefficients[:, :2], error[plain.steps - 1])
+    assert np.any(against > 0) and np.any(against < 0)
+    np.testing.assert_allclose(
+        corrected.lower, plain.lower + np.maximum(0.0, against), rtol=0, atol=1e-12
+    )
+
+
 @pytest.mark.parametrize("controller_type", list(CONTROLLERS))
 def test_moving_obstacle_crossing_the_path_then_vanishing(controller_type):
     """A disc crossing the line at 0.2 m/s, there from 5 s to 30 s, reaching the line where

@@ -107,17 +107,30 @@ class LinearMpc(IncrementalMpc):
         return tracked_reference(self.model, state, disturbance, reference, self.sample_time)
 
     def soft_rows(
-        self, nominal: np.ndarray, reference: np.ndarray, observation: Observation
+        self,
+        nominal: np.ndarray,
+        reference: np.ndarray,
+        observation: Observation,
+        correction: tuple[np.ndarray, ...] | None = None,
     ) -> SoftRows:
         """Half-planes a . p_n >= b for the predicted steps n near any obstacle.
 
         Steps whose nominal position is farther than ``_OBSTACLE_RANGE_M`` beyond the
         inflated disc are left out: the plan cannot move that far from its nominal in
         one re-plan, and every row saved keeps the QP small.
+
+        ``correction``, one (ny, 2) array per obstacle, is the prediction's position error
+        (predicted minus nonlinear) at steps n = 1..ny: each
+        half-plane moves out by the error's component against it, a . p_n >= b + max(0,
+        a . e_n), so that a position that far off the prediction still meets a . p >= b.
         """
         all_normals, all_offsets, all_steps = [], [], []
-        for obstacle in observation.obstacles:
+        for index, obstacle in enumerate(observation.obstacles):
             normals, offsets = self._half_planes(obstacle, nominal, reference)
+            if correction is not None:
+                offsets = offsets + np.maximum(
+                    0.0, np.einsum("nk,nk->n", normals, correction[index])
+                )
             gaps = np.einsum("nk,nk->n", normals, nominal[1:, :2]) - offsets
             near = np.flatnonzero(gaps < _OBSTACLE_RANGE_M)
             all_normals.append(normals[near])
