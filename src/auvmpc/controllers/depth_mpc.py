@@ -106,7 +106,9 @@ class DepthMpc(IncrementalMpc):
         c -= np.einsum("nij,nj->ni", B, nominal_input)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
 
-    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
+    def soft_rows(
+        self, nominal: np.ndarray, reference: np.ndarray, observation, correction=None
+    ) -> SoftRows:
         """Below the surface and above the bottom by the margins, at every predicted step."""
         ny = self.horizon
         steps = np.concatenate([np.arange(1, ny + 1)] * 2)

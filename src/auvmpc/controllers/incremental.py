@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from abc import abstractmethod
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,9 +27,10 @@ class IncrementalMpc(ShelledController):
     """One sample of an incremental MPC, for any plant, inside the safety shell.
 
     Subclasses supply the plant-specific parts: the estimator, the reference
-    alignment, the prediction model and the soft state constraints. This class
-    owns the solve loop (condensed or sparse QP); the shell owns the hard limits, the
-    fallback and the plan.
+    alignment, the prediction model, the soft state constraints and, optionally, a check
+    of the solved plan (:meth:`plan_check`) that corrects the soft constraints for one
+    more solve. This class owns the solve loop (condensed or sparse QP); the shell owns
+    the hard limits, the fallback and the plan.
     """
 
     qp: CondensedQp
@@ -62,7 +64,15 @@ class IncrementalMpc(ShelledController):
         follow as given)."""
         return self.aligned_reference(state, reference)
 
-    def soft_rows(self, nominal: np.ndarray, reference: np.ndarray, observation) -> SoftRows:
+    def soft_rows(
+        self,
+        nominal: np.ndarray,
+        reference: np.ndarray,
+        observation: Observation,
+        correction: object | None = None,
+    ) -> SoftRows:
+        """Soft state constraints along the nominal (ny + 1, nx), corrected by what
+        :meth:`plan_check` returned on a second solve (None on the first)."""
         return SoftRows.empty(nominal.shape[1])
 
     def after_command(self, command: np.ndarray) -> None:
@@ -80,13 +90,63 @@ class IncrementalMpc(ShelledController):
             state, disturbance, observation.reference[: qp.horizon + 1]
         )
         moves = qp.shifted_moves(self._plan, previous)
+        started = time.perf_counter()
+        solution = self._solve(observation, state, disturbance, reference, previous, moves, None)
+        if solution.solved:
+            correction = self.plan_check(
+                observation, state, disturbance, qp.plan(solution.moves, previous), solution.states
+            )
+            if correction is not None:
+                # The same QP again (same nominal, so the same rows), the rows corrected.
+                corrected = self._solve(
+                    observation, state, disturbance, reference, previous, moves, correction
+                )
+                corrected.iterations += solution.iterations
+                if corrected.solved:
+                    solution = corrected
+                else:
+                    solution.iterations = corrected.iterations
+        self._proposed = solution.states if solution.solved else None
+        return Proposal(
+            plan=qp.plan(solution.moves, previous) if solution.solved else None,
+            solve_time_s=time.perf_counter() - started,
+            iterations=solution.iterations,
+            max_slack=solution.max_slack,
+            predicted_states=solution.states,
+            disturbance=disturbance,
+        )
+
+    def plan_check(
+        self,
+        observation: Observation,
+        state: np.ndarray,
+        disturbance: np.ndarray,
+        plan: np.ndarray,
+        predicted: np.ndarray,
+    ) -> object | None:
+        """After a solve: None if the plan (ny, nu) and its predicted states (ny + 1, nx)
+        stand, else a correction for :meth:`soft_rows`, and the QP is solved once more."""
+        return None
+
+    def _solve(
+        self,
+        observation: Observation,
+        state: np.ndarray,
+        disturbance: np.ndarray,
+        reference: np.ndarray,
+        previous: np.ndarray,
+        moves: np.ndarray,
+        correction: object | None,
+    ) -> _Solution:
+        """The linearise-and-solve passes from the nominal moves ``moves``."""
+        qp = self.qp
         self.linearisation_nodes = (
             self.aligned_reference(state, _shifted(self._predicted))
             if self._predicted is not None
             else None
         )
-        started = time.perf_counter()
         iterations, max_slack, predicted = 0, 0.0, None
+        solved = False
         for _ in range(self.linearisation_iterations):
             # Each pass re-linearises (model and soft rows) around the last plan.
             prediction = self.prediction_model(state, qp.plan(moves, previous), disturbance)
@@ -96,7 +156,7 @@ class IncrementalMpc(ShelledController):
                 free, sensitivity = qp.condense(state, previous, prediction)
             if nominal is None:
                 nominal = free + sensitivity @ moves
-            soft = self.soft_rows(nominal, reference, observation)
+            soft = self.soft_rows(nominal, reference, observation, correction)
             trust = None
             if prediction.nominal is not None and self.trust_region_weights is not None:
                 trust = (self.trust_region_weights, prediction.nominal)
@@ -129,20 +189,23 @@ class IncrementalMpc(ShelledController):
                 break
             moves = new_moves
             self.linearisation_nodes = predicted
-        self._proposed = predicted if solved else None
-        return Proposal(
-            plan=qp.plan(moves, previous) if solved else None,
-            solve_time_s=time.perf_counter() - started,
-            iterations=iterations,
-            max_slack=max_slack,
-            predicted_states=predicted,
-            disturbance=disturbance,
-        )
+        return _Solution(solved, moves, predicted, iterations, max_slack)
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         # After a fallback the next sample linearises afresh.
         self._predicted = None if fell_back else self._proposed
         self.after_command(command)
+
+
+@dataclass
+class _Solution:
+    """What the linearise-and-solve passes of one sample found."""
+
+    solved: bool
+    moves: np.ndarray  # (n_moves,) the last pass's moves (the nominal ones if it failed)
+    states: np.ndarray | None  # (ny + 1, nx) predicted by the last pass that solved
+    iterations: int
+    max_slack: float
 
 
 def _shifted(states: np.ndarray) -> np.ndarray:

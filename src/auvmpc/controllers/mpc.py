@@ -11,7 +11,10 @@ the heading reference alignment, the offset-free estimator, and the obstacles.
   previous solution with exact CasADi Jacobians.
 
 Obstacles: each keep-out disc becomes one half-plane per predicted step, tangent
-to the inflated disc, each row softened by its own exact-penalty slack.
+to the inflated disc, each row softened by its own exact-penalty slack. The paper's
+frozen model leaves out how the vehicle turns over the horizon, so :class:`PaperMpc`
+checks its plan on the nonlinear model and, where that enters a disc, moves those
+half-planes out by the prediction's error and solves once more (:meth:`PaperMpc.plan_check`).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.vehicle import VehicleParams, body_from_world
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
@@ -107,17 +111,30 @@ class LinearMpc(IncrementalMpc):
         return tracked_reference(self.model, state, disturbance, reference, self.sample_time)
 
     def soft_rows(
-        self, nominal: np.ndarray, reference: np.ndarray, observation: Observation
+        self,
+        nominal: np.ndarray,
+        reference: np.ndarray,
+        observation: Observation,
+        correction: tuple[np.ndarray, ...] | None = None,
     ) -> SoftRows:
         """Half-planes a . p_n >= b for the predicted steps n near any obstacle.
 
         Steps whose nominal position is farther than ``_OBSTACLE_RANGE_M`` beyond the
         inflated disc are left out: the plan cannot move that far from its nominal in
         one re-plan, and every row saved keeps the QP small.
+
+        ``correction``, one (ny, 2) array per obstacle, is the prediction's position error
+        (predicted minus nonlinear, :meth:`PaperMpc.plan_check`) at steps n = 1..ny: each
+        half-plane moves out by the error's component against it, a . p_n >= b + max(0,
+        a . e_n), so that a position that far off the prediction still meets a . p >= b.
         """
         all_normals, all_offsets, all_steps = [], [], []
-        for obstacle in observation.obstacles:
+        for index, obstacle in enumerate(observation.obstacles):
             normals, offsets = self._half_planes(obstacle, nominal, reference)
+            if correction is not None:
+                offsets = offsets + np.maximum(
+                    0.0, np.einsum("nk,nk->n", normals, correction[index])
+                )
             gaps = np.einsum("nk,nk->n", normals, nominal[1:, :2]) - offsets
             near = np.flatnonzero(gaps < _OBSTACLE_RANGE_M)
             all_normals.append(normals[near])
@@ -238,6 +255,42 @@ class PaperMpc(LinearMpc):
         super().__init__(model, config)
         # Thrust and body-frame disturbance enter the same velocity rows: [B_c, G_c].
         self._input_matrix = np.hstack([input_matrix(model), disturbance_matrix(model)])
+        config = self.config  # with what the vehicle decides filled in
+        sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
+        self._rollout = sampled.rollout(config.prediction_horizon)  # for plan_check
+
+    def plan_check(
+        self,
+        observation: Observation,
+        state: np.ndarray,
+        disturbance: np.ndarray,
+        plan: np.ndarray,
+        predicted: np.ndarray,
+    ) -> tuple[np.ndarray, ...] | None:
+        """Where the plan's thrusts, on the nonlinear model, enter a keep-out disc: the
+        frozen prediction's position error there, one (ny, 2) array per obstacle (zero at
+        the other steps), for :meth:`soft_rows`; None when the rollout stays clear.
+
+        The frozen model neither turns the predicted velocity with the heading nor lets
+        the Munk moment (m11 - m22) u v follow the sway, so beside a disc passed with sway
+        the vehicle can turn into the disc where the plan predicted a steady heading
+        (docs/paper-reproduction.md, 4). The check costs one rollout per sample with an
+        obstacle in view; the model, the cost, the moves and the QP are the paper's, and
+        while no rollout enters a disc the result is the paper's plan unchanged.
+        """
+        if not self.config.rollout_check or not observation.obstacles:
+            return None
+        forces = np.tile(np.reshape(disturbance, (3, 1)), (1, self.horizon))
+        rollout = np.asarray(self._rollout(state, plan.T, forces)).T[:, :2]  # (ny, 2)
+        steps = np.arange(1, self.horizon + 1)
+        errors, entered = [], False
+        for obstacle in observation.obstacles:
+            centres, radii = obstacle.predict(steps * self.sample_time)
+            reach = radii + self.ocp.keep_out_extra
+            inside = np.hypot(*(rollout - centres).T) < reach
+            errors.append(np.where(inside[:, None], predicted[1:, :2] - rollout, 0.0))
+            entered = entered or bool(inside.any())
+        return tuple(errors) if entered else None
 
     def prediction_model(
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
