@@ -489,7 +489,7 @@ def figure_depth(log, limits, title: str = "") -> Figure:
 
     Parameters
     ----------
-    log : auvmpc.depth.DepthLog
+    log : auvmpc.sim.log.DepthLog
     limits : HeaveParams
         Vertical thrust limits to draw.
     """

@@ -90,8 +90,8 @@ class Observation:
 
     k: int
     t: float  # s
-    state: np.ndarray  # (6,) measured [x, y, psi, u, v, r], possibly noisy
-    reference: np.ndarray  # (preview_steps + 1, 6): reference at t_k + i * Te, i = 0..
+    state: np.ndarray  # measured, possibly noisy: (6,) [x, y, psi, u, v, r]; depth: (1,) [z]
+    reference: np.ndarray  # (preview_steps + 1, nx): reference at t_k + i * Te, i = 0..
     obstacles: tuple[ObstacleState, ...] = ()
 
 

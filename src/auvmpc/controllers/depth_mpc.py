@@ -15,8 +15,9 @@ import numpy as np
 
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import AugmentedEkf
+from auvmpc.models.heave import heave_dynamics, resolve_heave
 from auvmpc.models.integrators import rk4
-from auvmpc.models.vehicle import HeaveParams, heave_dynamics
+from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
@@ -26,7 +27,15 @@ NX = 2  # [z, w]
 
 
 class DepthMpc(IncrementalMpc):
-    """Depth controller; ``config`` is a depth.DepthControllerConfig."""
+    """Depth controller; ``config`` is a :class:`auvmpc.controllers.config.DepthControllerConfig`,
+    ``water_depth`` (m) where the bottom is (z = -water_depth)."""
+
+    @classmethod
+    def from_config(
+        cls, model: VehicleParams, config, obstacle_count: int = 0, *, water_depth_m: float
+    ) -> DepthMpc:
+        """Built by the registry on the vehicle's heave section (no obstacles in depth)."""
+        return cls(resolve_heave(model, {}), config, water_depth_m)
 
     def __init__(self, heave: HeaveParams, config, water_depth: float) -> None:
         self.config = config

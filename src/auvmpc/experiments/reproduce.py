@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
-from auvmpc.depth import STEP_METRIC_KEYS
 from auvmpc.experiments.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
 from auvmpc.experiments.run import fill_run_folder, simulate
 from auvmpc.scenario import ResolvedScenario, load_scenario, planar_twin
 from auvmpc.sim.log import SimLog
+from auvmpc.sim.metrics import STEP_METRIC_KEYS
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
 

@@ -40,8 +40,8 @@ from collections.abc import Callable
 import casadi as ca
 import numpy as np
 
-from auvmpc.models.discrete import StateLayout
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
+from auvmpc.models.layout import StateLayout
 from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
@@ -64,9 +64,7 @@ __all__ = [
 ]
 
 SIX_DOF = StateLayout(
-    names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"),
-    position=(0, 1),
-    heading=5,
+    names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r")
 )
 NX = 12
 # Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.

@@ -16,8 +16,8 @@ from auvmpc.config import (
     read_text_file,
     read_yaml_mapping,
 )
-from auvmpc.depth import DepthScenario
 from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import Scenario, SixDofScenario
 from auvmpc.scenario.resolved import (
     ResolvedDepthScenario,

@@ -1,11 +1,12 @@
 """The paper's control architecture on the 6-DOF plant (paper section 4.2).
 
 Every sample: the horizontal controller (any registered one, built on the 3-DOF model) sees
-``[x, y, psi, u, v, r]`` of the measured 6-DOF state; the depth MPC (:mod:`auvmpc.depth`) sees
-the measured depth and depth rate and the depth reference; :class:`ThrustMapping` puts both
-demands on the vehicle's ``six_dof.thrusters`` within their hard force and rate limits; the
-6-DOF plant (:mod:`auvmpc.models.six_dof`) integrates the held thrust with RK4 sub-steps in
-the water current. Roll and pitch are left to passive stability.
+``[x, y, psi, u, v, r]`` of the measured 6-DOF state; the depth MPC
+(:mod:`auvmpc.controllers.depth_mpc`) sees the measured depth and depth rate and the depth
+reference; :class:`ThrustMapping` puts both demands on the vehicle's ``six_dof.thrusters``
+within their hard force and rate limits; the 6-DOF plant (:mod:`auvmpc.models.six_dof`)
+integrates the held thrust with RK4 sub-steps in the water current. Roll and pitch are left
+to passive stability.
 
 Conventions: the plant, the log and the 3-D reference use NED (z down, the depth below the
 surface); the depth controller works in z up (negative below the surface), as in the tank
@@ -21,6 +22,7 @@ controller's total heave force is split over the vertical set by least squares o
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from collections.abc import Callable
@@ -142,7 +144,7 @@ class SixDofLog(SimLog):
         """The horizontal view: the horizontal thrusters only (what the 3-DOF metrics and
         figures read, checked against the horizontal controller's limits)."""
         n = self.n_horizontal
-        fields = {name: getattr(self, name) for name in SimLog.__dataclass_fields__}
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(SimLog)}
         fields["thrust"] = self.thrust[:, :n]
         fields["initial_thrust"] = self.initial_thrust[:n]
         return SimLog(**fields)
@@ -187,8 +189,8 @@ class SixDofLog(SimLog):
             rows = list(csv.DictReader(handle))
         steps = base.steps
         log = cls.allocate_six_dof(steps, n_horizontal, base.n_thrusters, base.sample_time)
-        for name in SimLog.__dataclass_fields__:
-            setattr(log, name, getattr(base, name))
+        for simlog_field in dataclasses.fields(SimLog):
+            setattr(log, simlog_field.name, getattr(base, simlog_field.name))
         number = lambda row, name: float(row[name])  # noqa: E731
         for k, row in enumerate(rows):
             full = np.zeros(12)
