@@ -43,7 +43,7 @@ from scipy.interpolate import CubicSpline
 
 from auvmpc.config import NonNegative, StrictModel
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import DEPTH
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 
 __all__ = [
     "REFERENCE_TYPES",
@@ -438,7 +438,7 @@ class Reference(ABC):
 
     def positions(self, t: ArrayLike) -> np.ndarray:
         """Path positions ``[x, y]`` (m) at times ``t`` (s), shape (n, 2)."""
-        return self.states(t)[:, :2]
+        return self.states(t)[:, HORIZONTAL.position]
 
     def preview(self, t0: float, dt: float, n: int) -> np.ndarray:
         """States at ``t0 + i*dt`` for i = 0..n-1, shape (n, 6).
@@ -474,13 +474,10 @@ def _wrap(angle: ArrayLike) -> np.ndarray:
 def _assemble(
     x: ArrayLike, y: ArrayLike, psi: ArrayLike, u: ArrayLike, r: ArrayLike, n: int
 ) -> np.ndarray:
-    out = np.empty((n, 6))
-    out[:, 0] = x
-    out[:, 1] = y
-    out[:, 2] = psi
-    out[:, 3] = u
-    out[:, 4] = 0.0  # v_r = 0: the reference vehicle moves along its own heading
-    out[:, 5] = r
+    out = np.empty((n, HORIZONTAL.size))
+    # v_r = 0: the reference vehicle moves along its own heading.
+    for name, value in zip(HORIZONTAL.names, (x, y, psi, u, 0.0, r), strict=True):
+        out[:, HORIZONTAL.index(name)] = value
     return out
 
 

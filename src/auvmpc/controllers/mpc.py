@@ -30,6 +30,7 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, body_from_world
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
@@ -118,7 +119,7 @@ class LinearMpc(IncrementalMpc):
         all_normals, all_offsets, all_steps = [], [], []
         for obstacle in observation.obstacles:
             normals, offsets = self._half_planes(obstacle, nominal, reference)
-            gaps = np.einsum("nk,nk->n", normals, nominal[1:, :2]) - offsets
+            gaps = np.einsum("nk,nk->n", normals, nominal[1:, HORIZONTAL.position]) - offsets
             near = np.flatnonzero(gaps < _OBSTACLE_RANGE_M)
             all_normals.append(normals[near])
             all_offsets.append(offsets[near])
@@ -144,8 +145,8 @@ class LinearMpc(IncrementalMpc):
         steps = np.arange(1, self.horizon + 1)
         # Step n against the obstacle predicted at t + n Te, with that step's keep-out radius.
         centres, radii = obstacle.predict(steps * self.sample_time)
-        radial = nominal[1:, :2] - centres
-        heading = reference[1:, 2]
+        radial = nominal[1:, HORIZONTAL.position] - centres
+        heading = reference[1:, HORIZONTAL.heading]
         tangent = np.column_stack([np.cos(heading), np.sin(heading)])
         left = np.column_stack([-tangent[:, 1], tangent[:, 0]])
         closest = int(np.argmin(np.einsum("nk,nk->n", radial, radial)))
@@ -249,7 +250,7 @@ class PaperMpc(LinearMpc):
             Ad, Bd = step_A @ Ad, step_A @ Bd + step_B
         n, ny = self.model.n_thrusters, self.horizon
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
-        d_u, d_v = body_from_world(disturbance, state[2])
+        d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
         offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[2]])
         return AffinePrediction(
             A=np.broadcast_to(Ad, (ny, NX, NX)),

@@ -32,7 +32,7 @@ def world_disturbance_dynamics(model: VehicleParams):
     """x' = f(x, F, d_world): the model with a world-frame force and moment added."""
 
     def f(state, thrust, disturbance_world):
-        d_u, d_v = body_from_world(disturbance_world, state[2])
+        d_u, d_v = body_from_world(disturbance_world, state[HORIZONTAL.heading])
         return dynamics(state, thrust, model, (d_u, d_v, disturbance_world[2]))
 
     return f

@@ -17,6 +17,7 @@ import numpy as np
 
 from auvmpc.errors import FieldError
 from auvmpc.models.integrators import rk4_step_time_varying
+from auvmpc.models.layout import DEPTH
 from auvmpc.models.vehicle import HEAVE_MODEL_FIELDS, HeaveParams, VehicleParams
 
 __all__ = [
@@ -24,6 +25,9 @@ __all__ = [
     "heave_plant_step",
     "resolve_heave",
 ]
+
+_Z = DEPTH.index("z")
+
 
 def heave_dynamics(state, thrust, heave: HeaveParams, disturbance=0.0):
     """Derivative of [z, w] (m, m/s, z up) under vertical thrusts (N) and a force d_z (N).
@@ -66,7 +70,7 @@ def heave_plant_step(
     vertical force ``force(z, t)`` (N) evaluated where each sub-step asks."""
 
     def rhs(time_s: float, x: np.ndarray) -> np.ndarray:
-        return heave_dynamics(x, thrust, heave, force(x[0], time_s))
+        return heave_dynamics(x, thrust, heave, force(x[_Z], time_s))
 
     h = duration / substeps
     for i in range(substeps):

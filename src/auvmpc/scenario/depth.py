@@ -20,6 +20,7 @@ from auvmpc.controllers.config import DepthControllerConfig
 from auvmpc.environment.depth_sensor import DepthSensorConfig
 from auvmpc.environment.waves import WaveConfig, WaveType, wave_number
 from auvmpc.errors import FieldError
+from auvmpc.models.layout import DEPTH
 from auvmpc.references import DepthStepConfig
 
 __all__ = [
@@ -73,8 +74,9 @@ class DepthScenario(StrictModel):
             if not bottom < value < 0.0:
                 where = "below the tank bottom" if value <= bottom else "above the surface"
                 raise FieldError(f"reference.{field}", value, f"{where} (water depth {-bottom} m)")
-        if self.initial_state is not None and not bottom < self.initial_state[0] <= 0.0:
-            raise FieldError("initial_state.0", self.initial_state[0], "outside the water")
+        z = DEPTH.index("z")
+        if self.initial_state is not None and not bottom < self.initial_state[z] <= 0.0:
+            raise FieldError(f"initial_state.{z}", self.initial_state[z], "outside the water")
         if self.reference.step_time_s >= self.duration:
             raise FieldError("reference.step_time_s", self.reference.step_time_s, "after the end")
         steps = self.duration / self.controller.sample_time

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
 
@@ -145,7 +146,7 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
 
 
 def _check_start(scenario: Scenario) -> list[str]:
-    x, y = scenario.initial_state[:2]
+    x, y = scenario.initial_state[HORIZONTAL.position]
     margin = scenario.controller.vehicle_radius
     warnings = []
     for index, obstacle in enumerate(scenario.obstacles):
@@ -195,7 +196,7 @@ def reference_thrust_needs(
     """Generalised force [f_u, f_v, M_r] (k, 3) that moves the model along ``states``
     (k, 6) sampled every ``sample_time`` with no disturbance (the model solved for tau;
     accelerations by central differences)."""
-    u, v, r = states[:, 3], states[:, 4], states[:, 5]
+    u, v, r = (states[:, HORIZONTAL.index(name)] for name in ("u", "v", "r"))
     if len(states) > 1:
         du, dv, dr = (np.gradient(q, sample_time) for q in (u, v, r))
     else:
@@ -266,7 +267,7 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     t = sample_time * np.arange(steps + 1)
     states = make_reference(scenario.reference, resolved.base_dir).states(t)
     warnings: list[str] = []
-    speed = np.hypot(states[:, 3], states[:, 4])
+    speed = np.hypot(*states[:, HORIZONTAL.body_velocity].T)
     top = steady_top_speed(plant)
     fastest = int(np.argmax(speed))
     if speed[fastest] > top * (1.0 + _RELATIVE_MARGIN):
@@ -290,7 +291,8 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     infeasible = np.flatnonzero(~feasible_forces(plant, tau))
     if len(infeasible):
         k = int(infeasible[0])
-        radius = speed[k] / abs(states[k, 5]) if abs(states[k, 5]) > 1e-12 else math.inf
+        yaw_rate = abs(states[k, HORIZONTAL.index("r")])
+        radius = speed[k] / yaw_rate if yaw_rate > 1e-12 else math.inf
         warnings.append(
             f"reference: needs more thrust than {plant.name}'s limits {list(plant.thrust_limits)}"
             f" N at {len(infeasible)} of {len(t)} samples, first at t = {t[k]:g} s "

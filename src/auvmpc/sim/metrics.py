@@ -14,7 +14,8 @@ import math
 import numpy as np
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.models.layout import DEPTH
+from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.references import DepthStepConfig
 from auvmpc.sim.log import DepthLog, SimLog
@@ -41,16 +42,18 @@ LIMIT_TOLERANCE_N = 1e-9
 MARGIN_TOLERANCE_M = 0.01
 # The reference is "not moving" below this speed (m/s): no along-track direction to lag on.
 _MIN_REFERENCE_SPEED_M_PER_S = 0.01
+# Where a horizontal log's columns are (auvmpc.models.layout).
+_POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
 
 
 def position_error(log: SimLog) -> np.ndarray:
     """(N+1,) Euclidean distance to the reference position (m)."""
-    return np.hypot(*(log.state[:, :2] - log.reference[:, :2]).T)
+    return np.hypot(*(log.state[:, _POSITION] - log.reference[:, _POSITION]).T)
 
 
 def heading_error(log: SimLog) -> np.ndarray:
     """(N+1,) heading error wrapped to (-pi, pi] (rad)."""
-    return wrap_angle(log.state[:, 2] - log.reference[:, 2])
+    return wrap_angle(log.state[:, _HEADING] - log.reference[:, _HEADING])
 
 
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
@@ -118,20 +121,20 @@ def compute_metrics(
     common = actuation_metrics(log, limits.thrust_limits, limits.thrust_rate_limit)
     steady = log.t >= transient_s - 1e-9
     clearance = log.clearance_m
-    yaw_rate = np.abs(log.state[:, 5])
+    yaw_rate = np.abs(log.state[:, _YAW_RATE])
     heading_after = np.abs(heading[steady])
     metrics = {
         "rms_position_error_m": _rms(error),
         "max_position_error_m": float(error.max()),
         "final_position_error_m": float(error[-1]),
         "rms_heading_error_rad": _rms(heading),
-        **{
-            name: common[name]
-            for name in (
-                "max_abs_thrust_N", "max_abs_thrust_rate_N_per_s", "thrust_limit_violations",
-                "thrust_rate_violations",
-            )
-        },  # fmt: skip
+        **_pick(
+            common,
+            "max_abs_thrust_N",
+            "max_abs_thrust_rate_N_per_s",
+            "thrust_limit_violations",
+            "thrust_rate_violations",
+        ),
         "min_obstacle_clearance_m": float(clearance.min())
         if np.isfinite(clearance).any()
         else None,
@@ -140,15 +143,19 @@ def compute_metrics(
         )
         if np.isfinite(clearance).any()
         else None,
-        "detour_m": path_length(log.state[:, :2]) - path_length(log.reference[:, :2]),
+        "detour_m": path_length(log.state[:, _POSITION]) - path_length(log.reference[:, _POSITION]),
         "time_lost_s": time_lost(log),
-        **{
-            name: common[name]
-            for name in (
-                "solve_ms_median", "solve_ms_p99", "solve_ms_max", "thrust_effort_N2s",
-                "solver_failures", "fallback_steps", "relaxed_steps", "longest_fallback_streak",
-            )
-        },  # fmt: skip
+        **_pick(
+            common,
+            "solve_ms_median",
+            "solve_ms_p99",
+            "solve_ms_max",
+            "thrust_effort_N2s",
+            "solver_failures",
+            "fallback_steps",
+            "relaxed_steps",
+            "longest_fallback_streak",
+        ),
         "max_abs_yaw_rate_rad_per_s": float(yaw_rate.max()),
         "transient_s": float(transient_s),
         "rms_position_error_after_transient_m": _rms(error[steady]),
@@ -165,9 +172,9 @@ def compute_metrics(
         max_error_after_transient_m=metrics["max_position_error_after_transient_m"],
         max_heading_error_after_transient_rad=metrics["max_heading_error_after_transient_rad"],
         max_abs_yaw_rate_after_transient=float(yaw_rate[steady].max()) if steady.any() else None,
-        max_abs_reference_yaw_rate=float(np.abs(log.reference[:, 5]).max()),
-        reference_extent_m=float(np.hypot(*np.ptp(log.reference[:, :2], axis=0))),
-        heading_turns=relative_heading_turns(log.state[:, 2], log.reference[:, 2]),
+        max_abs_reference_yaw_rate=float(np.abs(log.reference[:, _YAW_RATE]).max()),
+        reference_extent_m=float(np.hypot(*np.ptp(log.reference[:, _POSITION], axis=0))),
+        heading_turns=relative_heading_turns(log.state[:, _HEADING], log.reference[:, _HEADING]),
         fallback_steps=metrics["fallback_steps"],
         longest_fallback_streak=metrics["longest_fallback_streak"],
         relaxed_steps=metrics["relaxed_steps"],
@@ -192,17 +199,17 @@ def time_lost(log: SimLog) -> float:
     divided by the reference speed there (samples slower than 1 cm/s are left out).
     """
     reference = log.reference
+    psi = reference[:, _HEADING]
+    u, v = reference[:, HORIZONTAL.body_velocity].T
     velocity = np.column_stack(
-        [
-            np.cos(reference[:, 2]) * reference[:, 3] - np.sin(reference[:, 2]) * reference[:, 4],
-            np.sin(reference[:, 2]) * reference[:, 3] + np.cos(reference[:, 2]) * reference[:, 4],
-        ]
+        [np.cos(psi) * u - np.sin(psi) * v, np.sin(psi) * u + np.cos(psi) * v]
     )
     speed = np.hypot(*velocity.T)
     moving = speed > _MIN_REFERENCE_SPEED_M_PER_S
     if not moving.any():
         return 0.0
-    lag = np.einsum("nk,nk->n", reference[moving, :2] - log.state[moving, :2], velocity[moving])
+    ahead = reference[moving, _POSITION] - log.state[moving, _POSITION]
+    lag = np.einsum("nk,nk->n", ahead, velocity[moving])
     return float(max(0.0, np.max(lag / speed[moving] ** 2)))
 
 
@@ -213,6 +220,11 @@ def longest_run(flags: np.ndarray) -> int:
         current = current + 1 if flag else 0
         longest = max(longest, current)
     return longest
+
+
+def _pick(metrics: dict, *names: str) -> dict:
+    """``names`` of ``metrics``, in that order (run.json keeps its key order)."""
+    return {name: metrics[name] for name in names}
 
 
 def _rms(values: np.ndarray) -> float | None:
@@ -251,8 +263,8 @@ def compute_six_dof_metrics(
     )
     rate = np.abs(increments) > mapping.max_step + LIMIT_TOLERANCE_N
     steady = log.t >= transient_s - 1e-9
-    depth_error = log.full_state[:, 2] - log.depth_reference[:, 0]
-    roll, pitch = np.abs(log.full_state[:, 3]), np.abs(log.full_state[:, 4])
+    depth_error = log.full_state[:, SIX_DOF.index("z")] - log.depth_reference[:, 0]
+    roll, pitch = (np.abs(log.full_state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
     metrics.update(
         {
             "thrust_limit_violations": int(force.sum()),
@@ -329,12 +341,18 @@ def compute_depth_metrics(
         "max_z_m": float(z.max()),
         "min_z_m": float(z.min()),
     }
-    first = (
-        "thrust_limit_violations", "thrust_rate_violations", "max_abs_thrust_N",
-        "solve_ms_median", "solve_ms_p99", "solve_ms_max", "solver_failures",
-    )  # fmt: skip
-    metrics.update({name: common[name] for name in first})
-    metrics.update({name: value for name, value in common.items() if name not in first})
+    # The keys depth runs had first, in their order; then the rest of the common ones.
+    metrics |= _pick(
+        common,
+        "thrust_limit_violations",
+        "thrust_rate_violations",
+        "max_abs_thrust_N",
+        "solve_ms_median",
+        "solve_ms_p99",
+        "solve_ms_max",
+        "solver_failures",
+    )
+    metrics |= {name: value for name, value in common.items() if name not in metrics}
     return metrics
 
 

@@ -136,7 +136,7 @@ def plant_step(
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         force = disturbance.force_world(t)
-        d_u, d_v = body_from_world(force, x[2])
+        d_u, d_v = body_from_world(force, x[_HEADING])
         water = disturbance.water_velocity_world(t)
         return dynamics(x, thrust, plant, (d_u, d_v, force[2]), current_world=water)
 
@@ -192,7 +192,7 @@ def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunc
 
     def rhs(j: int, state):
         force = forces[:, j]
-        d_u, d_v = body_from_world(force, state[2])
+        d_u, d_v = body_from_world(force, state[_HEADING])
         return dynamics(state, thrust, plant, (d_u, d_v, force[2]), current_world=water)
 
     h = duration / substeps
