@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
 
@@ -92,7 +92,7 @@ def check_memory(
         if isinstance(resolved, ResolvedDepthScenario)
         else resolved.model.n_thrusters
     )
-    nx = 2 if isinstance(resolved, ResolvedDepthScenario) else 6
+    nx = (DEPTH if isinstance(resolved, ResolvedDepthScenario) else HORIZONTAL).size
     # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
     log_bytes = steps * (_BYTES * (3 * nx + n + 4) + 64)
     if log_bytes > budget:

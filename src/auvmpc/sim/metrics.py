@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.models.layout import DEPTH, HORIZONTAL
@@ -67,11 +68,14 @@ def thrust_increments(log: SimLog) -> np.ndarray:
 
 
 def actuation_metrics(
-    log: SimLog, thrust_limits: tuple[float, float], thrust_rate_limit: float
+    log: SimLog,
+    thrust_limits: tuple[ArrayLike, ArrayLike],
+    thrust_rate_limit: ArrayLike,
 ) -> dict[str, float | int]:
     """What every kind of run reports of its thrust and its controller: the largest thrust and
     rate, hard-limit and rate-limit violations (against ``thrust_limits`` (N) and
-    ``thrust_rate_limit`` (N/s)), effort, solve times, fallback and relaxed steps."""
+    ``thrust_rate_limit`` (N/s), one for all thrusters or one per thruster), effort, solve
+    times, fallback and relaxed steps."""
     increments = thrust_increments(log)
     max_step = thrust_rate_limit * log.sample_time
     lower, upper = thrust_limits
@@ -257,23 +261,20 @@ def compute_six_dof_metrics(
 
     metrics = compute_metrics(log.horizontal(), limits, transient_s, obstacle_margin_m)
     mapping = ThrustMapping(limits, log.sample_time)
-    increments = thrust_increments(log)
-    force = (log.thrust < mapping.lower - LIMIT_TOLERANCE_N) | (
-        log.thrust > mapping.upper + LIMIT_TOLERANCE_N
-    )
-    rate = np.abs(increments) > mapping.max_step + LIMIT_TOLERANCE_N
+    every_thruster = actuation_metrics(log, (mapping.lower, mapping.upper), mapping.rate_limit)
     steady = log.t >= transient_s - 1e-9
     depth_error = log.full_state[:, SIX_DOF.index("z")] - log.depth_reference[:, 0]
     roll, pitch = (np.abs(log.full_state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
     metrics.update(
         {
-            "thrust_limit_violations": int(force.sum()),
-            "thrust_rate_violations": int(rate.sum()),
-            "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
-            "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
-            if log.steps
-            else 0.0,
-            "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+            **_pick(
+                every_thruster,
+                "thrust_limit_violations",
+                "thrust_rate_violations",
+                "max_abs_thrust_N",
+                "max_abs_thrust_rate_N_per_s",
+                "thrust_effort_N2s",
+            ),
             "saturated_thrust_commands": int(log.saturated.sum()),
             "rms_depth_error_m": _rms(depth_error),
             "max_depth_error_m": float(np.abs(depth_error).max()),

@@ -97,9 +97,10 @@ class ThrustMapping:
         self.upper = np.concatenate(
             [np.full(n, vehicle.thrust_limits[1]), np.full(count, heave.thrust_limits[1])]
         )
-        self.max_step = sample_time * np.concatenate(
+        self.rate_limit = np.concatenate(  # N/s
             [np.full(n, vehicle.thrust_rate_limit), np.full(count, heave.thrust_rate_limit)]
         )
+        self.max_step = sample_time * self.rate_limit
 
     def vertical(self, heave_force_up: float) -> np.ndarray:
         """The vertical thrusters' forces for an upward heave force (N): NED Z = -force."""
