@@ -146,7 +146,7 @@ def figure_trajectory(
     for row, marker, color, size, label in ((0, "o", "tab:green", 8, "start"),
                                             (-1, "s", "tab:blue", 7, "end")):  # fmt: skip
         ax.plot(
-            *log.state[row, :2],
+            *log.state[row, _POSITION],
             marker=marker,
             color=color,
             markeredgecolor="black",
@@ -871,9 +871,9 @@ def figure_compare_trajectory(
     for i, (label, log) in enumerate(runs):
         color = _series_color(i)
         ax.plot(*log.state[:, _POSITION].T, **ACTUAL_STYLE | {"color": color}, label=label)
-        ax.plot(*log.state[-1, :2], marker="s", color=color, markeredgecolor="black",
+        ax.plot(*log.state[-1, _POSITION], marker="s", color=color, markeredgecolor="black",
                 markersize=6, linestyle="none", zorder=5)  # fmt: skip
-    ax.plot(*first.state[0, :2], marker="o", color="tab:green", markeredgecolor="black",
+    ax.plot(*first.state[0, _POSITION], marker="o", color="tab:green", markeredgecolor="black",
             markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
     ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
             label="end of each run")  # fmt: skip

@@ -49,7 +49,7 @@ from auvmpc.ocp.tracking import ThrustPenalty
 
 __all__ = ["DoMpcController"]
 
-NX = 6
+NX = HORIZONTAL.size
 # Unused obstacle slots sit this far away (m) with zero reach: never active.
 _PARKED_OBSTACLE_M = 1e6
 # Keeps the distance differentiable if a predicted position ever hits a centre exactly (m^2).

@@ -44,7 +44,7 @@ __all__ = [
     "sdc_matrix",
 ]
 
-NX = 6
+NX = HORIZONTAL.size
 # Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
 # heading and velocities carry the nonlinearity (rotation, Coriolis), positions follow them.
 _TRUST_REGION_SCALE = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0])

@@ -64,7 +64,7 @@ __all__ = [
 ]
 
 SIX_DOF = StateLayout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
-NX = 12
+NX = SIX_DOF.size
 # Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.
 PITCH_LIMIT_RAD = math.radians(85.0)
 

@@ -32,6 +32,7 @@ from pydantic import AfterValidator, Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.six_dof_params import SixDofParams
 
 __all__ = [
@@ -52,8 +53,8 @@ __all__ = [
     "turn_up_time",
 ]
 
-STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
-NX = 6
+STATE_NAMES = HORIZONTAL.names  # the state order of the equations above
+NX = HORIZONTAL.size
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Damping = Annotated[
