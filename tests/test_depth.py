@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from auvmpc.controllers.base import Observation
 from auvmpc.environment.waves import GRAVITY, WaveConfig, WaveField, wave_number
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import simulate, write_run
-from auvmpc.models.vehicle import heave_dynamics, load_vehicle
+from auvmpc.models.heave import heave_dynamics
+from auvmpc.models.vehicle import load_vehicle
 from auvmpc.scenario import load_scenario
 
 # Issue 5: replaying the logged thrust reproduces the logged depth in calm water to 1 mm.
@@ -154,3 +156,40 @@ def test_bad_wave_and_tank_parameters_name_the_field(override, field):
     with pytest.raises(ConfigError) as caught:
         load_scenario("paper-depth-waves", [override])
     assert str(caught.value).startswith(field)
+
+
+def test_depth_runs_in_the_shared_loop_with_a_registered_controller(tmp_path):
+    """kind: depth uses sim.loop.closed_loop, the registry's depth-mpc inside the shell (same
+    ``info`` keys as the horizontal controllers) and the log named by the DEPTH layout."""
+    from auvmpc.controllers.registry import REGISTRY
+    from auvmpc.controllers.shell import INFO_KEYS
+    from auvmpc.experiments.run import make_controller
+    from auvmpc.sim.log import DepthLog
+
+    resolved = load_scenario("paper-depth-calm", ["duration=12", "reference.step_time_s=2"])
+    assert "depth-mpc" in REGISTRY
+    controller = make_controller(resolved.scenario, resolved.model)
+    result = controller.compute(
+        Observation(k=0, t=0.0, state=np.array([-0.3]), reference=np.tile([-0.3, 0.0], (31, 1)))
+    )
+    assert set(INFO_KEYS) <= set(result.info)
+    run = simulate(resolved)
+    assert isinstance(run.log, DepthLog)
+    assert run.log.layout.names == ("z", "w")
+    write_run(run, tmp_path / "run", figures=False)
+    header = (tmp_path / "run" / "log.csv").read_text().splitlines()[0].split(",")
+    assert header == ["t", "z", "w", "z_ref", "Fz1", "Fz2", "solve_ms", "status",
+                      "z_measured", "wave_force_N"]  # fmt: skip
+    again = DepthLog.read_csv(tmp_path / "run" / "log.csv")
+    np.testing.assert_array_equal(again.state, run.log.state)
+    np.testing.assert_array_equal(again.z_measured, run.log.z_measured)
+    np.testing.assert_array_equal(again.thrust, run.log.thrust)
+    # The same actuation metrics as a horizontal run, computed the same way.
+    assert run.metrics["fallback_steps"] == run.metrics["solver_failures"] == 0
+
+
+def test_each_kind_refuses_the_others_controller_in_one_line():
+    with pytest.raises(ConfigError, match="controller.type"):
+        load_scenario("paper-depth-calm", ["controller.type=mpc"])
+    with pytest.raises(ConfigError, match="controller.type"):
+        load_scenario("paper-ideal", ["controller.type=depth-mpc"])

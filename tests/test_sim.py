@@ -108,6 +108,22 @@ def test_loop_records_the_mistakes_it_is_given(jmse):
     assert metrics["max_abs_thrust_rate_N_per_s"] == pytest.approx(40.0)
 
 
+def test_the_loop_refuses_a_plant_that_steps_another_sample_time(jmse):
+    from auvmpc.sim.plant import HorizontalPlant
+
+    rng = np.random.default_rng(0)
+    plant = HorizontalPlant(jmse, WorldDisturbance(DisturbanceConfig(), 0.25, rng), 0.25, 0.05)
+    with pytest.raises(ValueError, match="plant steps 0.25 s"):
+        closed_loop(
+            plant,
+            ReckLessController(),
+            make_reference(LineConfig(type="line", start=(0, 0), heading_deg=0, speed=0.5)),
+            duration=2.0,
+            initial_state=np.zeros(6),
+            sensor=SensorNoise(SensorNoiseConfig(), rng),
+        )
+
+
 def test_clearance_only_while_an_obstacle_exists(jmse):
     rng = np.random.default_rng(0)
     obstacle = ObstacleConfig(center=(3.0, 0.0), radius=0.5, appear_time=1.0, vanish_time=2.0)

@@ -27,6 +27,7 @@ from matplotlib.patches import Circle, Polygon
 
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.plots import (
     ACTUAL_STYLE,
@@ -40,6 +41,8 @@ from auvmpc.scenario import Scenario
 from auvmpc.sim.log import SimLog
 
 __all__ = ["AnimationFormat", "AnimationSettings", "animate_run", "ffmpeg_path", "frame_rows"]
+
+_POSITION = HORIZONTAL.position  # x, y (m) of a horizontal log's state and reference
 
 
 class AnimationFormat(StrEnum):
@@ -233,7 +236,9 @@ class _Scene:
         self.hull = _hull(half_length, half_width)
         # Length drawn for a thruster at its limit (m): in the close-up the hull's half
         # length; in the overview 6 % of the scene, so that the arrows stay visible.
-        span = float(np.ptp(np.vstack([log.state[:, :2], log.reference[:, :2]]), axis=0).max())
+        span = float(
+            np.ptp(np.vstack([log.state[:, _POSITION], log.reference[:, _POSITION]]), axis=0).max()
+        )
         self.arrow_length = {"main": max(half_length, 0.06 * span), "zoom": half_length}
         self.zoom_half_width = 2.5 * max(half_length, self.radius)
 
@@ -287,7 +292,9 @@ class _Scene:
             return text if main else "_nolegend_"
 
         ax.plot(
-            *log.reference[:, :2].T, **REFERENCE_STYLE | {"alpha": 0.6}, label=label("reference")
+            *log.reference[:, _POSITION].T,
+            **REFERENCE_STYLE | {"alpha": 0.6},
+            label=label("reference"),
         )
         parts: dict = {}
         (parts["preview"],) = ax.plot(
@@ -337,7 +344,7 @@ class _Scene:
 
     def _limits(self) -> None:
         log = self.log
-        points = [log.state[:, :2], log.reference[:, :2]]
+        points = [log.state[:, _POSITION], log.reference[:, _POSITION]]
         for obstacle in self.obstacles:
             t = log.t[[0, -1]]
             centres = np.array(obstacle.center) + np.outer(t, obstacle.velocity)
@@ -363,7 +370,8 @@ class _Scene:
         """Move every artist to log row k."""
         log = self.log
         t = float(log.t[k])
-        x, y, psi = log.state[k, :3]
+        (x, y), psi = log.state[k, _POSITION], log.state[k, HORIZONTAL.heading]
+        target_x, target_y = log.reference[k, _POSITION]
         rotation = np.array([[math.cos(psi), -math.sin(psi)], [math.sin(psi), math.cos(psi)]])
         position = np.array([x, y])
         end = min(len(log.t), k + self.preview_rows + 1)
@@ -374,9 +382,9 @@ class _Scene:
         for name, parts in self.parts.items():
             parts["body"].set_xy(self.hull @ rotation.T + position)
             parts["envelope"].set_center((x, y))
-            parts["trail"].set_data(log.state[: k + 1, 0], log.state[: k + 1, 1])
-            parts["target"].set_data([log.reference[k, 0]], [log.reference[k, 1]])
-            parts["preview"].set_data(log.reference[k:end, 0], log.reference[k:end, 1])
+            parts["trail"].set_data(*log.state[: k + 1, _POSITION].T)
+            parts["target"].set_data([target_x], [target_y])
+            parts["preview"].set_data(*log.reference[k:end, _POSITION].T)
             scale = thrust / self.max_thrust * self.arrow_length[name]
             world = (self.thruster_dir * scale[:, None]) @ rotation.T
             parts["quiver"].set_offsets(origins)
@@ -387,7 +395,7 @@ class _Scene:
         half = self.zoom_half_width
         self.zoom.set_xlim(x - half, x + half)
         self.zoom.set_ylim(y - half, y + half)
-        error = float(np.hypot(*(log.state[k, :2] - log.reference[k, :2])))
+        error = float(np.hypot(*(log.state[k, _POSITION] - log.reference[k, _POSITION])))
         self.clock.set_text(f"t = {t:6.1f} s\nerror {error:5.2f} m")
         force = log.disturbance_world[k, :2]
         magnitude = float(np.hypot(*force))

@@ -25,11 +25,10 @@ from matplotlib.figure import Figure
 
 import auvmpc  # noqa: E402 -- the package names the public API once (re-exported lazily)
 from auvmpc.controllers.base import Controller
-from auvmpc.depth import DepthLog
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import DepthRunResult, RunResult, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
-from auvmpc.sim.log import SimLog
+from auvmpc.sim.log import DepthLog, SimLog
 
 __all__ = list(auvmpc._API)
 
@@ -74,9 +73,9 @@ def load_scenario(
 
 def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     """A copy of a loaded scenario with more fields changed (the original is untouched)."""
-    from auvmpc.depth import DepthScenario
     from auvmpc.errors import format_validation_error
     from auvmpc.scenario import apply_override, validate_scenario
+    from auvmpc.scenario.depth import DepthScenario
 
     # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
     # must get its own defaults): only the fields its file set.
@@ -103,11 +102,12 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     return ResolvedScenario(validate_scenario(data), scenario.base_dir)
 
 
-def build_controller(scenario: ResolvedScenario) -> Controller:
+def build_controller(scenario: Scenario) -> Controller:
     """The scenario's controller on its nominal vehicle model, ready for ``reset``/``compute``
-    (to step it yourself; :func:`simulate` builds its own)."""
-    if not isinstance(scenario, ResolvedScenario):
-        raise TypeError("build_controller takes a horizontal scenario (depth runs build inside)")
+    (to step it yourself; :func:`simulate` builds its own); a depth scenario's is the depth
+    MPC, which sees ``[z]`` measured and ``[z, w]`` reference rows."""
+    if not isinstance(scenario, ResolvedScenario | ResolvedDepthScenario):
+        raise TypeError(f"build_controller takes a loaded scenario, got {type(scenario).__name__}")
     return make_controller(scenario.scenario, scenario.model)
 
 

@@ -26,6 +26,8 @@ from numpy.typing import ArrayLike
 
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.metrics import LIMIT_TOLERANCE_N, heading_error, position_error, thrust_increments
@@ -73,6 +75,7 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 TIME_LABEL = "time t (s)"
 PANEL_WIDTH_IN = 7.0
 PANEL_HEIGHT_IN = 2.1
+_POSITION = HORIZONTAL.position  # x, y (m) of a horizontal log's state and reference
 GHOST_POSITIONS = 5  # a moving obstacle is drawn at this many times while it exists
 
 
@@ -97,7 +100,7 @@ def figure_trajectory(
     Parameters
     ----------
     log : SimLog
-        The run; positions are ``state[:, :2]`` and ``reference[:, :2]`` (m).
+        The run; positions are ``state[:, HORIZONTAL.position]`` and the reference's (m).
     obstacles : sequence of ObstacleConfig
         The keep-out discs of the scenario (may be empty).
     vehicle_radius : float
@@ -120,8 +123,8 @@ def figure_trajectory(
         )
     figure = _new_figure(PANEL_WIDTH_IN, 6.4, title)
     ax = figure.add_subplot()
-    ax.plot(*log.reference[:, :2].T, **REFERENCE_STYLE, label="reference")
-    ax.plot(*log.state[:, :2].T, **ACTUAL_STYLE, label="actual")
+    ax.plot(*log.reference[:, _POSITION].T, **REFERENCE_STYLE, label="reference")
+    ax.plot(*log.state[:, _POSITION].T, **ACTUAL_STYLE, label="actual")
 
     approaches = [_closest_approach(log, obstacle, vehicle_radius) for obstacle in obstacles]
     labelled: set[str] = set()
@@ -143,7 +146,7 @@ def figure_trajectory(
     for row, marker, color, size, label in ((0, "o", "tab:green", 8, "start"),
                                             (-1, "s", "tab:blue", 7, "end")):  # fmt: skip
         ax.plot(
-            *log.state[row, :2],
+            *log.state[row, _POSITION],
             marker=marker,
             color=color,
             markeredgecolor="black",
@@ -489,7 +492,7 @@ def figure_depth(log, limits, title: str = "") -> Figure:
 
     Parameters
     ----------
-    log : auvmpc.depth.DepthLog
+    log : auvmpc.sim.log.DepthLog
     limits : HeaveParams
         Vertical thrust limits to draw.
     """
@@ -497,7 +500,7 @@ def figure_depth(log, limits, title: str = "") -> Figure:
     depth_ax, thrust_ax = axes
     depth_ax.plot(log.t, log.z_measured, color="0.6", lw=0.8, label="measured (sensor)")
     depth_ax.step(log.t, log.z_ref, where="post", color="0.3", ls="--", label="reference")
-    depth_ax.plot(log.t, log.state[:, 0], color="tab:blue", label="depth z (true)")
+    depth_ax.plot(log.t, log.state[:, DEPTH.index("z")], color="tab:blue", label="depth z (true)")
     depth_ax.set_ylabel("z (m, up)")
     steps = len(log.thrust)
     for i in range(log.thrust.shape[1]):
@@ -546,12 +549,12 @@ def figure_trajectory_3d(log, title: str = "") -> Figure:
     figure = _new_figure(7.0, 6.0, title)
     ax = figure.add_subplot(projection="3d")
     ax.plot(
-        log.reference[:, 0], log.reference[:, 1], log.depth_reference[:, 0],
+        *log.reference[:, _POSITION].T, log.depth_reference[:, 0],
         label="reference", **REFERENCE_STYLE,
     )  # fmt: skip
-    state = log.full_state
-    ax.plot(state[:, 0], state[:, 1], state[:, 2], label="vehicle (true)", **ACTUAL_STYLE)
-    ax.scatter(*state[0, :3], color=ACTUAL_STYLE["color"], marker="o", label="start")
+    position = log.full_state[:, SIX_DOF.span("x", "z")]  # x north, y east, z down (m)
+    ax.plot(*position.T, label="vehicle (true)", **ACTUAL_STYLE)
+    ax.scatter(*position[0], color=ACTUAL_STYLE["color"], marker="o", label="start")
     ax.set_xlabel("x north (m)")
     ax.set_ylabel("y east (m)")
     ax.set_zlabel("depth z (m, down)")
@@ -563,11 +566,16 @@ def figure_trajectory_3d(log, title: str = "") -> Figure:
 def figure_tracking_errors(log, title: str = "") -> Figure:
     """Horizontal position error and the yaw-rate, surge and sway errors (true - reference)."""
     figure, axes = _time_panels(4, title)
+
+    def error(name: str) -> np.ndarray:
+        column = HORIZONTAL.index(name)
+        return log.state[:, column] - log.reference[:, column]
+
     rows = (
         (position_error(log), "position error (m)"),
-        (log.state[:, 5] - log.reference[:, 5], "yaw-rate error (rad/s)"),
-        (log.state[:, 3] - log.reference[:, 3], "surge error (m/s)"),
-        (log.state[:, 4] - log.reference[:, 4], "sway error (m/s)"),
+        (error("r"), "yaw-rate error (rad/s)"),
+        (error("u"), "surge error (m/s)"),
+        (error("v"), "sway error (m/s)"),
     )
     for ax, (values, label) in zip(axes, rows, strict=True):
         ax.plot(log.t, values, **ACTUAL_STYLE)
@@ -582,12 +590,12 @@ def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure
     figure, axes = _time_panels(4, title)
     depth_ax, roll_ax, pitch_ax, thrust_ax = axes
     depth_ax.plot(log.t, log.depth_reference[:, 0], label="reference", **REFERENCE_STYLE)
-    depth_ax.plot(log.t, log.full_state[:, 2], label="true", **ACTUAL_STYLE)
+    depth_ax.plot(log.t, log.full_state[:, SIX_DOF.index("z")], label="true", **ACTUAL_STYLE)
     depth_ax.invert_yaxis()
     depth_ax.set_ylabel("depth z (m, down)")
-    roll_ax.plot(log.t, np.degrees(log.full_state[:, 3]), **ACTUAL_STYLE)
+    roll_ax.plot(log.t, np.degrees(log.full_state[:, SIX_DOF.index("phi")]), **ACTUAL_STYLE)
     roll_ax.set_ylabel("roll phi (deg)")
-    pitch_ax.plot(log.t, np.degrees(log.full_state[:, 4]), **ACTUAL_STYLE)
+    pitch_ax.plot(log.t, np.degrees(log.full_state[:, SIX_DOF.index("theta")]), **ACTUAL_STYLE)
     pitch_ax.set_ylabel("pitch theta (deg)")
     n, steps = log.n_horizontal, log.steps
     for i in range(n, log.n_thrusters):
@@ -657,7 +665,7 @@ def _closest_approach(
     exists = np.array([obstacle.exists_at(t) for t in log.t], dtype=bool)
     if not exists.any():
         return None
-    gap = np.hypot(*(log.state[:, :2] - _centres(obstacle, log.t)).T)
+    gap = np.hypot(*(log.state[:, _POSITION] - _centres(obstacle, log.t)).T)
     gap = np.where(exists, gap - obstacle.radius - vehicle_radius, np.inf)
     k = int(np.argmin(gap))
     return k, float(gap[k])
@@ -780,7 +788,7 @@ def _draw_vehicle(
     ax: Axes, state: np.ndarray, radius: float, color: str, alpha: float, label: str | None
 ) -> None:
     """Envelope disc outline with a tick from the centre along the heading."""
-    x, y, psi = state[:3]
+    (x, y), psi = state[_POSITION], state[HORIZONTAL.heading]
     ax.add_patch(
         Circle(
             (x, y),
@@ -807,7 +815,7 @@ def _draw_min_clearance(
     ax: Axes, log: SimLog, obstacle: ObstacleConfig, k: int, gap: float, vehicle_radius: float
 ) -> None:
     """Vehicle disc at the sample of minimum clearance and the gap to the obstacle disc."""
-    position = log.state[k, :2]
+    position = log.state[k, _POSITION]
     centre = obstacle.center_at(log.t[k])
     offset = centre - position
     distance = float(np.hypot(*offset))
@@ -854,7 +862,7 @@ def figure_compare_trajectory(
     figure = _new_figure(PANEL_WIDTH_IN, 6.4, title)
     ax = figure.add_subplot()
     first = runs[0][1]
-    ax.plot(*first.reference[:, :2].T, **REFERENCE_STYLE, label="reference")
+    ax.plot(*first.reference[:, _POSITION].T, **REFERENCE_STYLE, label="reference")
     labelled: set[str] = set()
     for obstacle in obstacles:
         approach = _closest_approach(first, obstacle, 0.0)
@@ -862,10 +870,10 @@ def figure_compare_trajectory(
             _draw_obstacle(ax, first, obstacle, approach[0], labelled)
     for i, (label, log) in enumerate(runs):
         color = _series_color(i)
-        ax.plot(*log.state[:, :2].T, **ACTUAL_STYLE | {"color": color}, label=label)
-        ax.plot(*log.state[-1, :2], marker="s", color=color, markeredgecolor="black",
+        ax.plot(*log.state[:, _POSITION].T, **ACTUAL_STYLE | {"color": color}, label=label)
+        ax.plot(*log.state[-1, _POSITION], marker="s", color=color, markeredgecolor="black",
                 markersize=6, linestyle="none", zorder=5)  # fmt: skip
-    ax.plot(*first.state[0, :2], marker="o", color="tab:green", markeredgecolor="black",
+    ax.plot(*first.state[0, _POSITION], marker="o", color="tab:green", markeredgecolor="black",
             markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
     ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
             label="end of each run")  # fmt: skip

@@ -41,8 +41,9 @@ from numpy.typing import ArrayLike
 from pydantic import Field, field_validator, model_validator
 from scipy.interpolate import CubicSpline
 
-from auvmpc.config import StrictModel
+from auvmpc.config import NonNegative, StrictModel
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 
 __all__ = [
     "REFERENCE_TYPES",
@@ -53,6 +54,8 @@ __all__ = [
     "DepthProfile",
     "DepthSchedule",
     "DepthScheduleConfig",
+    "DepthStep",
+    "DepthStepConfig",
     "Helix",
     "HelixConfig",
     "Lawnmower",
@@ -110,6 +113,17 @@ class DepthChangeConfig(StrictModel):
     time_s: float = Field(..., ge=0.0, description="Time the change starts, s.")
     depth_m: float = Field(..., description="Depth below the surface after the change (NED), m.")
     duration_s: float = Field(..., gt=0.0, description="Time the change takes, s.")
+
+
+class DepthStepConfig(StrictModel):
+    """The reference: hold ``initial_depth_m``, then step to ``final_depth_m``."""
+
+    initial_depth_m: float = Field(default=-0.3, description="z before the step (m, negative)")
+    final_depth_m: float = Field(default=-0.5, description="z after the step (m, negative)")
+    step_time_s: NonNegative = Field(default=10.0, description="time of the step (s)")
+
+    def depth(self, t: np.ndarray) -> np.ndarray:
+        return np.where(np.asarray(t) >= self.step_time_s, self.final_depth_m, self.initial_depth_m)
 
 
 class DepthScheduleConfig(StrictModel):
@@ -424,7 +438,7 @@ class Reference(ABC):
 
     def positions(self, t: ArrayLike) -> np.ndarray:
         """Path positions ``[x, y]`` (m) at times ``t`` (s), shape (n, 2)."""
-        return self.states(t)[:, :2]
+        return self.states(t)[:, HORIZONTAL.position]
 
     def preview(self, t0: float, dt: float, n: int) -> np.ndarray:
         """States at ``t0 + i*dt`` for i = 0..n-1, shape (n, 6).
@@ -460,13 +474,10 @@ def _wrap(angle: ArrayLike) -> np.ndarray:
 def _assemble(
     x: ArrayLike, y: ArrayLike, psi: ArrayLike, u: ArrayLike, r: ArrayLike, n: int
 ) -> np.ndarray:
-    out = np.empty((n, 6))
-    out[:, 0] = x
-    out[:, 1] = y
-    out[:, 2] = psi
-    out[:, 3] = u
-    out[:, 4] = 0.0  # v_r = 0: the reference vehicle moves along its own heading
-    out[:, 5] = r
+    out = np.empty((n, HORIZONTAL.size))
+    # v_r = 0: the reference vehicle moves along its own heading.
+    for name, value in zip(HORIZONTAL.names, (x, y, psi, u, 0.0, r), strict=True):
+        out[:, HORIZONTAL.index(name)] = value
     return out
 
 
@@ -763,6 +774,31 @@ class DepthSchedule(DepthProfile):
             )
             level = depth
         return out
+
+
+class DepthStep:
+    """The depth experiment's reference ``[z, w]`` (:data:`auvmpc.models.layout.DEPTH`): the
+    setpoint of :class:`DepthStepConfig` at rest. Without ``preview`` a horizon of times sees
+    the setpoint of its first time throughout (a commanded step is unknown until it happens).
+    """
+
+    layout = DEPTH
+
+    def __init__(self, config: DepthStepConfig, preview: bool) -> None:
+        self.config = config
+        self.preview = preview
+
+    def states(self, t: ArrayLike) -> np.ndarray:
+        """(n, 2) rows ``[z_ref, 0]`` at the times ``t`` (s), the first first."""
+        times = np.asarray(t, dtype=float)
+        if not self.preview:
+            times = np.full_like(times, times[0])
+        depth = self.config.depth(times)
+        return np.column_stack([depth, np.zeros_like(depth)])
+
+    def state(self, t: float) -> np.ndarray:
+        """(2,) ``[z_ref, 0]`` at one time ``t`` (s)."""
+        return np.array([self.config.depth(t), 0.0])
 
 
 # --------------------------------------------------------------------------------------------

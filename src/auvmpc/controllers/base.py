@@ -9,6 +9,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import ActuatorLimits
 from auvmpc.ocp.underactuated_reference import crab_reference
@@ -90,8 +91,8 @@ class Observation:
 
     k: int
     t: float  # s
-    state: np.ndarray  # (6,) measured [x, y, psi, u, v, r], possibly noisy
-    reference: np.ndarray  # (preview_steps + 1, 6): reference at t_k + i * Te, i = 0..
+    state: np.ndarray  # measured, possibly noisy: (6,) [x, y, psi, u, v, r]; depth: (1,) [z]
+    reference: np.ndarray  # (preview_steps + 1, nx): reference at t_k + i * Te, i = 0..
     obstacles: tuple[ObstacleState, ...] = ()
 
 
@@ -143,8 +144,9 @@ def align_heading(state: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """The reference preview with its (continuous) heading shifted by 2 pi k to the turn
     the vehicle is on, so that heading errors stay within (-pi, pi] of the truth."""
     aligned = np.array(reference, dtype=float)
-    turns = np.round((state[2] - aligned[0, 2]) / (2.0 * math.pi))
-    aligned[:, 2] += 2.0 * math.pi * turns
+    heading = HORIZONTAL.heading
+    turns = np.round((state[heading] - aligned[0, heading]) / (2.0 * math.pi))
+    aligned[:, heading] += 2.0 * math.pi * turns
     return aligned
 
 
@@ -158,7 +160,8 @@ def tracked_reference(
     """The reference preview a horizontal controller's cost tracks: for an underactuated
     vehicle with the heading it can hold (ocp/underactuated_reference.py), and aligned to
     the turn the vehicle is on."""
-    crabbed = crab_reference(model, reference, disturbance, sample_time, float(state[2]))
+    heading = float(state[HORIZONTAL.heading])
+    crabbed = crab_reference(model, reference, disturbance, sample_time, heading)
     return align_heading(state, crabbed)
 
 

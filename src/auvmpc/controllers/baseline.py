@@ -54,6 +54,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]
@@ -62,6 +63,7 @@ __all__ = ["BaselineConfig", "BaselineController"]
 # A command is "saturated" when the limits moved it by more than this (N): float round-off
 # in the allocation is far smaller, any real clipping far larger.
 _SATURATION_TOLERANCE_N = 1e-9
+_POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
 
 
 class BaselineConfig(StrictModel):
@@ -211,7 +213,7 @@ class BaselineController(ShelledController):
         reference = np.asarray(observation.reference, dtype=float)
         if state.shape != (6,):
             raise ValueError(f"observation.state must have shape (6,), got {state.shape}")
-        if reference.ndim != 2 or reference.shape[1] != 6 or reference.shape[0] < 1:
+        if reference.ndim != 2 or reference.shape[1] != HORIZONTAL.size or reference.shape[0] < 1:
             raise ValueError(
                 f"observation.reference must have shape (n >= 1, 6), got {reference.shape}"
             )
@@ -219,7 +221,7 @@ class BaselineController(ShelledController):
         tau_des, errors, integrated = self._desired_generalised_force(state, reference)
         thrust, saturated = self._saturate(tau_des)
         deficit = tau_des - self.model.T @ thrust  # zero unless a limit cut the demand
-        self._integrate(state[2], reference[0, 2], integrated, deficit, saturated)
+        self._integrate(state[_HEADING], reference[0, _HEADING], integrated, deficit, saturated)
 
         details = {
             "tau_u_N": float(tau_des[0]),
@@ -262,17 +264,17 @@ class BaselineController(ShelledController):
         _, _, psi, u, v, r = state
         now = reference[0]
         ahead = reference[1] if reference.shape[0] > 1 else now
-        psi_r, r_r = now[2], now[5]
+        psi_r, r_r = now[_HEADING], now[_YAW_RATE]
 
         # Reference world velocity now and one sample ahead; their difference over Te is the
         # mean acceleration the held command must produce (centripetal part included).
         velocity_r = _world_velocity(now)
         accel_r = (_world_velocity(ahead) - velocity_r) / te
-        yaw_accel_r = (ahead[5] - r_r) / te
+        yaw_accel_r = (ahead[_YAW_RATE] - r_r) / te
 
         # Position loop in the path frame (x along the reference heading, y to its starboard).
         to_path = _rotation(psi_r).T
-        error_path = to_path @ (state[:2] - now[:2])
+        error_path = to_path @ (state[_POSITION] - now[_POSITION])
         velocity = _rotation(psi) @ np.array([u, v])
         velocity_error_path = to_path @ (velocity - velocity_r)
         # Cascade form of PD: the position error asks for a closing speed K_D^-1 K_P e,
@@ -375,7 +377,7 @@ class BaselineController(ShelledController):
 
 def _world_velocity(reference_row: np.ndarray) -> np.ndarray:
     """World velocity (x', y') of a reference state row [x, y, psi, u, v, r]."""
-    return _rotation(reference_row[2]) @ reference_row[3:5]
+    return _rotation(reference_row[_HEADING]) @ reference_row[HORIZONTAL.body_velocity]
 
 
 def _rotation(angle: float) -> np.ndarray:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import math
 from enum import StrEnum
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from auvmpc.config import NonNegative, StrictModel
+from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
@@ -21,6 +21,9 @@ __all__ = [
     "CONTROLLER_PRESETS",
     "ControllerConfig",
     "ControllerType",
+    "DEPTH_MPC",
+    "DepthControllerConfig",
+    "DepthObserverConfig",
     "DEFAULT_SAMPLE_TIME_S",
     "NmpcMode",
     "QpStructure",
@@ -181,6 +184,15 @@ class ControllerConfig(StrictModel):
         default_factory=BaselineConfig, description="gains of the classical baseline tracker"
     )
 
+    @field_validator("type", mode="before")
+    @classmethod
+    def _not_the_depth_controller(cls, value: Any) -> Any:
+        if value == DEPTH_MPC:
+            raise FieldError(
+                "", value, "the depth controller (kind: depth scenarios, six-dof depth_controller)"
+            )
+        return value
+
     @model_validator(mode="after")
     def _horizons(self) -> ControllerConfig:
         if self.control_horizon is not None and self.control_horizon > self.prediction_horizon:
@@ -302,6 +314,84 @@ def stable_model_substeps(model: VehicleParams, sample_time: float) -> int:
 
 
 BLOCKED_MOVES = (0, 1, 2, 3, 5, 7, 10, 14, 19, 25)
+
+# The controller type of depth scenarios (``kind: depth``); ``ControllerType`` names the
+# horizontal ones, so each kind refuses the other's controllers at validation.
+DEPTH_MPC = "depth-mpc"
+
+
+class DepthObserverConfig(StrictModel):
+    """Filter tuning. The defaults trust the model more than the sensor, so that wave-frequency
+    motion, which 5 N/s thrusters cannot cancel, is filtered out rather than chased."""
+
+    measurement_std: Positive = Field(default=0.02, description="assumed depth noise (m)")
+    depth_process_std: Positive = Field(default=1e-3, description="model error per sample (m)")
+    velocity_process_std: Positive = Field(default=5e-3, description="model error per sample (m/s)")
+    disturbance_rate_std: Positive = Field(
+        default=0.1, description="random walk of the unknown vertical force (N/sqrt(s))"
+    )
+    initial_disturbance_std: Positive = Field(
+        default=5.0, description="prior uncertainty of the unknown vertical force (N)"
+    )
+
+
+class DepthControllerConfig(StrictModel):
+    """Depth MPC choice and tuning (controllers/depth_mpc.py): a depth scenario's
+    ``controller``, a 6-DOF scenario's ``depth_controller``."""
+
+    type: Literal["depth-mpc"] = Field(default=DEPTH_MPC, description="depth controller")
+    sample_time: Positive = Field(default=0.1, description="Te (s)")
+    prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
+    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
+        default=None, description="nc (steps); omitted = every move free"
+    )
+    Q: tuple[NonNegative, NonNegative] = Field(default=(200.0, 1.0), description="on [z, w]")
+    S: tuple[NonNegative, NonNegative] = Field(default=(400.0, 2.0), description="terminal")
+    R: NonNegative = Field(default=0.01, description="weight per vertical thruster")
+    thrust_penalty: ThrustPenalty = Field(
+        default=ThrustPenalty.INCREMENT, description="R on F or dF"
+    )
+    offset_free: bool = Field(default=True, description="estimate the unknown vertical force")
+    preview: bool = Field(
+        default=False,
+        description="see future setpoint changes (false: a commanded step, unknown until it "
+        "happens, as in the tank experiment)",
+    )
+    known_net_buoyancy: bool = Field(
+        default=False, description="give the model the vehicle file's net buoyancy"
+    )
+    surface_margin_m: NonNegative = Field(default=0.1, description="keep this far below z = 0")
+    bottom_margin_m: NonNegative = Field(default=0.1, description="keep this far above the bottom")
+    depth_slack_penalty: Positive = Field(default=1e5, description="exact penalty on depth slack")
+    qp_solver: QpSolverName = Field(default=QpSolverName.DAQP)
+    qp_iteration_limit: Annotated[int, Field(ge=1)] | None = None
+    solver_time_limit_ms: Positive | None = None
+    observer: DepthObserverConfig = Field(default_factory=DepthObserverConfig)
+
+    @field_validator("type", mode="before")
+    @classmethod
+    def _only_the_depth_controller(cls, value: Any) -> Any:
+        if value != DEPTH_MPC and value in ControllerType.__members__.values():
+            raise FieldError("", value, f"a horizontal controller; depth scenarios use {DEPTH_MPC}")
+        return value
+
+    @model_validator(mode="after")
+    def _horizons(self) -> DepthControllerConfig:
+        if self.control_horizon is not None and self.control_horizon > self.prediction_horizon:
+            raise FieldError(
+                "control_horizon",
+                self.control_horizon,
+                f"exceeds prediction_horizon {self.prediction_horizon}",
+            )
+        return self
+
+    def move_schedule(self) -> tuple[int, ...]:
+        return tuple(range(self.control_horizon or self.prediction_horizon))
+
+    def for_vehicle(self, model: VehicleParams) -> DepthControllerConfig:
+        """Nothing is left to fill in for a vehicle (the registry asks every config)."""
+        return self
+
 
 CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
     "baseline": ("controller.type=baseline",),

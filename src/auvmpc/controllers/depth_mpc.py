@@ -15,18 +15,32 @@ import numpy as np
 
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import AugmentedEkf
+from auvmpc.models.heave import heave_dynamics, resolve_heave
 from auvmpc.models.integrators import rk4
-from auvmpc.models.vehicle import HeaveParams, heave_dynamics
+from auvmpc.models.layout import DEPTH
+from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
 __all__ = ["DepthMpc"]
 
-NX = 2  # [z, w]
+NX = DEPTH.size  # [z, w]
+_Z = DEPTH.index("z")
+# The soft rows' coefficients on [z, w]: -z >= surface margin, z >= bottom + margin.
+_BELOW_SURFACE = np.array([-1.0 if name == "z" else 0.0 for name in DEPTH.names])
+_ABOVE_BOTTOM = np.array([1.0 if name == "z" else 0.0 for name in DEPTH.names])
 
 
 class DepthMpc(IncrementalMpc):
-    """Depth controller; ``config`` is a depth.DepthControllerConfig."""
+    """Depth controller; ``config`` is a :class:`auvmpc.controllers.config.DepthControllerConfig`,
+    ``water_depth`` (m) where the bottom is (z = -water_depth)."""
+
+    @classmethod
+    def from_config(
+        cls, model: VehicleParams, config, obstacle_count: int = 0, *, water_depth_m: float
+    ) -> DepthMpc:
+        """Built by the registry on the vehicle's heave section (no obstacles in depth)."""
+        return cls(resolve_heave(model, {}), config, water_depth_m)
 
     def __init__(self, heave: HeaveParams, config, water_depth: float) -> None:
         self.config = config
@@ -84,10 +98,10 @@ class DepthMpc(IncrementalMpc):
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         super().reset(initial_state, initial_thrust)
-        self._observer.reset(np.array([initial_state[0], 0.0, 0.0]))
+        self._observer.reset(np.array([initial_state[_Z], 0.0, 0.0]))
 
     def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        estimate = self._observer.correct(measured[:1])
+        estimate = self._observer.correct(measured[:1])  # the pressure sensor's [z]
         return estimate[:NX], estimate[NX:]
 
     def after_command(self, command: np.ndarray) -> None:
@@ -112,7 +126,9 @@ class DepthMpc(IncrementalMpc):
         """Below the surface and above the bottom by the margins, at every predicted step."""
         ny = self.horizon
         steps = np.concatenate([np.arange(1, ny + 1)] * 2)
-        coefficients = np.vstack([np.tile([-1.0, 0.0], (ny, 1)), np.tile([1.0, 0.0], (ny, 1))])
+        coefficients = np.vstack(
+            [np.tile(_BELOW_SURFACE, (ny, 1)), np.tile(_ABOVE_BOTTOM, (ny, 1))]
+        )
         lower = np.concatenate(
             [
                 np.full(ny, self.config.surface_margin_m),  # -z >= margin

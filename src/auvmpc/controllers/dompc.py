@@ -43,12 +43,13 @@ from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, dynamics
 from auvmpc.ocp.tracking import ThrustPenalty
 
 __all__ = ["DoMpcController"]
 
-NX = 6
+NX = HORIZONTAL.size
 # Unused obstacle slots sit this far away (m) with zero reach: never active.
 _PARKED_OBSTACLE_M = 1e6
 # Keeps the distance differentiable if a predicted position ever hits a centre exactly (m^2).
@@ -165,7 +166,7 @@ class DoMpcController(ShelledController):
         mpc.bounds["upper", "_u", "dF"] = ocp.max_move
         mpc.bounds["lower", "_x", "F_prev"] = ocp.input_lower
         mpc.bounds["upper", "_x", "F_prev"] = ocp.input_upper
-        position = model.x["state"][:2]
+        position = model.x["state"][HORIZONTAL.position]
         for slot in range(slots):
             cx, cy, reach = (model.tvp["obstacles"][3 * slot + i] for i in range(3))
             distance = ca.sqrt(

@@ -34,6 +34,7 @@ from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, body_from_world
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
@@ -47,7 +48,7 @@ __all__ = [
     "sdc_matrix",
 ]
 
-NX = 6
+NX = HORIZONTAL.size
 # Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
 # heading and velocities carry the nonlinearity (rotation, Coriolis), positions follow them.
 _TRUST_REGION_SCALE = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0])
@@ -135,7 +136,7 @@ class LinearMpc(IncrementalMpc):
                 offsets = offsets + np.maximum(
                     0.0, np.einsum("nk,nk->n", normals, correction[index])
                 )
-            gaps = np.einsum("nk,nk->n", normals, nominal[1:, :2]) - offsets
+            gaps = np.einsum("nk,nk->n", normals, nominal[1:, HORIZONTAL.position]) - offsets
             near = np.flatnonzero(gaps < _OBSTACLE_RANGE_M)
             all_normals.append(normals[near])
             all_offsets.append(offsets[near])
@@ -144,7 +145,7 @@ class LinearMpc(IncrementalMpc):
             return SoftRows.empty(NX)
         normals = np.vstack(all_normals)
         coefficients = np.zeros((len(normals), NX))
-        coefficients[:, :2] = normals
+        coefficients[:, HORIZONTAL.position] = normals
         return SoftRows(np.concatenate(all_steps), coefficients, np.concatenate(all_offsets))
 
     def _half_planes(
@@ -161,8 +162,8 @@ class LinearMpc(IncrementalMpc):
         steps = np.arange(1, self.horizon + 1)
         # Step n against the obstacle predicted at t + n Te, with that step's keep-out radius.
         centres, radii = obstacle.predict(steps * self.sample_time)
-        radial = nominal[1:, :2] - centres
-        heading = reference[1:, 2]
+        radial = nominal[1:, HORIZONTAL.position] - centres
+        heading = reference[1:, HORIZONTAL.heading]
         tangent = np.column_stack([np.cos(heading), np.sin(heading)])
         left = np.column_stack([-tangent[:, 1], tangent[:, 0]])
         closest = int(np.argmin(np.einsum("nk,nk->n", radial, radial)))
@@ -281,14 +282,16 @@ class PaperMpc(LinearMpc):
         if not self.config.rollout_check or not observation.obstacles:
             return None
         forces = np.tile(np.reshape(disturbance, (3, 1)), (1, self.horizon))
-        rollout = np.asarray(self._rollout(state, plan.T, forces)).T[:, :2]  # (ny, 2)
+        rollout = np.asarray(self._rollout(state, plan.T, forces)).T[:, HORIZONTAL.position]
         steps = np.arange(1, self.horizon + 1)
         errors, entered = [], False
         for obstacle in observation.obstacles:
             centres, radii = obstacle.predict(steps * self.sample_time)
             reach = radii + self.ocp.keep_out_extra
             inside = np.hypot(*(rollout - centres).T) < reach
-            errors.append(np.where(inside[:, None], predicted[1:, :2] - rollout, 0.0))
+            errors.append(
+                np.where(inside[:, None], predicted[1:, HORIZONTAL.position] - rollout, 0.0)
+            )
             entered = entered or bool(inside.any())
         return tuple(errors) if entered else None
 
@@ -302,7 +305,7 @@ class PaperMpc(LinearMpc):
             Ad, Bd = step_A @ Ad, step_A @ Bd + step_B
         n, ny = self.model.n_thrusters, self.horizon
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
-        d_u, d_v = body_from_world(disturbance, state[2])
+        d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
         offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[2]])
         return AffinePrediction(
             A=np.broadcast_to(Ad, (ny, NX, NX)),

@@ -70,6 +70,7 @@ from auvmpc.controllers.base import (
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
 from auvmpc.solvers.ipopt import IpoptSolver
@@ -210,9 +211,10 @@ class NonlinearMpc(ShelledController):
 
 def _aligned_guess(guess: Iterate, state: np.ndarray) -> Iterate:
     """The guess with its headings shifted by 2 pi k to the turn of the measured heading."""
-    turns = np.round((state[2] - guess.states[0, 2]) / (2.0 * math.pi))
+    heading = HORIZONTAL.heading
+    turns = np.round((state[heading] - guess.states[0, heading]) / (2.0 * math.pi))
     if not turns:
         return guess
     states = guess.states.copy()
-    states[:, 2] += 2.0 * math.pi * turns
+    states[:, heading] += 2.0 * math.pi * turns
     return Iterate(states, guess.thrust, guess.slack)

@@ -1,32 +1,44 @@
 """Which class implements each controller type: adding a controller is its module plus a line
-here (and its name in ``ControllerType``)."""
+here (and its name in ``ControllerType``, or its scenario kind's config for a depth one)."""
 
 from __future__ import annotations
 
 import importlib
 
-from auvmpc.controllers.config import ControllerConfig, ControllerType
+from auvmpc.controllers.config import (
+    DEPTH_MPC,
+    ControllerConfig,
+    ControllerType,
+    DepthControllerConfig,
+)
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["REGISTRY", "build_controller"]
 
 # Imported only when used: do-mpc is an optional extra, and CasADi set-up is not free.
-REGISTRY: dict[ControllerType, tuple[str, str]] = {
+REGISTRY: dict[str, tuple[str, str]] = {
     ControllerType.BASELINE: ("auvmpc.controllers.baseline", "BaselineController"),
     ControllerType.MPC: ("auvmpc.controllers.mpc", "PaperMpc"),
     ControllerType.LTV_MPC: ("auvmpc.controllers.ltv", "LtvMpc"),
     ControllerType.NMPC: ("auvmpc.controllers.nmpc", "NonlinearMpc"),
     ControllerType.DO_MPC: ("auvmpc.controllers.dompc", "DoMpcController"),
+    DEPTH_MPC: ("auvmpc.controllers.depth_mpc", "DepthMpc"),  # kind: depth, 6-DOF's depth
 }
 
 
 def build_controller(
-    config: ControllerConfig, model: VehicleParams, obstacle_count: int = 0
+    config: ControllerConfig | DepthControllerConfig,
+    model: VehicleParams,
+    obstacle_count: int = 0,
+    **surroundings: float,
 ) -> ShelledController:
-    """The configured controller on the nominal (controller-side) vehicle model."""
+    """The configured controller on the nominal (controller-side) vehicle model.
+
+    ``surroundings``: what else the scenario says that the controller is built for, by
+    name (a depth controller's ``water_depth_m``)."""
     module, name = REGISTRY[config.type]
     controller_class = getattr(importlib.import_module(module), name)
     return controller_class.from_config(
-        model, config.for_vehicle(model), obstacle_count=obstacle_count
+        model, config.for_vehicle(model), obstacle_count=obstacle_count, **surroundings
     )

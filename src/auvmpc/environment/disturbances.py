@@ -164,7 +164,8 @@ class SensorNoise:
         self._rng = rng
         self._active = bool(np.any(self._std > 0))
 
-    def measure(self, true_state: np.ndarray) -> np.ndarray:
+    def measure(self, true_state: np.ndarray, t: float | None = None) -> np.ndarray:
+        """The state with noise; ``t`` is unused (the noise does not depend on time)."""
         if not self._active:
             return true_state.copy()
         return true_state + self._std * self._rng.standard_normal(self._std.shape)

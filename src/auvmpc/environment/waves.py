@@ -25,10 +25,20 @@ import numpy as np
 from pydantic import Field
 
 from auvmpc.config import StrictModel
+from auvmpc.models.vehicle import HeaveParams, VehicleParams
 
-__all__ = ["WaveType", "WaveConfig", "WaveField", "wave_number", "GRAVITY"]
+__all__ = [
+    "GRAVITY",
+    "WATER_DENSITY",
+    "WaveConfig",
+    "WaveField",
+    "WaveType",
+    "morison_inertia",
+    "wave_number",
+]
 
 GRAVITY = 9.81  # m/s^2
+WATER_DENSITY = 1025.0  # kg/m^3, sea water (a fresh-water tank: 1000; 2.5 % on the wave force)
 # Stokes' limiting steepness: a wave higher than this fraction of its length breaks.
 _BREAKING_STEEPNESS = 1.0 / 7.0
 
@@ -132,3 +142,11 @@ class WaveField:
 
     def breaks(self) -> bool:
         return self.steepness() > _BREAKING_STEEPNESS
+
+
+def morison_inertia(vehicle: VehicleParams, heave: HeaveParams) -> float:
+    """The mass (kg) that turns the water's vertical acceleration into a force on the body,
+    ``F_z = (rho V + m_added) a_z``: Froude-Krylov (the displaced water, from the vehicle's
+    mass and net buoyancy) plus the heave added mass."""
+    displaced_mass = vehicle.mass + heave.net_buoyancy_N / GRAVITY
+    return displaced_mass * WATER_DENSITY / 1025.0 + (heave.m_heave - vehicle.mass)

@@ -29,6 +29,7 @@ from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
@@ -41,7 +42,7 @@ __all__ = [
     "world_disturbance_dynamics",
 ]
 
-NX, ND = 6, 3
+NX, ND = HORIZONTAL.size, 3  # state [x, y, psi, u, v, r], world force [X, Y, N]
 
 
 # Disturbance statistics as fractions of the thrust authority (ObserverConfig.for_vehicle).
@@ -250,7 +251,7 @@ class DisturbanceObserver:
             np.diag(np.concatenate([np.square(config.state_process_std), rate])),
             np.diag(measurement),
             np.diag(np.concatenate([measurement, np.square(config.initial_disturbance_std)])),
-            angle_index=2,
+            angle_index=HORIZONTAL.heading,
         )
 
     def reset(self, initial_state: np.ndarray) -> None:

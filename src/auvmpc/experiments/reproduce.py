@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
-from auvmpc.depth import STEP_METRIC_KEYS
 from auvmpc.experiments.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
 from auvmpc.experiments.run import fill_run_folder, simulate
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.scenario import ResolvedScenario, load_scenario, planar_twin
 from auvmpc.sim.log import SimLog
+from auvmpc.sim.metrics import STEP_METRIC_KEYS
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
 
@@ -157,7 +158,8 @@ def velocity_settling(log: SimLog) -> dict[str, float | None]:
     """``settle_u_s``, ``settle_v_s``, ``settle_r_s``: last exit from the band, first straight."""
     window = log.t < FIRST_STRAIGHT_END_S
     settled = {}
-    for index, name in ((3, "u"), (4, "v"), (5, "r")):
+    for name in ("u", "v", "r"):
+        index = HORIZONTAL.index(name)
         error = np.abs(log.state[window, index] - log.reference[window, index])
         outside = np.flatnonzero(error > SETTLING_BAND)
         if len(outside) == 0:
@@ -227,7 +229,8 @@ def _six_dof_pair(name: str, label: str, out_dir: Path, figures: bool) -> list[d
 def velocity_errors(log: SimLog, transient_s: float) -> dict[str, float]:
     """RMS yaw-rate, surge and sway errors after the transient (the paper's Figure 6)."""
     steady = log.t >= transient_s - 1e-9
-    error = log.state[steady, 3:6] - log.reference[steady, 3:6]
+    velocities = HORIZONTAL.span("u", "r")  # surge, sway, yaw rate
+    error = log.state[steady, velocities] - log.reference[steady, velocities]
     rms = np.sqrt(np.mean(error**2, axis=0))
     return {
         "rms_surge_error_after_transient_m_per_s": float(rms[0]),

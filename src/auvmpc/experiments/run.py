@@ -15,14 +15,15 @@ from threadpoolctl import threadpool_limits
 from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.registry import build_controller
-from auvmpc.depth import DepthLog, DepthScenario, depth_metrics, simulate_depth
+from auvmpc.environment.depth_sensor import PressureSensor
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
+from auvmpc.environment.waves import WaveField
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.outputs import OutputKind, atomic_write_text, staged_folder
 from auvmpc.experiments.provenance import Stopwatch
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.references import make_reference
+from auvmpc.references import DepthStep, make_reference
 from auvmpc.scenario import (
     ControllerType,
     ResolvedDepthScenario,
@@ -32,9 +33,11 @@ from auvmpc.scenario import (
     SixDofScenario,
     scenario_to_dict,
 )
-from auvmpc.sim.log import SimLog
+from auvmpc.scenario.depth import DepthScenario
+from auvmpc.sim.log import DepthLog, SimLog
 from auvmpc.sim.loop import closed_loop
-from auvmpc.sim.metrics import compute_metrics, compute_six_dof_metrics
+from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
+from auvmpc.sim.plant import HeavePlant
 from auvmpc.sim.six_dof_loop import SixDofLog
 
 __all__ = [
@@ -124,8 +127,10 @@ class DepthRunResult(_Finished):
         draw_depth_figures(self.log, self.scenario, self.resolved.heave_plant, folder, fmt, dpi)
 
 
-def make_controller(scenario: Scenario, model: VehicleParams) -> Controller:
+def make_controller(scenario: Scenario | DepthScenario, model: VehicleParams) -> Controller:
     """The scenario's controller, built on the nominal (controller-side) vehicle model."""
+    if isinstance(scenario, DepthScenario):
+        return build_controller(scenario.controller, model, water_depth_m=scenario.tank.depth_m)
     return build_controller(scenario.controller, model, obstacle_count=len(scenario.obstacles))
 
 
@@ -178,15 +183,7 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
 
     libraries = _solver_libraries(resolved.scenario)
     if isinstance(resolved, ResolvedDepthScenario):
-        with threadpool_limits(limits=1, user_api="blas"):
-            log, heave = simulate_depth(resolved.scenario, resolved.model, step)
-        return DepthRunResult(
-            resolved,
-            log,
-            depth_metrics(log, resolved.scenario, heave),
-            provenance=stopwatch.record(libraries),
-            warnings=warnings,
-        )
+        return _simulate_depth(resolved, step, stopwatch, warnings, libraries)
     if isinstance(resolved, ResolvedSixDofScenario):
         return _simulate_six_dof(resolved, step, stopwatch, warnings, libraries)
     scenario = resolved.scenario
@@ -227,6 +224,43 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
     )
 
 
+def _simulate_depth(
+    resolved: ResolvedDepthScenario, step, stopwatch: Stopwatch, warnings, libraries
+) -> DepthRunResult:
+    """The depth MPC on the heave plant in the tank, in the same closed loop as a horizontal
+    run. Random streams: child 0 of the scenario seed is the waves', child 1 the sensor's."""
+    scenario = resolved.scenario
+    wave_seed, sensor_seed = np.random.SeedSequence(scenario.seed).spawn(2)
+    water_depth = scenario.tank.depth_m
+    waves = (
+        WaveField(scenario.waves, water_depth, np.random.default_rng(wave_seed))
+        if scenario.waves is not None
+        else None
+    )
+    config = scenario.controller
+    plant = HeavePlant(
+        resolved.model, resolved.heave_plant, waves, config.sample_time, scenario.plant.max_step
+    )
+    controller = make_controller(scenario, resolved.model)
+    with threadpool_limits(limits=1, user_api="blas"):
+        log = closed_loop(
+            plant,
+            controller,
+            DepthStep(scenario.reference, config.preview),
+            duration=scenario.duration,
+            initial_state=scenario.start_state(),
+            sensor=PressureSensor(scenario.sensor, np.random.default_rng(sensor_seed)),
+            on_step=step,
+        )
+    return DepthRunResult(
+        resolved,
+        log,
+        compute_depth_metrics(log, scenario.reference, resolved.heave_plant),
+        provenance=stopwatch.record(libraries),
+        warnings=warnings,
+    )
+
+
 def _simulate_six_dof(
     resolved: ResolvedSixDofScenario, step, stopwatch: Stopwatch, warnings, libraries
 ) -> SixDofRunResult:
@@ -235,8 +269,6 @@ def _simulate_six_dof(
     Random streams: children 0 and 1 of the scenario seed are the current's and the horizontal
     sensor's, as in a horizontal scenario (so its planar twin sees the same draws); child 2 is
     the depth sensor's, child 3 the obstacle sensor's."""
-    from auvmpc.controllers.depth_mpc import DepthMpc
-    from auvmpc.depth import resolve_heave
     from auvmpc.environment.currents import WaterCurrent
     from auvmpc.sim.six_dof_loop import closed_loop_six_dof
 
@@ -247,8 +279,8 @@ def _simulate_six_dof(
     sample_time = scenario.controller.sample_time
     controller = make_controller(scenario, resolved.model)
     warnings = [*warnings, *getattr(controller, "build_warnings", ())]
-    depth_controller = DepthMpc(
-        resolve_heave(resolved.model, {}), scenario.depth_controller, scenario.water_depth_m
+    depth_controller = build_controller(
+        scenario.depth_controller, resolved.model, water_depth_m=scenario.water_depth_m
     )
     x, y, psi, u, v, r = scenario.initial_state
     initial = np.array([x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r], float)
@@ -389,7 +421,7 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     info = json.loads((run_dir / "run.json").read_text())
     if info["scenario"].get("kind") == "depth":
         scenario = DepthScenario.model_validate(info["scenario"])
-        log = DepthLog.read_csv(run_dir / "log.csv", scenario.controller.sample_time)
+        log = DepthLog.read_csv(run_dir / "log.csv")
         heave = VehicleParams.model_validate(info["plant"]).heave
         draw_depth_figures(log, scenario, heave, run_dir, fmt, dpi)
         return

@@ -11,50 +11,19 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.codegen import compiled
 from auvmpc.models.integrators import rk4
+from auvmpc.models.layout import HORIZONTAL, StateLayout
 from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics
 from auvmpc.native import native_function
 
 __all__ = ["HORIZONTAL", "DiscreteModel", "StateLayout", "horizontal_model"]
 
 
-@dataclass(frozen=True)
-class StateLayout:
-    """Names of a model's state entries, in order, and where position and heading are."""
-
-    names: tuple[str, ...]
-    position: tuple[int, int]  # world x, y (m)
-    heading: int  # psi (rad), continuous
-
-    @property
-    def size(self) -> int:
-        return len(self.names)
-
-    def index(self, name: str) -> int:
-        return self.names.index(name)
-
-    def vector(self, values: Any) -> np.ndarray:
-        """A per-state vector from a sequence in state order or a mapping by state name
-        (names left out are 0)."""
-        if isinstance(values, dict):
-            unknown = set(values) - set(self.names)
-            if unknown:
-                raise ValueError(f"unknown state names {sorted(unknown)}; known: {self.names}")
-            return np.array([float(values.get(name, 0.0)) for name in self.names])
-        vector = np.asarray(values, dtype=float)
-        if vector.shape != (self.size,):
-            raise ValueError(f"need {self.size} values ({self.names}), got shape {vector.shape}")
-        return vector
-
-
-HORIZONTAL = StateLayout(names=("x", "y", "psi", "u", "v", "r"), position=(0, 1), heading=2)
 # The world-frame force X, Y (N) and moment N (N m) that the offset-free estimator estimates.
 DISTURBANCE_NAMES = ("X", "Y", "N")
 
@@ -63,7 +32,7 @@ def world_disturbance_dynamics(model: VehicleParams):
     """x' = f(x, F, d_world): the model with a world-frame force and moment added."""
 
     def f(state, thrust, disturbance_world):
-        d_u, d_v = body_from_world(disturbance_world, state[2])
+        d_u, d_v = body_from_world(disturbance_world, state[HORIZONTAL.heading])
         return dynamics(state, thrust, model, (d_u, d_v, disturbance_world[2]))
 
     return f

@@ -40,8 +40,8 @@ from collections.abc import Callable
 import casadi as ca
 import numpy as np
 
-from auvmpc.models.discrete import StateLayout
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
+from auvmpc.models.layout import StateLayout
 from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
@@ -63,12 +63,8 @@ __all__ = [
     "six_dof_model",
 ]
 
-SIX_DOF = StateLayout(
-    names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"),
-    position=(0, 1),
-    heading=5,
-)
-NX = 12
+SIX_DOF = StateLayout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
+NX = SIX_DOF.size
 # Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.
 PITCH_LIMIT_RAD = math.radians(85.0)
 

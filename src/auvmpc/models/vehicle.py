@@ -32,6 +32,7 @@ from pydantic import AfterValidator, Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.six_dof_params import SixDofParams
 
 __all__ = [
@@ -43,7 +44,6 @@ __all__ = [
     "check_plant_scale",
     "body_from_world",
     "dynamics",
-    "heave_dynamics",
     "HeaveParams",
     "load_vehicle",
     "preset_names",
@@ -53,8 +53,8 @@ __all__ = [
     "turn_up_time",
 ]
 
-STATE_NAMES = ("x", "y", "psi", "u", "v", "r")
-NX = 6
+STATE_NAMES = HORIZONTAL.names  # the state order of the equations above
+NX = HORIZONTAL.size
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Damping = Annotated[
@@ -93,22 +93,6 @@ class HeaveParams(StrictModel):
     thruster_count: int = Field(ge=1, description="number of vertical thrusters")
     thrust_limits: ThrustLimits = Field(description="per vertical thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per vertical thruster (N/s)")
-
-
-def heave_dynamics(state, thrust, heave: HeaveParams, disturbance=0.0):
-    """Derivative of [z, w] (m, m/s, z up) under vertical thrusts (N) and a force d_z (N).
-
-    NumPy in, NumPy out; CasADi in, CasADi out (like :func:`dynamics`).
-    """
-    symbolic = isinstance(state, ca.SX | ca.MX) or isinstance(thrust, ca.SX | ca.MX)
-    w = state[1]
-    if symbolic:
-        total, absolute = ca.sum1(thrust), ca.fabs
-    else:
-        total, absolute = float(np.sum(thrust)), abs
-    force = heave.Zw * w + heave.Zww * absolute(w) * w + total + heave.net_buoyancy_N + disturbance
-    derivative = (w, force / heave.m_heave)
-    return ca.vertcat(*derivative) if symbolic else np.array(derivative, dtype=float)
 
 
 class VehicleParams(StrictModel):

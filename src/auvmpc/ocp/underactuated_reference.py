@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics, top_yaw_rate
 
 __all__ = ["CRAB_TURN_FRACTION", "crab_reference"]
@@ -61,12 +62,12 @@ def crab_reference(
     if missing is None or len(reference) < 2:
         return reference
     reference = np.asarray(reference, dtype=float)
-    tangent = reference[:, 2]
+    tangent = reference[:, HORIZONTAL.heading]
     cos_t, sin_t = np.cos(tangent), np.sin(tangent)
-    u_ref, v_ref = reference[:, 3], reference[:, 4]
+    u_ref, v_ref = reference[:, HORIZONTAL.body_velocity].T
     velocity = np.stack([u_ref * cos_t - v_ref * sin_t, u_ref * sin_t + v_ref * cos_t], axis=1)
     acceleration = np.gradient(velocity, sample_time, axis=0)
-    r = reference[:, 5]
+    r = reference[:, HORIZONTAL.index("r")]
     r_dot = np.gradient(r, sample_time)
 
     candidates = tangent[:, None] + _OFFSETS[None, :]  # (nodes, candidates)
@@ -82,10 +83,10 @@ def crab_reference(
     psi = tangent + crab
     shaped = reference.copy()
     cos_p, sin_p = np.cos(psi), np.sin(psi)
-    shaped[:, 2] = psi
-    shaped[:, 3] = velocity[:, 0] * cos_p + velocity[:, 1] * sin_p
-    shaped[:, 4] = -velocity[:, 0] * sin_p + velocity[:, 1] * cos_p
-    shaped[:, 5] = np.gradient(np.unwrap(psi), sample_time)
+    shaped[:, HORIZONTAL.heading] = psi
+    shaped[:, HORIZONTAL.index("u")] = velocity[:, 0] * cos_p + velocity[:, 1] * sin_p
+    shaped[:, HORIZONTAL.index("v")] = -velocity[:, 0] * sin_p + velocity[:, 1] * cos_p
+    shaped[:, HORIZONTAL.index("r")] = np.gradient(np.unwrap(psi), sample_time)
     return shaped
 
 
@@ -106,7 +107,7 @@ def _missing_force(model, missing, heading, velocity, acceleration, r, r_dot, di
     needed = (ax * cos_h + ay * sin_h + r * v, -ax * sin_h + ay * cos_h - r * u, r_dot[:, None])
     d_u, d_v = body_from_world(disturbance, heading)
     unforced = dynamics((0.0, 0.0, heading, u, v, r), np.zeros(model.n_thrusters), model,
-                        (d_u, d_v, disturbance[2]))[3:]  # fmt: skip
+                        (d_u, d_v, disturbance[2]))[HORIZONTAL.span("u", "r")]  # fmt: skip
     inertia = (model.m11, model.m22, model.Iz)
     return sum(
         weight * mass * (want - have)

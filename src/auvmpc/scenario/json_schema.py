@@ -40,8 +40,8 @@ def json_schema(kind: SchemaKind | str) -> dict[str, Any]:
     """
     kind = SchemaKind(kind)
     if kind is SchemaKind.SCENARIO:
-        from auvmpc.depth import DepthScenario
         from auvmpc.scenario import Scenario, SixDofScenario
+        from auvmpc.scenario.depth import DepthScenario
 
         schema = TypeAdapter(Scenario | DepthScenario | SixDofScenario).json_schema()
         schema["title"] = "auvmpc scenario"
@@ -145,10 +145,10 @@ def _references(node: Any) -> Iterator[str]:
 
 def _model_classes() -> dict[str, type[BaseModel]]:
     """Every pydantic model reachable from the file models, by class name (= schema name)."""
-    from auvmpc.depth import DepthScenario
     from auvmpc.experiments.campaign.spec import CampaignSpec
     from auvmpc.models.vehicle import VehicleParams
     from auvmpc.scenario import Scenario, SixDofScenario
+    from auvmpc.scenario.depth import DepthScenario
 
     found: dict[str, type[BaseModel]] = {}
     queue: list[Any] = [Scenario, DepthScenario, SixDofScenario, VehicleParams, CampaignSpec]

@@ -16,8 +16,8 @@ from auvmpc.config import (
     read_text_file,
     read_yaml_mapping,
 )
-from auvmpc.depth import DepthScenario
 from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import Scenario, SixDofScenario
 from auvmpc.scenario.resolved import (
     ResolvedDepthScenario,
@@ -72,7 +72,7 @@ def load_scenario(
 ) -> ResolvedScenario | ResolvedDepthScenario:
     """Load a built-in scenario by name or a YAML file, apply ``field=value`` overrides.
 
-    A file with ``kind: depth`` is a depth experiment (auvmpc.depth), one with
+    A file with ``kind: depth`` is a depth experiment (auvmpc.scenario.depth), one with
     ``kind: six-dof`` runs on the 6-DOF plant (:class:`ResolvedSixDofScenario`, a
     :class:`ResolvedScenario`); any other is a horizontal-plane scenario."""
     text_source = str(source)

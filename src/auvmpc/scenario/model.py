@@ -16,8 +16,7 @@ from auvmpc.config import (
     NonNegative,
     StrictModel,
 )
-from auvmpc.controllers.config import ControllerConfig
-from auvmpc.depth import DepthControllerConfig
+from auvmpc.controllers.config import ControllerConfig, DepthControllerConfig
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
@@ -61,8 +60,8 @@ class Scenario(StrictModel):
 
     kind: Literal["horizontal"] = Field(
         default="horizontal",
-        description="horizontal-plane tracking ('depth': auvmpc.depth; 'six-dof': the 6-DOF "
-        "plant, auvmpc.sim.six_dof_loop)",
+        description="horizontal-plane tracking ('depth': auvmpc.scenario.depth; 'six-dof': the "
+        "6-DOF plant, auvmpc.sim.six_dof_loop)",
     )
     name: str = Field(description="identifier")
     description: str = Field(default="", description="one line for humans")
@@ -150,8 +149,8 @@ class SixDofScenario(Scenario):
     sensing: SixDofSensingConfig = Field(default_factory=SixDofSensingConfig)  # type: ignore[assignment]
     depth_controller: DepthControllerConfig = Field(
         default_factory=DepthControllerConfig,
-        description="the depth MPC (auvmpc.depth); sample_time is the horizontal controller's "
-        "and preview true unless given",
+        description="the depth MPC (controllers/depth_mpc.py); sample_time is the horizontal "
+        "controller's and preview true unless given",
     )
     water_depth_m: Annotated[float, Field(gt=0)] = Field(
         default=100.0, description="depth of the bottom below the surface (m)"

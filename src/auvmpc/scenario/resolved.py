@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from auvmpc.depth import DepthScenario, resolve_heave
 from auvmpc.errors import ConfigError, FieldError
+from auvmpc.models.heave import resolve_heave
 from auvmpc.models.six_dof import plant_step_length
 from auvmpc.models.vehicle import (
     VehicleParams,
@@ -20,6 +20,7 @@ from auvmpc.models.vehicle import (
     stable_plant_step,
 )
 from auvmpc.references import Reference, make_reference
+from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import (
     DEFAULT_PLANT_STEP_S,
     Scenario,

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import (
     ResolvedDepthScenario,
@@ -98,7 +99,7 @@ def check_memory(
         if isinstance(resolved, ResolvedDepthScenario)
         else resolved.model.n_thrusters
     )
-    nx = 2 if isinstance(resolved, ResolvedDepthScenario) else 6
+    nx = (DEPTH if isinstance(resolved, ResolvedDepthScenario) else HORIZONTAL).size
     # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
     log_bytes = steps * (_BYTES * (3 * nx + n + 4) + 64)
     if log_bytes > budget:
@@ -152,7 +153,7 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
 
 
 def _check_start(scenario: Scenario) -> list[str]:
-    x, y = scenario.initial_state[:2]
+    x, y = scenario.initial_state[HORIZONTAL.position]
     margin = scenario.controller.vehicle_radius
     warnings = []
     for index, obstacle in enumerate(scenario.obstacles):
@@ -202,7 +203,7 @@ def reference_thrust_needs(
     """Generalised force [f_u, f_v, M_r] (k, 3) that moves the model along ``states``
     (k, 6) sampled every ``sample_time`` with no disturbance (the model solved for tau;
     accelerations by central differences)."""
-    u, v, r = states[:, 3], states[:, 4], states[:, 5]
+    u, v, r = (states[:, HORIZONTAL.index(name)] for name in ("u", "v", "r"))
     if len(states) > 1:
         du, dv, dr = (np.gradient(q, sample_time) for q in (u, v, r))
     else:
@@ -282,7 +283,7 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
                 "but a horizontal-plane scenario tracks only its horizontal path; give "
                 "kind: six-dof to follow the depth too"
             )
-    speed = np.hypot(states[:, 3], states[:, 4])
+    speed = np.hypot(*states[:, HORIZONTAL.body_velocity].T)
     top = steady_top_speed(plant)
     fastest = int(np.argmax(speed))
     if speed[fastest] > top * (1.0 + _RELATIVE_MARGIN):
@@ -306,7 +307,8 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     infeasible = np.flatnonzero(~feasible_forces(plant, tau))
     if len(infeasible):
         k = int(infeasible[0])
-        radius = speed[k] / abs(states[k, 5]) if abs(states[k, 5]) > 1e-12 else math.inf
+        yaw_rate = abs(states[k, HORIZONTAL.index("r")])
+        radius = speed[k] / yaw_rate if yaw_rate > 1e-12 else math.inf
         warnings.append(
             f"reference: needs more thrust than {plant.name}'s limits {list(plant.thrust_limits)}"
             f" N at {len(infeasible)} of {len(t)} samples, first at t = {t[k]:g} s "

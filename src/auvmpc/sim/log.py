@@ -2,7 +2,9 @@
 
 Row k holds the TRUE plant state at t_k and the reference at t_k; the thrust on
 row k is what was applied over [t_k, t_k+1), so the last row has none
-(``shared/spec/interfaces.md``). Arrays are preallocated and time-major.
+(``shared/spec/interfaces.md``). Arrays are preallocated and time-major. The state columns
+are named by the log's state layout: :class:`SimLog` is a horizontal run's
+(``x, y, psi, u, v, r``), :class:`DepthLog` a depth run's (``z, w``), same loop, same rows.
 """
 
 from __future__ import annotations
@@ -12,13 +14,15 @@ import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
-from auvmpc.models.vehicle import STATE_NAMES
+from auvmpc.models.layout import DEPTH, HORIZONTAL, StateLayout
 
-__all__ = ["ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
+__all__ = ["DepthLog", "ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
 
+STATE_NAMES = HORIZONTAL.names
 REFERENCE_NAMES = tuple(f"{name}_ref" for name in STATE_NAMES)
 DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
 # The world force and moment the controller's prediction used at sample k (its estimate with
@@ -28,34 +32,46 @@ ESTIMATE_NAMES = ("dist_X_hat", "dist_Y_hat", "dist_N_hat")
 
 @dataclass
 class SimLog:
-    """Time-major record of one run (N samples, n thrusters)."""
+    """Time-major record of one run (N samples, n thrusters, nx states of ``layout``)."""
+
+    #: The plant state's names: the columns of ``state`` and ``reference``.
+    layout: ClassVar[StateLayout] = HORIZONTAL
+    #: The external force logged at each row (``disturbance_world``'s columns).
+    disturbance_names: ClassVar[tuple[str, ...]] = DISTURBANCE_NAMES
+    #: Entries of what the controller's sensor measures (``measured``'s columns).
+    measured_size: ClassVar[int] = HORIZONTAL.size
 
     t: np.ndarray  # (N+1,) s
-    state: np.ndarray  # (N+1, 6) true plant state
-    reference: np.ndarray  # (N+1, 6)
+    state: np.ndarray  # (N+1, nx) true plant state
+    reference: np.ndarray  # (N+1, nx)
     thrust: np.ndarray  # (N, n) applied over [t_k, t_k+1)
     solve_ms: np.ndarray  # (N,) wall time of the controller call
     disturbance_estimate: np.ndarray  # (N, 3) what the controller assumed over [t_k, t_k+1)
     status: list[str]  # (N,) ControlStatus values
-    disturbance_world: np.ndarray  # (N+1, 3) world force [X, Y, N] at t_k
+    disturbance_world: np.ndarray  # (N+1, nd) external force at t_k (horizontal: world X, Y, N)
     clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
     sample_time: float
     initial_thrust: np.ndarray  # (n,) F(-1), what the first rate limit is measured from
+    # (N+1, m) what the sensor gave at t_k (the controller's input on rows 0..N-1); in memory
+    # only for a horizontal run, whose log.csv keeps the truth.
+    measured: np.ndarray
 
     @classmethod
     def allocate(cls, steps: int, n_thrusters: int, sample_time: float) -> SimLog:
+        nx = cls.layout.size
         return cls(
             t=sample_time * np.arange(steps + 1, dtype=float),
-            state=np.zeros((steps + 1, 6)),
-            reference=np.zeros((steps + 1, 6)),
+            state=np.zeros((steps + 1, nx)),
+            reference=np.zeros((steps + 1, nx)),
             thrust=np.zeros((steps, n_thrusters)),
             solve_ms=np.zeros(steps),
-            disturbance_estimate=np.zeros((steps, 3)),
+            disturbance_estimate=np.zeros((steps, len(ESTIMATE_NAMES))),
             status=[""] * steps,
-            disturbance_world=np.zeros((steps + 1, 3)),
+            disturbance_world=np.zeros((steps + 1, len(cls.disturbance_names))),
             clearance_m=np.full(steps + 1, math.inf),
             sample_time=sample_time,
             initial_thrust=np.zeros(n_thrusters),
+            measured=np.zeros((steps + 1, cls.measured_size)),
         )
 
     @property
@@ -128,6 +144,85 @@ class SimLog:
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log
+
+
+@dataclass
+class DepthLog(SimLog):
+    """A depth run's log (``kind: depth``): true ``[z, w]``, the depth setpoint, the vertical
+    thrusts, the pressure sensor's reading and the wave force (docs/depth.md). Its log.csv
+    columns: ``t, z, w, z_ref, Fz1..Fzn, solve_ms, status, z_measured, wave_force_N``."""
+
+    layout: ClassVar[StateLayout] = DEPTH
+    disturbance_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
+    measured_size: ClassVar[int] = 1  # the pressure sensor's depth
+
+    @property
+    def z_ref(self) -> np.ndarray:
+        """(N+1,) the depth setpoint (m, up)."""
+        return self.reference[:, _DEPTH]
+
+    @property
+    def z_measured(self) -> np.ndarray:
+        """(N+1,) the depth the controller saw (m, up)."""
+        return self.measured[:, 0]
+
+    @property
+    def wave_force(self) -> np.ndarray:
+        """(N+1,) the waves' vertical force on the vehicle at t_k (N, up)."""
+        return self.disturbance_world[:, 0]
+
+    def columns(self) -> list[str]:
+        thrusters = [f"Fz{i + 1}" for i in range(self.n_thrusters)]
+        return [
+            "t", *self.layout.names, "z_ref", *thrusters, "solve_ms", "status",
+            "z_measured", *self.disturbance_names,
+        ]  # fmt: skip
+
+    def to_csv_text(self) -> str:
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(self.columns())
+        nv = self.n_thrusters
+        for k in range(self.steps + 1):
+            applied = k < self.steps
+            writer.writerow(
+                [
+                    _num(self.t[k]), *(_num(v) for v in self.state[k]), _num(self.z_ref[k]),
+                    *([_num(f) for f in self.thrust[k]] if applied else [""] * nv),
+                    _num(self.solve_ms[k]) if applied else "",
+                    self.status[k] if applied else "",
+                    _num(self.z_measured[k]), _num(self.wave_force[k]),
+                ]
+            )  # fmt: skip
+        return buffer.getvalue()
+
+    @classmethod
+    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> DepthLog:
+        """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
+        with open(path, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        if not rows:
+            raise ValueError(f"{path}: empty log")
+        thrusters = sorted((c for c in rows[0] if c.startswith("Fz")), key=lambda c: int(c[2:]))
+        steps = len(rows) - 1
+        sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
+        log = cls.allocate(steps, len(thrusters), sample_time)
+        for k, row in enumerate(rows):
+            log.t[k] = float(row["t"])
+            log.state[k] = [float(row[name]) for name in cls.layout.names]
+            log.reference[k, _DEPTH] = float(row["z_ref"])
+            log.measured[k] = float(row["z_measured"])
+            log.disturbance_world[k] = [float(row[name]) for name in cls.disturbance_names]
+            if k < steps:
+                log.thrust[k] = [float(row[name]) for name in thrusters]
+                log.solve_ms[k] = float(row["solve_ms"])
+                log.status[k] = row["status"]
+        if initial_thrust is not None:
+            log.initial_thrust = np.asarray(initial_thrust, dtype=float)
+        return log
+
+
+_DEPTH = DEPTH.index("z")
 
 
 def _num(value: float) -> str:

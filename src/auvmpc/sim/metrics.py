@@ -1,17 +1,31 @@
-"""Run metrics: pure functions of a SimLog (names and units per interfaces.md)."""
+"""Run metrics: pure functions of a SimLog (names and units per interfaces.md).
+
+Every kind of run gets the same actuation and solver metrics (:func:`actuation_metrics`:
+limit and rate violations, fallbacks, solve times), then its own: tracking errors and the
+verdict of a horizontal run (:func:`compute_metrics`), depth, roll and pitch of a 6-DOF one
+(:func:`compute_six_dof_metrics`), the step response of a depth one
+(:func:`compute_depth_metrics`, docs/depth.md).
+"""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from auvmpc.controllers.base import ControlStatus
-from auvmpc.models.vehicle import VehicleParams
-from auvmpc.sim.log import SimLog
+from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF
+from auvmpc.models.vehicle import HeaveParams, VehicleParams
+from auvmpc.references import DepthStepConfig
+from auvmpc.sim.log import DepthLog, SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 
 __all__ = [
+    "STEP_METRIC_KEYS",
+    "actuation_metrics",
+    "compute_depth_metrics",
     "compute_metrics",
     "compute_six_dof_metrics",
     "position_error",
@@ -29,16 +43,18 @@ LIMIT_TOLERANCE_N = 1e-9
 MARGIN_TOLERANCE_M = 0.01
 # The reference is "not moving" below this speed (m/s): no along-track direction to lag on.
 _MIN_REFERENCE_SPEED_M_PER_S = 0.01
+# Where a horizontal log's columns are (auvmpc.models.layout).
+_POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
 
 
 def position_error(log: SimLog) -> np.ndarray:
     """(N+1,) Euclidean distance to the reference position (m)."""
-    return np.hypot(*(log.state[:, :2] - log.reference[:, :2]).T)
+    return np.hypot(*(log.state[:, _POSITION] - log.reference[:, _POSITION]).T)
 
 
 def heading_error(log: SimLog) -> np.ndarray:
     """(N+1,) heading error wrapped to (-pi, pi] (rad)."""
-    return wrap_angle(log.state[:, 2] - log.reference[:, 2])
+    return wrap_angle(log.state[:, _HEADING] - log.reference[:, _HEADING])
 
 
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
@@ -49,6 +65,43 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
 def thrust_increments(log: SimLog) -> np.ndarray:
     """(N, n) change of each thruster's force at every sample, from F(-1)."""
     return np.diff(np.vstack([log.initial_thrust, log.thrust]), axis=0)
+
+
+def actuation_metrics(
+    log: SimLog,
+    thrust_limits: tuple[ArrayLike, ArrayLike],
+    thrust_rate_limit: ArrayLike,
+) -> dict[str, float | int]:
+    """What every kind of run reports of its thrust and its controller: the largest thrust and
+    rate, hard-limit and rate-limit violations (against ``thrust_limits`` (N) and
+    ``thrust_rate_limit`` (N/s), one for all thrusters or one per thruster), effort, solve
+    times, fallback and relaxed steps."""
+    increments = thrust_increments(log)
+    max_step = thrust_rate_limit * log.sample_time
+    lower, upper = thrust_limits
+    force_violations = (log.thrust < lower - LIMIT_TOLERANCE_N) | (
+        log.thrust > upper + LIMIT_TOLERANCE_N
+    )
+    rate_violations = np.abs(increments) > max_step + LIMIT_TOLERANCE_N
+    solve = log.solve_ms
+    fallback = np.array([status == ControlStatus.FALLBACK for status in log.status], dtype=bool)
+    relaxed_steps = sum(status == ControlStatus.RELAXED for status in log.status)
+    return {
+        "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
+        "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
+        if log.steps
+        else 0.0,
+        "thrust_limit_violations": int(force_violations.sum()),
+        "thrust_rate_violations": int(rate_violations.sum()),
+        "solve_ms_median": _percentile(solve, 50),
+        "solve_ms_p99": _percentile(solve, 99),
+        "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
+        "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+        "solver_failures": int(fallback.sum()),
+        "fallback_steps": int(fallback.sum()),
+        "relaxed_steps": int(relaxed_steps),
+        "longest_fallback_streak": longest_run(fallback),
+    }
 
 
 def compute_metrics(
@@ -69,31 +122,23 @@ def compute_metrics(
     """
     error = position_error(log)
     heading = heading_error(log)
-    increments = thrust_increments(log)
-    max_step = limits.thrust_rate_limit * log.sample_time
-    lower, upper = limits.thrust_limits
-    force_violations = (log.thrust < lower - LIMIT_TOLERANCE_N) | (
-        log.thrust > upper + LIMIT_TOLERANCE_N
-    )
-    rate_violations = np.abs(increments) > max_step + LIMIT_TOLERANCE_N
-    solve = log.solve_ms
+    common = actuation_metrics(log, limits.thrust_limits, limits.thrust_rate_limit)
     steady = log.t >= transient_s - 1e-9
     clearance = log.clearance_m
-    fallback = np.array([status == ControlStatus.FALLBACK for status in log.status], dtype=bool)
-    relaxed_steps = sum(status == ControlStatus.RELAXED for status in log.status)
-    yaw_rate = np.abs(log.state[:, 5])
+    yaw_rate = np.abs(log.state[:, _YAW_RATE])
     heading_after = np.abs(heading[steady])
     metrics = {
         "rms_position_error_m": _rms(error),
         "max_position_error_m": float(error.max()),
         "final_position_error_m": float(error[-1]),
         "rms_heading_error_rad": _rms(heading),
-        "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
-        "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
-        if log.steps
-        else 0.0,
-        "thrust_limit_violations": int(force_violations.sum()),
-        "thrust_rate_violations": int(rate_violations.sum()),
+        **_pick(
+            common,
+            "max_abs_thrust_N",
+            "max_abs_thrust_rate_N_per_s",
+            "thrust_limit_violations",
+            "thrust_rate_violations",
+        ),
         "min_obstacle_clearance_m": float(clearance.min())
         if np.isfinite(clearance).any()
         else None,
@@ -102,16 +147,19 @@ def compute_metrics(
         )
         if np.isfinite(clearance).any()
         else None,
-        "detour_m": path_length(log.state[:, :2]) - path_length(log.reference[:, :2]),
+        "detour_m": path_length(log.state[:, _POSITION]) - path_length(log.reference[:, _POSITION]),
         "time_lost_s": time_lost(log),
-        "solve_ms_median": _percentile(solve, 50),
-        "solve_ms_p99": _percentile(solve, 99),
-        "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
-        "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
-        "solver_failures": int(fallback.sum()),
-        "fallback_steps": int(fallback.sum()),
-        "relaxed_steps": int(relaxed_steps),
-        "longest_fallback_streak": longest_run(fallback),
+        **_pick(
+            common,
+            "solve_ms_median",
+            "solve_ms_p99",
+            "solve_ms_max",
+            "thrust_effort_N2s",
+            "solver_failures",
+            "fallback_steps",
+            "relaxed_steps",
+            "longest_fallback_streak",
+        ),
         "max_abs_yaw_rate_rad_per_s": float(yaw_rate.max()),
         "transient_s": float(transient_s),
         "rms_position_error_after_transient_m": _rms(error[steady]),
@@ -128,9 +176,9 @@ def compute_metrics(
         max_error_after_transient_m=metrics["max_position_error_after_transient_m"],
         max_heading_error_after_transient_rad=metrics["max_heading_error_after_transient_rad"],
         max_abs_yaw_rate_after_transient=float(yaw_rate[steady].max()) if steady.any() else None,
-        max_abs_reference_yaw_rate=float(np.abs(log.reference[:, 5]).max()),
-        reference_extent_m=float(np.hypot(*np.ptp(log.reference[:, :2], axis=0))),
-        heading_turns=relative_heading_turns(log.state[:, 2], log.reference[:, 2]),
+        max_abs_reference_yaw_rate=float(np.abs(log.reference[:, _YAW_RATE]).max()),
+        reference_extent_m=float(np.hypot(*np.ptp(log.reference[:, _POSITION], axis=0))),
+        heading_turns=relative_heading_turns(log.state[:, _HEADING], log.reference[:, _HEADING]),
         fallback_steps=metrics["fallback_steps"],
         longest_fallback_streak=metrics["longest_fallback_streak"],
         relaxed_steps=metrics["relaxed_steps"],
@@ -155,17 +203,17 @@ def time_lost(log: SimLog) -> float:
     divided by the reference speed there (samples slower than 1 cm/s are left out).
     """
     reference = log.reference
+    psi = reference[:, _HEADING]
+    u, v = reference[:, HORIZONTAL.body_velocity].T
     velocity = np.column_stack(
-        [
-            np.cos(reference[:, 2]) * reference[:, 3] - np.sin(reference[:, 2]) * reference[:, 4],
-            np.sin(reference[:, 2]) * reference[:, 3] + np.cos(reference[:, 2]) * reference[:, 4],
-        ]
+        [np.cos(psi) * u - np.sin(psi) * v, np.sin(psi) * u + np.cos(psi) * v]
     )
     speed = np.hypot(*velocity.T)
     moving = speed > _MIN_REFERENCE_SPEED_M_PER_S
     if not moving.any():
         return 0.0
-    lag = np.einsum("nk,nk->n", reference[moving, :2] - log.state[moving, :2], velocity[moving])
+    ahead = reference[moving, _POSITION] - log.state[moving, _POSITION]
+    lag = np.einsum("nk,nk->n", ahead, velocity[moving])
     return float(max(0.0, np.max(lag / speed[moving] ** 2)))
 
 
@@ -176,6 +224,11 @@ def longest_run(flags: np.ndarray) -> int:
         current = current + 1 if flag else 0
         longest = max(longest, current)
     return longest
+
+
+def _pick(metrics: dict, *names: str) -> dict:
+    """``names`` of ``metrics``, in that order (run.json keeps its key order)."""
+    return {name: metrics[name] for name in names}
 
 
 def _rms(values: np.ndarray) -> float | None:
@@ -208,23 +261,20 @@ def compute_six_dof_metrics(
 
     metrics = compute_metrics(log.horizontal(), limits, transient_s, obstacle_margin_m)
     mapping = ThrustMapping(limits, log.sample_time)
-    increments = thrust_increments(log)
-    force = (log.thrust < mapping.lower - LIMIT_TOLERANCE_N) | (
-        log.thrust > mapping.upper + LIMIT_TOLERANCE_N
-    )
-    rate = np.abs(increments) > mapping.max_step + LIMIT_TOLERANCE_N
+    every_thruster = actuation_metrics(log, (mapping.lower, mapping.upper), mapping.rate_limit)
     steady = log.t >= transient_s - 1e-9
-    depth_error = log.full_state[:, 2] - log.depth_reference[:, 0]
-    roll, pitch = np.abs(log.full_state[:, 3]), np.abs(log.full_state[:, 4])
+    depth_error = log.full_state[:, SIX_DOF.index("z")] - log.depth_reference[:, 0]
+    roll, pitch = (np.abs(log.full_state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
     metrics.update(
         {
-            "thrust_limit_violations": int(force.sum()),
-            "thrust_rate_violations": int(rate.sum()),
-            "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
-            "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
-            if log.steps
-            else 0.0,
-            "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+            **_pick(
+                every_thruster,
+                "thrust_limit_violations",
+                "thrust_rate_violations",
+                "max_abs_thrust_N",
+                "max_abs_thrust_rate_N_per_s",
+                "thrust_effort_N2s",
+            ),
             "saturated_thrust_commands": int(log.saturated.sum()),
             "rms_depth_error_m": _rms(depth_error),
             "max_depth_error_m": float(np.abs(depth_error).max()),
@@ -256,3 +306,71 @@ def compute_six_dof_metrics(
     elif trouble:
         metrics["verdict_reason"] = "; ".join([str(metrics["verdict_reason"]), *trouble])
     return metrics
+
+
+# --- depth runs (kind: depth): the tank step experiment ------------------------------------
+
+STEADY_WINDOW_S = 10.0  # "over the last 10 s" (issue 5)
+
+STEP_METRIC_KEYS = (
+    "rise_time_s", "settling_time_0p05m_s", "settling_time_2pct_s", "overshoot_m",
+    "steady_state_error_mean_abs_m", "steady_state_error_max_abs_m",
+)  # fmt: skip
+
+
+def compute_depth_metrics(
+    log: DepthLog, step: DepthStepConfig, limits: HeaveParams
+) -> dict[str, float | int | None]:
+    """Step-response metrics of the true depth (docs/depth.md), then the actuation and solver
+    metrics every run has, against the vertical thrusters' limits in ``limits``."""
+    z = log.state[:, DEPTH.index("z")]
+    after = log.t >= step.step_time_s - 1e-9
+    t_after, z_after = log.t[after] - step.step_time_s, z[after]
+    change = step.final_depth_m - step.initial_depth_m
+    progress = (z_after - step.initial_depth_m) / change  # 0 before, 1 at the target
+    error = np.abs(z_after - step.final_depth_m)
+    steady = log.t >= log.t[-1] - STEADY_WINDOW_S - 1e-9
+    steady_error = np.abs(z[steady] - log.z_ref[steady])
+    common = actuation_metrics(log, limits.thrust_limits, limits.thrust_rate_limit)
+    metrics = {
+        "rise_time_s": _rise_time(t_after, progress),
+        "settling_time_0p05m_s": _settling_time(t_after, error, 0.05),
+        "settling_time_2pct_s": _settling_time(t_after, error, 0.02 * abs(change)),
+        "overshoot_m": float(max(0.0, np.max((z_after - step.final_depth_m) * np.sign(change)))),
+        "steady_state_error_mean_abs_m": float(np.mean(steady_error)),
+        "steady_state_error_max_abs_m": float(np.max(steady_error)),
+        "max_z_m": float(z.max()),
+        "min_z_m": float(z.min()),
+    }
+    # The keys depth runs had first, in their order; then the rest of the common ones.
+    metrics |= _pick(
+        common,
+        "thrust_limit_violations",
+        "thrust_rate_violations",
+        "max_abs_thrust_N",
+        "solve_ms_median",
+        "solve_ms_p99",
+        "solve_ms_max",
+        "solver_failures",
+    )
+    metrics |= {name: value for name, value in common.items() if name not in metrics}
+    return metrics
+
+
+def _rise_time(t: np.ndarray, progress: np.ndarray) -> float | None:
+    """10 % to 90 % of the step, first crossings."""
+    ten = np.flatnonzero(progress >= 0.1)
+    ninety = np.flatnonzero(progress >= 0.9)
+    if len(ten) == 0 or len(ninety) == 0:
+        return None
+    return float(t[ninety[0]] - t[ten[0]])
+
+
+def _settling_time(t: np.ndarray, error: np.ndarray, band: float) -> float | None:
+    """Time of the last entry into the band (None if it ends outside)."""
+    outside = np.flatnonzero(error > band)
+    if len(outside) == 0:
+        return 0.0
+    if outside[-1] == len(error) - 1:
+        return None
+    return float(t[outside[-1] + 1])

@@ -1,6 +1,10 @@
-"""The simulated vehicle over one zero-order-hold sample: RK4 sub-steps of the 3-DOF model
-(auvmpc.models.vehicle) under the world-frame disturbance, evaluated where each sub-step asks, and
-the water current (held over the sample, like the force's slow part).
+"""The simulated vehicle over one zero-order-hold sample, as the closed loop (sim/loop.py)
+steps it: a :class:`Plant` of the scenario's kind.
+
+:class:`HorizontalPlant`: RK4 sub-steps of the 3-DOF model (auvmpc.models.vehicle) under the
+world-frame disturbance, evaluated where each sub-step asks, and the water current (held over
+the sample, like the force's slow part). :class:`HeavePlant`: RK4 sub-steps of the heave model
+(auvmpc.models.heave) under the surface waves' vertical force.
 
 Two implementations of the same arithmetic: :func:`plant_step` in NumPy, and
 :class:`PlantStepper`, which evaluates the disturbance at every RK4 stage of the sample
@@ -12,16 +16,111 @@ expressions (auvmpc.native). The NumPy one evaluates the model 40 times a sample
 from __future__ import annotations
 
 import functools
+import math
+from typing import Protocol
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.environment.disturbances import WorldDisturbance
+from auvmpc.environment.waves import WaveField, morison_inertia
+from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
-from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics
+from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.vehicle import HeaveParams, VehicleParams, body_from_world, dynamics
 from auvmpc.native import NativeFunction, native_function
+from auvmpc.sim.log import DepthLog, SimLog
 
-__all__ = ["PlantStepper", "plant_step", "stage_times"]
+__all__ = [
+    "HeavePlant",
+    "HorizontalPlant",
+    "Plant",
+    "PlantStepper",
+    "plant_step",
+    "stage_times",
+    "substeps_for",
+]
+
+_HEADING = HORIZONTAL.heading
+_DEPTH = DEPTH.index("z")
+
+
+class Plant(Protocol):
+    """What the closed loop integrates: one held-thrust sample at a time, in its environment."""
+
+    log_type: type[SimLog]  # its state layout, logged columns and CSV form
+    n_thrusters: int
+    sample_time: float  # s, the sample :meth:`step` integrates over
+
+    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+        """The environment's force on the vehicle at ``t`` (logged, one row per sample)."""
+
+    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+        """The state one sample after ``t0`` under ``thrust`` held; the environment then
+        moves on to the next sample."""
+
+
+def substeps_for(sample_time: float, max_step: float) -> int:
+    """RK4 sub-steps per sample so that none is longer than ``max_step``."""
+    return max(1, math.ceil(sample_time / max_step - 1e-9))
+
+
+class HorizontalPlant:
+    """The 3-DOF vehicle under a :class:`WorldDisturbance` (force, moment and water current)."""
+
+    log_type = SimLog
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        disturbance: WorldDisturbance,
+        sample_time: float,
+        max_step: float,
+    ) -> None:
+        self.vehicle, self.disturbance, self.sample_time = vehicle, disturbance, sample_time
+        self.n_thrusters = vehicle.n_thrusters
+        self.stepper = PlantStepper(vehicle, sample_time, substeps_for(sample_time, max_step))
+
+    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+        """World force and moment [X, Y, N] (N, N, N m)."""
+        return self.disturbance.force_world(t)
+
+    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+        following = self.stepper(state, thrust, t0, self.disturbance)
+        self.disturbance.advance()
+        return following
+
+
+class HeavePlant:
+    """The heave model (depth experiment) under the surface waves, or in calm water."""
+
+    log_type = DepthLog
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        heave: HeaveParams,
+        waves: WaveField | None,
+        sample_time: float,
+        max_step: float,
+    ) -> None:
+        self.heave, self.waves, self.sample_time = heave, waves, sample_time
+        self.n_thrusters = heave.thruster_count
+        self.substeps = substeps_for(sample_time, max_step)
+        # Froude-Krylov plus added mass: the water around the body accelerates with the wave.
+        self.inertia = morison_inertia(vehicle, heave)
+
+    def wave_force(self, z: float, t: float) -> float:
+        """The waves' vertical force (N, up) on the vehicle at height ``z`` (m) at ``t``."""
+        return 0.0 if self.waves is None else self.inertia * self.waves.vertical_acceleration(z, t)
+
+    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+        return np.array([self.wave_force(state[_DEPTH], t)])
+
+    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+        return heave_plant_step(
+            self.heave, state, thrust, t0, self.sample_time, self.substeps, self.wave_force
+        )
 
 
 def plant_step(
@@ -37,7 +136,7 @@ def plant_step(
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         force = disturbance.force_world(t)
-        d_u, d_v = body_from_world(force, x[2])
+        d_u, d_v = body_from_world(force, x[_HEADING])
         water = disturbance.water_velocity_world(t)
         return dynamics(x, thrust, plant, (d_u, d_v, force[2]), current_world=water)
 
@@ -93,7 +192,7 @@ def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunc
 
     def rhs(j: int, state):
         force = forces[:, j]
-        d_u, d_v = body_from_world(force, state[2])
+        d_u, d_v = body_from_world(force, state[_HEADING])
         return dynamics(state, thrust, plant, (d_u, d_v, force[2]), current_world=water)
 
     h = duration / substeps

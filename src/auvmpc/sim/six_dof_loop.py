@@ -1,11 +1,12 @@
 """The paper's control architecture on the 6-DOF plant (paper section 4.2).
 
 Every sample: the horizontal controller (any registered one, built on the 3-DOF model) sees
-``[x, y, psi, u, v, r]`` of the measured 6-DOF state; the depth MPC (:mod:`auvmpc.depth`) sees
-the measured depth and depth rate and the depth reference; :class:`ThrustMapping` puts both
-demands on the vehicle's ``six_dof.thrusters`` within their hard force and rate limits; the
-6-DOF plant (:mod:`auvmpc.models.six_dof`) integrates the held thrust with RK4 sub-steps in
-the water current. Roll and pitch are left to passive stability.
+``[x, y, psi, u, v, r]`` of the measured 6-DOF state; the depth MPC
+(:mod:`auvmpc.controllers.depth_mpc`) sees the measured depth and depth rate and the depth
+reference; :class:`ThrustMapping` puts both demands on the vehicle's ``six_dof.thrusters``
+within their hard force and rate limits; the 6-DOF plant (:mod:`auvmpc.models.six_dof`)
+integrates the held thrust with RK4 sub-steps in the water current. Roll and pitch are left
+to passive stability.
 
 Conventions: the plant, the log and the 3-D reference use NED (z down, the depth below the
 surface); the depth controller works in z up (negative below the surface), as in the tank
@@ -21,6 +22,7 @@ controller's total heave force is split over the vertical set by least squares o
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from collections.abc import Callable
@@ -34,7 +36,8 @@ from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.disturbances import SensorNoise
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import clearance, visible_obstacles
-from auvmpc.models.six_dof import check_pitch, depth_rate, integrate, six_dof_model
+from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF, check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import Reference
 from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
@@ -51,8 +54,10 @@ __all__ = [
 # The 6-DOF state's columns beyond the horizontal ones (x, y, psi, u, v, r).
 EXTRA_STATE_NAMES = ("z", "phi", "theta", "w", "p", "q")
 # Where [x, y, psi, u, v, r] and the rest sit in [x, y, z, phi, theta, psi, u, v, w, p, q, r].
-HORIZONTAL_INDEX = np.array([0, 1, 5, 6, 7, 11])
-EXTRA_INDEX = np.array([2, 3, 4, 8, 9, 10])
+HORIZONTAL_INDEX = np.array([SIX_DOF.index(name) for name in HORIZONTAL.names])
+EXTRA_INDEX = np.array([SIX_DOF.index(name) for name in EXTRA_STATE_NAMES])
+_DEPTH = SIX_DOF.index("z")  # NED, down (m)
+_POSITION = SIX_DOF.position
 DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
 CURRENT_NAMES = ("current_north", "current_east", "current_down")
 # Slack in a saturation check: far below any physical force.
@@ -92,9 +97,10 @@ class ThrustMapping:
         self.upper = np.concatenate(
             [np.full(n, vehicle.thrust_limits[1]), np.full(count, heave.thrust_limits[1])]
         )
-        self.max_step = sample_time * np.concatenate(
+        self.rate_limit = np.concatenate(  # N/s
             [np.full(n, vehicle.thrust_rate_limit), np.full(count, heave.thrust_rate_limit)]
         )
+        self.max_step = sample_time * self.rate_limit
 
     def vertical(self, heave_force_up: float) -> np.ndarray:
         """The vertical thrusters' forces for an upward heave force (N): NED Z = -force."""
@@ -142,7 +148,7 @@ class SixDofLog(SimLog):
         """The horizontal view: the horizontal thrusters only (what the 3-DOF metrics and
         figures read, checked against the horizontal controller's limits)."""
         n = self.n_horizontal
-        fields = {name: getattr(self, name) for name in SimLog.__dataclass_fields__}
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(SimLog)}
         fields["thrust"] = self.thrust[:, :n]
         fields["initial_thrust"] = self.initial_thrust[:n]
         return SimLog(**fields)
@@ -187,8 +193,8 @@ class SixDofLog(SimLog):
             rows = list(csv.DictReader(handle))
         steps = base.steps
         log = cls.allocate_six_dof(steps, n_horizontal, base.n_thrusters, base.sample_time)
-        for name in SimLog.__dataclass_fields__:
-            setattr(log, name, getattr(base, name))
+        for simlog_field in dataclasses.fields(SimLog):
+            setattr(log, simlog_field.name, getattr(base, simlog_field.name))
         number = lambda row, name: float(row[name])  # noqa: E731
         for k, row in enumerate(rows):
             full = np.zeros(12)
@@ -258,7 +264,7 @@ def closed_loop_six_dof(
     state = np.asarray(initial_state, dtype=float).copy()
     check_pitch(state)
     controller.reset(horizontal_state(state), previous[:n].copy())
-    depth_controller.reset(np.array([-state[2], -depth_rate(state)]), np.zeros(heave_count))
+    depth_controller.reset(np.array([-state[_DEPTH], -depth_rate(state)]), np.zeros(heave_count))
     preview = sample_time * np.arange(controller.preview_steps + 1)
     depth_preview_times = sample_time * np.arange(depth_controller.preview_steps + 1)
     depth_std, rate_std = depth_noise
@@ -269,10 +275,10 @@ def closed_loop_six_dof(
         log.state[k] = horizontal_state(state)
         log.reference[k] = reference.state(t)
         log.depth_reference[k] = reference.depths([t])[0, :2]
-        log.clearance_m[k] = clearance(state[:2], t, obstacles, vehicle_radius)
+        log.clearance_m[k] = clearance(state[_POSITION], t, obstacles, vehicle_radius)
         velocity = np.zeros(3)
         if current is not None:
-            velocity = current.at(t, state[2], depth_rate(state))[0]
+            velocity = current.at(t, state[_DEPTH], depth_rate(state))[0]
         log.current_world[k] = velocity
         if k == steps:
             break
@@ -283,11 +289,11 @@ def closed_loop_six_dof(
             reference=reference.states(t + preview),
             obstacles=visible_obstacles(obstacles, t)
             if perception is None
-            else perception.observe(t, state[:2]),
+            else perception.observe(t, state[_POSITION]),
         )
         result, horizontal, log.solve_ms[k] = timed_command(controller, observation, n)
 
-        measured_depth = state[2] + depth_std * depth_rng.standard_normal()
+        measured_depth = state[_DEPTH] + depth_std * depth_rng.standard_normal()
         measured_rate = depth_rate(state) + rate_std * depth_rng.standard_normal()
         times = t + depth_preview_times if depth_preview else np.full_like(depth_preview_times, t)
         target = reference.depths(times)
@@ -314,7 +320,7 @@ def closed_loop_six_dof(
                 thrust,
                 sample_time,
                 substeps,
-                lambda time_s, x: current.at(time_s, x[2], depth_rate(x)),
+                lambda time_s, x: current.at(time_s, x[_DEPTH], depth_rate(x)),
                 t0=t,
             )
         else:  # uniform in space, held over the sample: the compiled RK4 step

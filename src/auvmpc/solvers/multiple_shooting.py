@@ -19,6 +19,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 
@@ -28,7 +29,7 @@ if TYPE_CHECKING:  # read, never imported at run time: solvers sit below control
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "Sample", "Solution"]
 
-NX, ND = 6, 3
+NX, ND = HORIZONTAL.size, 3  # state [x, y, psi, u, v, r], world force [X, Y, N]
 # Obstacle slots in the program (built once): the nearest this many visible obstacles count.
 MAX_OBSTACLES = 8
 # Per slot: centre x, y now (m), velocity x, y (m/s), reach = radius + vehicle radius + margin.
@@ -215,9 +216,9 @@ class MultipleShootingProgram:
     ) -> Sample:
         """The sample's data; the nearest obstacles fill the slots, the rest are parked."""
         slots = np.zeros((self.n_slots, SLOT_FIELDS))
-        slots[:, 0:2] = state[:2] + _PARKED_OBSTACLE_M
+        slots[:, 0:2] = state[HORIZONTAL.position] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
-        nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[:2]))
+        nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[HORIZONTAL.position]))
         extra = self.ocp.keep_out_extra
         steps = self.sample_time * np.arange(1, self.horizon + 1)
         for o, obstacle in enumerate(nearest[: self.n_slots]):

@@ -1,0 +1,72 @@
+"""Named state layouts: which entry of a model's state vector is which quantity.
+
+Code outside a model's own equations reads states through a layout (``HORIZONTAL.position``,
+``HORIZONTAL.index("psi")``) rather than by number, so that a model with another state
+order is one new layout, not edits wherever a number was written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DEPTH", "HORIZONTAL", "StateLayout"]
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Names of a model's state entries, in order (units and frames: the model's module)."""
+
+    names: tuple[str, ...]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        """Where ``name`` sits; a ValueError naming the known names if it does not."""
+        if name not in self.names:
+            raise ValueError(f"no state {name!r} in {self.names}")
+        return self.names.index(name)
+
+    def span(self, first: str, last: str) -> slice:
+        """The entries ``first`` .. ``last`` (inclusive) as a slice (a view, not a copy)."""
+        return slice(self.index(first), self.index(last) + 1)
+
+    @property
+    def position(self) -> slice:
+        """World x, y (m)."""
+        return self.span("x", "y")
+
+    @property
+    def heading(self) -> int:
+        """psi (rad), continuous."""
+        return self.index("psi")
+
+    @property
+    def body_velocity(self) -> slice:
+        """Surge and sway u, v (m/s)."""
+        return self.span("u", "v")
+
+    def vector(self, values: Any) -> np.ndarray:
+        """A per-state vector from a sequence in state order or a mapping by state name
+        (names left out are 0)."""
+        if isinstance(values, dict):
+            unknown = set(values) - set(self.names)
+            if unknown:
+                raise ValueError(f"unknown state names {sorted(unknown)}; known: {self.names}")
+            return np.array([float(values.get(name, 0.0)) for name in self.names])
+        vector = np.asarray(values, dtype=float)
+        if vector.shape != (self.size,):
+            raise ValueError(f"need {self.size} values ({self.names}), got shape {vector.shape}")
+        return vector
+
+
+# The 3-DOF horizontal model (models/vehicle.py): world x, y (m), heading psi (rad), body surge
+# u, sway v (m/s), yaw rate r (rad/s).
+HORIZONTAL = StateLayout(names=("x", "y", "psi", "u", "v", "r"))
+# The 1-DOF heave model (models/heave.py): depth z (m, up, negative below the surface), heave
+# rate w (m/s, up).
+DEPTH = StateLayout(names=("z", "w"))
