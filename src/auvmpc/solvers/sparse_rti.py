@@ -222,7 +222,12 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
 
     # Dynamics: dX_{k+1} = A dX_k + B (dp_k + w_k) + gap, dp_{k+1} = dp_k + w_k + (F_k - P_{k+1}).
     successor = program.step(X, F, force)
-    A_x, B_x = ca.jacobian(successor, X), ca.jacobian(successor, F)
+    # Both Jacobians from one reverse sweep per successor component (6), where ca.jacobian
+    # takes forward mode, one sweep per input (6 + n): with 7 RK4 substeps (BlueROV2 Heavy)
+    # the successor and its Jacobians take 16 331 SX operations against 19 425, and the whole
+    # stage 15 521 against 19 935 with its common subexpressions merged (cse below).
+    transposed = ca.jtimes(successor, ca.vertcat(X, F), ca.SX.eye(NX), True)  # (NX + n, NX)
+    A_x, B_x = transposed[:NX, :].T, transposed[NX:, :].T
     A = ca.SX(nz, nz)
     A[:NX, :NX] = A_x
     A[:NX, NX:] = B_x
@@ -267,6 +272,7 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         [ca.densify(ca.SX(e)) for e in outputs],
         "X X_next P P_next F ref W d_world slots used movable step".split(),
         "A B b Q S R q r C D lg ug lbu ubu lbp_next ubp_next".split(),
+        {"cse": True},
     )
     terminal_weight = ocp.terminal_weight
     Q_N = ca.SX(nz, nz)

@@ -10,6 +10,7 @@
  */
 #include "auvmpc_controller.h"
 
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -157,12 +158,47 @@ static void jacobi_eigen(double a[NA][NA], double *values, double v[NA][NA]) {
     for (int i = 0; i < NA; ++i) values[i] = a[i][i];
 }
 
+/* Whether every eigenvalue of the symmetric a lies in [floor, ceiling], proved without them:
+ * Gershgorin's discs for the ceiling, and for the floor a Cholesky factorisation of
+ * a - (floor + margin) I, margin = NA^3 eps max|a_ij| covering the factorisation's
+ * round-off (its backward error, Higham 2002, Thm. 10.3). 0 when unproved, not when false:
+ * the eigenvalues then decide (a few thousand instructions here against about 57 000 for
+ * one Jacobi eigen-decomposition, callgrind). */
+static int eigenvalues_inside(double a[NA][NA]) {
+    double largest = 0.0, l[NA][NA];
+    for (int i = 0; i < NA; ++i) {
+        double radius = 0.0;
+        for (int j = 0; j < NA; ++j) {
+            radius += fabs(a[i][j]);
+            largest = fmax(largest, fabs(a[i][j]));
+        }
+        if (!(radius <= AUVMPC_COVARIANCE_CEILING)) return 0; /* a[i][i] + off-diagonal sum */
+    }
+    double shift = AUVMPC_COVARIANCE_FLOOR + NA * NA * NA * DBL_EPSILON * largest;
+    for (int j = 0; j < NA; ++j) {
+        double d = a[j][j] - shift;
+        for (int k = 0; k < j; ++k) d -= l[j][k] * l[j][k];
+        if (!(d > 0.0)) return 0;
+        l[j][j] = sqrt(d);
+        for (int i = j + 1; i < NA; ++i) {
+            double e = a[i][j];
+            for (int k = 0; k < j; ++k) e -= l[i][k] * l[j][k];
+            l[i][j] = e / l[j][j];
+        }
+    }
+    return 1;
+}
+
 /* The symmetric part of m with its eigenvalues clipped to [floor, ceiling], rebuilt only
  * when a bound is crossed (estimation.py, condition_covariance); into c.covariance. */
 static void condition_covariance(double m[NA][NA]) {
     double symmetric[NA][NA], work[NA][NA], vectors[NA][NA], values[NA];
     for (int i = 0; i < NA; ++i)
         for (int j = 0; j < NA; ++j) symmetric[i][j] = 0.5 * (m[i][j] + m[j][i]);
+    if (eigenvalues_inside(symmetric)) { /* the usual case: the eigenvalues are not needed */
+        memcpy(c.covariance, symmetric, sizeof symmetric);
+        return;
+    }
     memcpy(work, symmetric, sizeof work);
     jacobi_eigen(work, values, NULL);
     double low = values[0], high = values[0];
