@@ -7,8 +7,9 @@ import shutil
 
 import pytest
 
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.run import simulate, write_run
+from auvmpc.export.blasfeo_target import missing_features, required_features
 from auvmpc.export.c_library import export_c, verify_c
 from auvmpc.native import compiler
 from auvmpc.scenario import load_scenario
@@ -100,3 +101,82 @@ def test_verify_refuses_a_run_of_another_controller(tmp_path):
         verify_c(tmp_path / "export", tmp_path / "run")
     record = json.loads((tmp_path / "export" / "export.json").read_text())
     assert record["controller"]["control_horizon"] is None
+
+
+def _blasfeo_folder(tmp_path, features: tuple[str, ...], library: bytes | None = None):
+    """A folder standing in for a BLASFEO built for some CPU: the casadi wheel's own library
+    (or ``library``'s bytes) as libblasfeo.so, and a blasfeo_target.h needing ``features``."""
+    folder = tmp_path / "blasfeo"
+    folder.mkdir()
+    _, wheel_libraries = _casadi_hpipm()
+    target = folder / "libblasfeo.so"
+    if library is None:
+        shutil.copyfile(next(wheel_libraries.glob("libblasfeo.so*")), target)
+    else:
+        target.write_bytes(library)
+    (folder / "blasfeo_target.h").write_text(
+        "".join(
+            f"#ifndef TARGET_NEED_FEATURE_{f}\n#define TARGET_NEED_FEATURE_{f} 1\n#endif\n"
+            for f in features
+        )  # fmt: skip
+    )
+    return folder
+
+
+@needs_cc
+def test_export_links_the_blasfeo_it_is_given(tmp_path):
+    """--blasfeo DIR: the export links DIR's libblasfeo.so under the wheel's HPIPM (here a copy
+    of the wheel's own, so the commands are the same to the bound), and records it; a file
+    there that is no library makes the build fail, which shows it is the one linked."""
+    resolved, run_dir = _run(tmp_path, "paper-obstacles", _FREE)
+    folder = _blasfeo_folder(tmp_path, ())
+    export_c(resolved, tmp_path / "export", blasfeo=folder)
+    record = json.loads((tmp_path / "export" / "export.json").read_text())
+    assert record["blasfeo"] == str(folder.resolve())
+    assert f"BLASFEO_DIR ?= {folder.resolve()}" in (tmp_path / "export" / "Makefile").read_text()
+    result = verify_c(tmp_path / "export", run_dir)
+    assert result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
+    (folder / "libblasfeo.so").write_bytes(b"not a shared library")
+    with pytest.raises(RunFailed, match="did not build"):
+        verify_c(tmp_path / "export", run_dir)
+
+
+@needs_cc
+def test_verify_refuses_a_blasfeo_built_for_features_this_cpu_lacks(tmp_path):
+    resolved, run_dir = _run(tmp_path, "paper-ideal", _FREE)
+    folder = _blasfeo_folder(tmp_path, ("NO_SUCH_FEATURE",))
+    export_c(resolved, tmp_path / "export", blasfeo=folder)
+    with pytest.raises(ConfigError, match="lacks \\(NO_SUCH_FEATURE\\).*illegal instruction"):
+        verify_c(tmp_path / "export", run_dir)
+
+
+def test_a_blasfeo_folder_without_the_library_is_refused_in_one_line(tmp_path, monkeypatch,
+                                                                      capsys):  # fmt: skip
+    out = tmp_path / "export"
+    code, _, err = run_cli(
+        monkeypatch,
+        capsys,
+        "export-c",
+        "paper-ideal",
+        "--blasfeo",
+        str(tmp_path),
+        "--out",
+        str(out),
+    )
+    assert code == 2
+    assert err.strip() == f"error: --blasfeo: no libblasfeo.so in that folder (got '{tmp_path}')"
+    assert not out.exists()
+
+
+def test_cpu_features_are_read_from_cpuinfo(tmp_path):
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nflags\t\t: fpu sse2 pni avx avx2 fma\n")
+    assert missing_features(("SSE3", "AVX", "AVX2", "FMA"), cpuinfo) == []
+    assert missing_features(("AVX2", "AVX512F", "NEON"), cpuinfo) == ["AVX512F", "NEON"]
+    arm = tmp_path / "arm"
+    arm.write_text("Features\t: fp asimd evtstrm aes\n")
+    assert missing_features(("NEON", "NEONv2", "FMA"), arm) == ["FMA"]
+    assert missing_features(("AVX2",), tmp_path / "absent") == ["AVX2"]
+    header = tmp_path / "blasfeo_target.h"
+    header.write_text("#define TARGET_NEED_FEATURE_AVX2 1\n/* #undef TARGET_NEED_FEATURE_SSE3 */\n")
+    assert required_features(tmp_path) == ("AVX2",)

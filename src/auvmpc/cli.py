@@ -516,13 +516,22 @@ def export_c(
         typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
     ] = None,
     overwrite: Overwrite = False,
+    blasfeo: Annotated[
+        Path | None,
+        typer.Option(
+            "--blasfeo",
+            help="folder with a libblasfeo.so built for the target CPU, linked under HPIPM "
+            "instead of the casadi wheel's portable one (docs/onboard.md)",
+        ),
+    ] = None,
 ) -> None:
     """Write the scenario's real-time controller (nmpc, every move free) as a C99 library."""
     from auvmpc.export.c_library import export_c as write_export
     from auvmpc.scenario import load_scenario
 
     resolved = load_scenario(scenario, set_ or [])
-    console.print(f"wrote {write_export(resolved, out, overwrite=overwrite)}")
+    written = write_export(resolved, out, overwrite=overwrite, blasfeo=blasfeo)
+    console.print(f"wrote {written}")
 
 
 @app.command("verify-c")

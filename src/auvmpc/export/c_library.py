@@ -38,6 +38,12 @@ from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.estimation import covariance_bounds
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
+from auvmpc.export.blasfeo_target import (
+    LIBRARY,
+    blasfeo_folder,
+    missing_features,
+    required_features,
+)
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.native import compiler
 from auvmpc.references import make_reference
@@ -279,10 +285,17 @@ def _row(values) -> str:
     return " ".join(f"{float(v):.17g}" for v in np.ravel(values))
 
 
-def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
+def export_c(
+    resolved, out: Path | str, *, overwrite: bool = False, blasfeo: Path | str | None = None
+) -> Path:
     """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
-    rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it."""
+    rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it.
+
+    ``blasfeo``: a folder with a ``libblasfeo.so`` built for the target CPU, linked under
+    the casadi wheel's HPIPM instead of the wheel's portable one (export/blasfeo_target.py).
+    """
     config, slots = _check_supported(resolved)
+    tuned = None if blasfeo is None else blasfeo_folder(blasfeo)
     check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     hpipm = _casadi_hpipm()
     if hpipm is None:
@@ -308,6 +321,7 @@ def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
         makefile = (_TEMPLATES / "Makefile.in").read_text()
         makefile = makefile.replace("@CASADI_DIR@", str(libraries))
         makefile = makefile.replace("@CASADI_VERSION@", ca.__version__)
+        makefile = makefile.replace("@BLASFEO_DIR@", str(tuned or libraries))
         arena = _arena_bytes(qp, program, config)
         makefile = makefile.replace(
             "@ARENA_DEFINE@", "" if arena is None else f"-DAUVMPC_ARENA_BYTES={arena}"
@@ -321,6 +335,8 @@ def export_c(resolved, out: Path | str, *, overwrite: bool = False) -> Path:
             "casadi": ca.__version__,
             "hpipm_include": str(include),
             "hpipm_libraries": str(libraries),
+            "blasfeo": None if tuned is None else str(tuned),
+            "blasfeo_features": [] if tuned is None else list(required_features(tuned)),
             "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
             "hpipm_arena_bytes": arena,
         }
@@ -376,6 +392,18 @@ def _check_run(export: Path, run_dir: Path) -> None:
         raise ConfigError("RUN_DIR", str(run_dir), "its vehicle model is not the exported one")
 
 
+def _check_blasfeo(export: Path) -> None:
+    """Refuse to replay an export whose BLASFEO needs CPU features this machine lacks."""
+    record = json.loads((export / _RECORD).read_text())
+    missing = missing_features(tuple(record.get("blasfeo_features") or ()))
+    if missing:
+        raise ConfigError(
+            "DIR", str(export),
+            f"links {record['blasfeo']}/{LIBRARY}, built for CPU features this machine lacks "
+            f"({', '.join(missing)}): its replay would stop on an illegal instruction",
+        )  # fmt: skip
+
+
 def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     """Build ``export`` with the system C compiler (in a temporary folder), replay
     ``run_dir``'s log.csv through it and compare its commands with the logged ones."""
@@ -385,6 +413,7 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     if not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs log.csv)")
     _check_run(export, run_dir)
+    _check_blasfeo(export)
     cc = compiler()
     if cc is None or shutil.which("make") is None:
         raise ConfigError("DIR", str(export), "needs a C compiler and make on the PATH")

@@ -1,0 +1,60 @@
+"""Fetch a BLASFEO built for x86-64 with AVX2 and FMA (BLASFEO's X64_INTEL_HASWELL target),
+for ``auvmpc export-c --blasfeo DIR`` on this kind of machine.
+
+The casadi wheel's BLASFEO is the portable GENERIC build. PyPI's ``comma-deps-acados``
+wheel ships a BLASFEO built for X64_INTEL_HASWELL with its headers; this script downloads
+that wheel (a pinned version, from the package registry, not installed: it also carries a
+casadi of its own that must not replace auvmpc's) and unpacks only ``libblasfeo.so`` and
+``blasfeo_target.h`` into DIR. Run it once; nothing is fetched at run time.
+
+    python benchmarks/blasfeo_haswell.py --out .venv/blasfeo-x64-haswell
+    auvmpc export-c paper-obstacles --blasfeo .venv/blasfeo-x64-haswell --out X
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+WHEEL = "comma-deps-acados==0.2.2.post92"  # its BLASFEO: TARGET_X64_INTEL_HASWELL
+MEMBERS = {
+    "acados/install/lib/libblasfeo.so": "libblasfeo.so",
+    "acados/install/include/blasfeo/include/blasfeo_target.h": "blasfeo_target.h",
+}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True, help="folder to unpack into")
+    out = parser.parse_args().out
+    if out.exists() and any(out.iterdir()):
+        print(f"error: --out: {out} is not empty", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory() as scratch:
+        subprocess.run(
+            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+             "--only-binary", ":all:", "--platform", "manylinux_2_28_x86_64", "-d", scratch,
+             WHEEL],
+            check=True,
+        )  # fmt: skip
+        (wheel,) = Path(scratch).glob("*.whl")
+        out.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(wheel) as archive:
+            for name in archive.namelist():
+                for suffix, target in MEMBERS.items():
+                    if name.endswith(suffix):
+                        (out / target).write_bytes(archive.read(name))
+    missing = [target for target in MEMBERS.values() if not (out / target).is_file()]
+    if missing:
+        print(f"error: {WHEEL} no longer holds {missing}", file=sys.stderr)
+        return 1
+    print(f"wrote {out}: {', '.join(MEMBERS.values())}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
