@@ -118,10 +118,7 @@ class SimLog:
     @classmethod
     def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> SimLog:
         """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
-        with open(path, newline="") as handle:
-            rows = list(csv.DictReader(handle))
-        if not rows:
-            raise ValueError(f"{path}: empty log")
+        rows = _csv_rows(path)
         thrust_names = sorted(
             (name for name in rows[0] if name[0] == "F" and name[1:].isdigit()),
             key=lambda name: int(name[1:]),
@@ -199,10 +196,7 @@ class DepthLog(SimLog):
     @classmethod
     def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> DepthLog:
         """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
-        with open(path, newline="") as handle:
-            rows = list(csv.DictReader(handle))
-        if not rows:
-            raise ValueError(f"{path}: empty log")
+        rows = _csv_rows(path)
         thrusters = sorted((c for c in rows[0] if c.startswith("Fz")), key=lambda c: int(c[2:]))
         steps = len(rows) - 1
         sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
@@ -228,3 +222,12 @@ _DEPTH = DEPTH.index("z")
 def _num(value: float) -> str:
     """Shortest text that reads back to the same float."""
     return repr(float(value))
+
+
+def _csv_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of a log.csv by column name; an empty log is an error naming the file."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows:
+        raise ValueError(f"{path}: empty log")
+    return rows
