@@ -109,9 +109,6 @@ class SixDofRunResult(RunResult):
     resolved: ResolvedSixDofScenario
     log: SixDofLog
 
-    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
-        draw_figures(self.log, self.scenario, self.resolved.model, folder, fmt, dpi)
-
 
 @dataclass
 class DepthRunResult(_Finished):
