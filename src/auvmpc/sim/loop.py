@@ -103,8 +103,9 @@ def closed_loop(
     preview_offsets = sample_time * np.arange(controller.preview_steps + 1)
     for k in range(steps + 1):
         t = log.t[k]
+        preview = reference.states(t + preview_offsets)  # its first row is the reference at t
         log.state[k] = state
-        log.reference[k] = reference.state(t)
+        log.reference[k] = preview[0]
         log.disturbance_world[k] = plant.external_force(t, state)
         if position is not None:
             log.clearance_m[k] = clearance(state[position], t, obstacles, vehicle_radius)
@@ -116,7 +117,7 @@ def closed_loop(
             k=k,
             t=t,
             state=measured,
-            reference=reference.states(t + preview_offsets),
+            reference=preview,
             obstacles=visible_obstacles(obstacles, t)
             if perception is None
             else perception.observe(t, state[position]),
