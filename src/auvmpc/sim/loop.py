@@ -13,7 +13,7 @@ from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.references import Reference
-from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
 from auvmpc.sim.plant import PlantStepper, plant_step
 from auvmpc.vehicle import VehicleParams
 
@@ -94,6 +94,7 @@ def closed_loop(
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
+        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
         state = plant_sample(state, thrust, t, disturbance)
         disturbance.advance()
         if on_step is not None:

@@ -108,6 +108,7 @@ def compute_metrics(
         "solve_ms_p99": _percentile(solve, 99),
         "solve_ms_max": float(solve.max()) if len(solve) else 0.0,
         "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+        **tightening_metrics(log),
         "solver_failures": int(fallback.sum()),
         "fallback_steps": int(fallback.sum()),
         "relaxed_steps": int(relaxed_steps),
@@ -225,6 +226,7 @@ def compute_six_dof_metrics(
             if log.steps
             else 0.0,
             "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
+        **tightening_metrics(log),
             "saturated_thrust_commands": int(log.saturated.sum()),
             "rms_depth_error_m": _rms(depth_error),
             "max_depth_error_m": float(np.abs(depth_error).max()),
@@ -256,3 +258,17 @@ def compute_six_dof_metrics(
     elif trouble:
         metrics["verdict_reason"] = "; ".join([str(metrics["verdict_reason"]), *trouble])
     return metrics
+
+
+def tightening_metrics(log: SimLog) -> dict[str, float]:
+    """What the robust tightening (ocp/tightening.py) took, all zero for a nominal controller:
+    the largest and the mean (over the samples with obstacle rows) obstacle back-off, and the
+    largest and mean fraction of a thruster's range given up."""
+    obstacle, thrust = log.backoff[:, 0], log.backoff[:, 1]
+    with_rows = obstacle[obstacle > 0.0]
+    return {
+        "max_obstacle_backoff_m": float(obstacle.max(initial=0.0)),
+        "mean_obstacle_backoff_m": float(with_rows.mean()) if len(with_rows) else 0.0,
+        "max_thrust_backoff_fraction": float(thrust.max(initial=0.0)),
+        "mean_thrust_backoff_fraction": float(thrust.mean()) if len(thrust) else 0.0,
+    }

@@ -36,7 +36,7 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import clearance, visible_obstacles
 from auvmpc.models.six_dof import check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.references import Reference
-from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
 from auvmpc.sim.loop import timed_command
 from auvmpc.vehicle import VehicleParams
 
@@ -307,6 +307,7 @@ def closed_loop_six_dof(
         log.status[k] = str(result.status)
         log.depth_status[k] = str(depth_result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
+        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
         if profile:
             state = integrate(
                 model,
