@@ -127,7 +127,8 @@ def test_thrust_backoff_is_capped_and_the_box_stays_feasible():
     # Reachable: moving at the rate limit from the previous command meets every step's box.
     for n in range(len(A)):
         reach = (n + 1) * max_move
-        assert np.all(np.maximum(lower[n], previous - reach) <= np.minimum(upper[n], previous + reach))
+        lowest, highest = previous - reach, previous + reach
+        assert np.all(np.maximum(lower[n], lowest) <= np.minimum(upper[n], highest))
 
 
 # -- the controller --------------------------------------------------------------------------

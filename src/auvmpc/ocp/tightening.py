@@ -11,7 +11,8 @@ With an ancillary feedback u_n = u_plan_n + K_n e_n on the deviation e_n of the 
 the plan, the deviation follows the linearisation the plan was solved on:
 
     e_{n+1} = (A_n + B_n K_n) e_n + G_n w_n,    e_0 = 0,   w_n in W
-    e_n = sum_{j<n} Phi(n, j+1) G_j w_j,        Phi(n, j) = (A_{n-1} + B_{n-1} K_{n-1}) ... (A_j + B_j K_j)
+    e_n = sum_{j<n} Phi(n, j+1) G_j w_j,
+    Phi(n, j) = (A_{n-1} + B_{n-1} K_{n-1}) ... (A_j + B_j K_j)
 
 and its largest component in a direction c (the support function of its reachable set) is
 

@@ -101,11 +101,7 @@ class SimLog:
                         if applied
                         else [""] * len(ESTIMATE_NAMES)
                     ),
-                    *(
-                        (_num(v) for v in self.backoff[k])
-                        if applied
-                        else [""] * len(BACKOFF_NAMES)
-                    ),
+                    *((_num(v) for v in self.backoff[k]) if applied else [""] * len(BACKOFF_NAMES)),
                 ]
             )
         return buffer.getvalue()

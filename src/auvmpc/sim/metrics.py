@@ -226,7 +226,6 @@ def compute_six_dof_metrics(
             if log.steps
             else 0.0,
             "thrust_effort_N2s": float(np.sum(log.thrust**2) * log.sample_time),
-        **tightening_metrics(log),
             "saturated_thrust_commands": int(log.saturated.sum()),
             "rms_depth_error_m": _rms(depth_error),
             "max_depth_error_m": float(np.abs(depth_error).max()),
