@@ -15,10 +15,10 @@ from auvmpc.api import load_scenario
 from auvmpc.controllers.config import DisturbanceBound
 from auvmpc.errors import ConfigError
 from auvmpc.ocp.tightening import (
+    OBSTACLE_BACKOFF_LIMIT_M,
     THRUST_BACKOFF_LIMIT,
     Tightening,
     error_responses,
-    rotated_gains,
     tightened_box,
 )
 from auvmpc.runner import simulate
@@ -66,13 +66,15 @@ def test_backoff_is_attained_by_the_extremal_disturbance_and_bounds_every_other(
     rng = np.random.default_rng(14)
     A, B, G, gain = _random_problem(rng)
     ny, nx = A.shape[0], A.shape[1]
-    headings = rng.uniform(-np.pi, np.pi, ny)
+    nominal = np.zeros((ny, nx))
+    nominal[:, 2] = rng.uniform(-np.pi, np.pi, ny)  # headings
     force, moment = 3.0, 0.5
-    tightening = Tightening(force, moment, gain, np.full(4, 1e6))  # no cap in play
-    direction = rng.standard_normal(nx)
+    tightening = Tightening(force, moment, [0.0], gain[None], np.full(4, 1e6))  # no cap
+    direction = 0.1 * rng.standard_normal(nx)  # inside the obstacle cap
     step = ny - 1
-    backoffs = tightening.backoffs(A, B, G, headings, np.array([step]), direction[None])
-    K = rotated_gains(gain, headings)
+    backoffs = tightening.backoffs(A, B, G, nominal, np.array([step]), direction[None])
+    assert backoffs.rows[0] < OBSTACLE_BACKOFF_LIMIT_M
+    K = tightening.feedback(nominal)
     M = error_responses(A, B, G, K)
     # The extremal sequence: each w_j aligned with a' M[n, :, j] within W.
     weights = np.einsum("k,kjw->jw", direction, M[step])  # (ny, 3)
@@ -93,16 +95,16 @@ def test_backoff_is_attained_by_the_extremal_disturbance_and_bounds_every_other(
 
 def test_backoff_grows_linearly_without_feedback_on_a_pure_integrator():
     # e_{n+1} = e_n + g w_n on x only: the back-off at step n is n g w_F exactly.
-    ny, g, force = 6, 0.25, 4.0
+    ny, g, force = 6, 0.05, 4.0  # 1.2 m at the last step: inside the cap
     A = np.repeat(np.eye(6)[None], ny, axis=0)
     B = np.zeros((ny, 6, 4))
     G = np.zeros((ny, 6, 3))
     G[:, 0, 0] = g
-    tightening = Tightening(force, 0.0, np.zeros((4, 6)), np.full(4, 15.0))
+    tightening = Tightening(force, 0.0, [0.0], np.zeros((1, 4, 6)), np.full(4, 15.0))
     direction = np.zeros((ny, 6))
     direction[:, 0] = 1.0
     steps = np.arange(1, ny + 1)
-    backoffs = tightening.backoffs(A, B, G, np.zeros(ny), steps, direction)
+    backoffs = tightening.backoffs(A, B, G, np.zeros((ny, 6)), steps, direction)
     np.testing.assert_allclose(backoffs.rows, steps * g * force, atol=SUPPORT_ROUND_OFF_TOL)
     np.testing.assert_array_equal(backoffs.thrust, 0.0)  # no feedback, no thrust taken
 
@@ -111,9 +113,10 @@ def test_thrust_backoff_is_capped_and_the_box_stays_feasible():
     rng = np.random.default_rng(3)
     A, B, G, gain = _random_problem(rng)
     half_range = np.full(4, 15.0)
-    tightening = Tightening(1e4, 1e3, gain, half_range)  # far beyond what the thrust can hold
+    # Far beyond what the thrust can hold.
+    tightening = Tightening(1e4, 1e3, [0.0], gain[None], half_range)
     backoffs = tightening.backoffs(
-        A, B, G, np.zeros(len(A)), np.zeros(0, dtype=int), np.zeros((0, 6))
+        A, B, G, np.zeros((len(A), 6)), np.zeros(0, dtype=int), np.zeros((0, 6))
     )
     assert np.all(backoffs.thrust <= THRUST_BACKOFF_LIMIT * half_range + 1e-12)
     np.testing.assert_array_equal(backoffs.thrust[0], 0.0)  # u_0 is applied before any error
@@ -144,9 +147,8 @@ def _forced_zero_tightening(monkeypatch):
         bounded = scenario.controller.model_copy(
             update={"disturbance_bound": DisturbanceBound(force_N=1.0, moment_Nm=1.0)}
         )
-        gain = robust_tightening(model, bounded.for_vehicle(model))
-        gain_only = Tightening(0.0, 0.0, gain.gain, gain.half_range)
-        controller.tightening = gain_only
+        gains = robust_tightening(model, bounded.for_vehicle(model))
+        controller.tightening = Tightening(0.0, 0.0, gains.speeds, gains.gains, gains.half_range)
         return controller
 
     monkeypatch.setattr(auvmpc.runner, "make_controller", make)

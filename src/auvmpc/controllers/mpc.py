@@ -32,9 +32,9 @@ from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.ocp.tightening import Tightening, tightened_box, tube_gain
+from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
-from auvmpc.vehicle import VehicleParams, body_from_world
+from auvmpc.vehicle import VehicleParams, body_from_world, steady_speed
 
 __all__ = [
     "AffinePrediction",
@@ -120,7 +120,7 @@ class LinearMpc(IncrementalMpc):
             prediction.A,
             prediction.B,
             prediction.G,
-            nominal[:-1, 2],
+            nominal[:-1],
             soft.steps,
             soft.coefficients,
         )
@@ -202,7 +202,8 @@ class LinearMpc(IncrementalMpc):
 
 def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tightening | None:
     """The back-offs for ``config.disturbance_bound``, or None for a zero bound (the nominal
-    controller). The ancillary gain is the LQR gain of the model linearised at rest."""
+    controller). The ancillary gains: LQR gains of the model linearised in straight motion
+    at heading 0, from its top reverse to its top forward speed (ocp/tightening.py)."""
     bound = config.disturbance_bound
     if bound.is_zero:
         return None
@@ -214,10 +215,21 @@ def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tighten
             "actuation (leave the bound zero)",
         )
     sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
-    _, A, B = sampled.linearised_step(np.zeros(NX), np.zeros(model.n_thrusters), np.zeros(3))
     half_range = np.broadcast_to((model.thrust_max - model.thrust_min) / 2.0, model.n_thrusters)
-    gain = tube_gain(np.asarray(A), np.asarray(B), half_range)
-    return Tightening(bound.total_force_N, bound.moment_Nm, gain, half_range)
+    surge = model.T[0]
+    forward = float(np.maximum(surge * model.thrust_max, surge * model.thrust_min).sum())
+    reverse = float(-np.minimum(surge * model.thrust_max, surge * model.thrust_min).sum())
+    top = [steady_speed(model.Xu, model.Xuu, force) for force in (reverse, forward)]
+    speeds = np.arange(-top[0], top[1] + GAIN_SPEED_STEP, GAIN_SPEED_STEP)
+    allocation = np.linalg.pinv(model.T)
+    gains = []
+    for speed in speeds:
+        at = np.array([0.0, 0.0, 0.0, speed, 0.0, 0.0])
+        drag = -(model.Xu * speed + model.Xuu * speed * abs(speed))
+        holding = allocation @ np.array([drag, 0.0, 0.0])  # the thrust that keeps the speed
+        _, A, B = sampled.linearised_step(at, holding, np.zeros(3))
+        gains.append(tube_gain(np.asarray(A), np.asarray(B), half_range))
+    return Tightening(bound.total_force_N, bound.moment_Nm, speeds, np.array(gains), half_range)
 
 
 def _clamp_towards(vectors: np.ndarray, side: np.ndarray, max_angle: float) -> np.ndarray:

@@ -25,9 +25,12 @@ side of every constraint of the linearised problem. The back-offs are computed f
 Jacobians the step already has and enter the QP as changed bounds: its structure is the
 nominal one. docs/tightening.md states the assumptions and what is not guaranteed.
 
-K_n is one LQR gain of the vehicle's linearisation at rest (heading 0), rotated to the plan's
-heading at step n: the model is the same at every heading (the world frame only rotates the
-position), so the gain rotated is the gain of the rotated model.
+K_n is the LQR gain of the vehicle's linearisation in straight motion at the plan's surge
+speed at step n (a table over speeds, computed once), rotated to the plan's heading: the model
+is the same at every heading (the world frame only rotates the position), so the gain rotated
+is the gain of the rotated model. One gain at rest is not enough: moving, the heading steers
+the position, and the gain at rest left the loop at 0.6 m/s with a spectral radius of 0.98
+(0.60 with its own gain; jmse2210), which made the back-offs metres wide.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import scipy.linalg
 
 __all__ = [
     "Backoffs",
+    "OBSTACLE_BACKOFF_LIMIT_M",
     "THRUST_BACKOFF_LIMIT",
     "Tightening",
     "error_responses",
@@ -54,6 +58,11 @@ _TUBE_STATE_SCALE = np.array([0.25, 0.25, 0.2, 0.25, 0.25, 0.2])
 # Thrust back-offs are capped at this fraction of the half range, so the tightened box never
 # closes (a bound that would need more is reported by max_thrust_backoff_fraction reaching it).
 THRUST_BACKOFF_LIMIT = 0.5
+# Obstacle back-offs are capped at this (m): a wider tube means the linearisation it is
+# propagated on has diverged (the nominal step falls back there too), not a real deviation.
+OBSTACLE_BACKOFF_LIMIT_M = 2.0
+# Surge speeds of the gain table (m/s): this step, from the top reverse to the top forward speed.
+GAIN_SPEED_STEP = 0.1
 
 
 @dataclass(frozen=True)
@@ -73,17 +82,16 @@ def tube_gain(A: np.ndarray, B: np.ndarray, half_range: np.ndarray) -> np.ndarra
     return -np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
 
 
-def rotated_gains(gain: np.ndarray, headings: np.ndarray) -> np.ndarray:
-    """(n, nu, nx): ``gain`` (of the model at heading 0) acting on errors at each heading.
-
-    K(psi) e = K [R(psi)' e_p; e_psi; e_nu]: the position error is seen in the body frame.
+def rotated_gains(gains: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """(n, nu, nx): ``gains`` (n, nu, nx) of the model at heading 0 acting on errors at each
+    heading: K(psi) e = K [R(psi)' e_p; e_psi; e_nu], the position error seen in the body frame.
     """
-    cos, sin = np.cos(headings), np.sin(headings)
-    gains = np.repeat(gain[None], len(headings), axis=0)
-    kx, ky = gain[:, 0], gain[:, 1]
-    gains[:, :, 0] = cos[:, None] * kx - sin[:, None] * ky
-    gains[:, :, 1] = sin[:, None] * kx + cos[:, None] * ky
-    return gains
+    cos, sin = np.cos(headings)[:, None], np.sin(headings)[:, None]
+    rotated = gains.copy()
+    kx, ky = gains[:, :, 0], gains[:, :, 1]
+    rotated[:, :, 0] = cos * kx - sin * ky
+    rotated[:, :, 1] = sin * kx + cos * ky
+    return rotated
 
 
 def error_responses(A: np.ndarray, B: np.ndarray, G: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -103,17 +111,30 @@ def error_responses(A: np.ndarray, B: np.ndarray, G: np.ndarray, K: np.ndarray) 
 class Tightening:
     """The back-offs of one controller's constraints for a disturbance set W (module doc).
 
-    ``force`` w_F (N), ``moment`` w_M (N m); ``gain`` the ancillary K at heading 0 (nu, nx),
+    ``force`` w_F (N), ``moment`` w_M (N m); ``gains`` (s, nu, nx) the ancillary K at heading
+    0 for each surge speed of ``speeds`` (s,) (m/s, increasing; one speed: one gain for all),
     ``half_range`` (nu,) half of each input's force range (N).
     """
 
     def __init__(
-        self, force: float, moment: float, gain: np.ndarray, half_range: np.ndarray
+        self,
+        force: float,
+        moment: float,
+        speeds: np.ndarray,
+        gains: np.ndarray,
+        half_range: np.ndarray,
     ) -> None:
         self.force = float(force)
         self.moment = float(moment)
-        self.gain = np.asarray(gain, dtype=float)
+        self.speeds = np.asarray(speeds, dtype=float)
+        self.gains = np.asarray(gains, dtype=float)
         self.half_range = np.asarray(half_range, dtype=float)
+
+    def feedback(self, nominal: np.ndarray) -> np.ndarray:
+        """K_n (n, nu, nx) along nominal states (n, 6) [x y psi u v r]: the gain of the
+        nearest tabled surge speed, rotated to the heading."""
+        nearest = np.abs(nominal[:, 3, None] - self.speeds[None, :]).argmin(axis=1)
+        return rotated_gains(self.gains[nearest], nominal[:, 2])
 
     def support(self, directions: np.ndarray) -> np.ndarray:
         """h_W of the last axis (X, Y, N) of ``directions``, summed over the axis before it."""
@@ -125,19 +146,20 @@ class Tightening:
         A: np.ndarray,
         B: np.ndarray,
         G: np.ndarray,
-        headings: np.ndarray,
+        nominal: np.ndarray,
         row_steps: np.ndarray,
         row_coefficients: np.ndarray,
     ) -> Backoffs:
         """Back-offs along one linearisation: A (ny, nx, nx), B (ny, nx, nu), G (ny, nx, 3)
-        (world force and moment), the plan's heading at steps 0..ny-1, and the soft rows
-        ``row_coefficients[r] . x_{row_steps[r]} >= b_r`` (steps in 1..ny)."""
-        K = rotated_gains(self.gain, headings)
+        (world force and moment), the plan's states at steps 0..ny-1 (ny, nx), and the soft
+        rows ``row_coefficients[r] . x_{row_steps[r]} >= b_r`` (steps in 1..ny)."""
+        K = self.feedback(nominal)
         M = error_responses(A, B, G, K)  # (ny + 1, nx, ny, 3)
         # Soft rows: sum_j h_W(G_j' Phi' a) = sum_j h_W(a' M[n, :, j]).
         rows = self.support(np.einsum("rk,rkjw->rjw", row_coefficients, M[row_steps]))
+        np.minimum(rows, OBSTACLE_BACKOFF_LIMIT_M, out=rows)
         # Thrust at step n (n = 1..ny-1; u_0 is applied before any deviation): K_n e_n.
-        ny, nx = len(headings), A.shape[1]
+        ny, nx = len(nominal), A.shape[1]
         thrust = np.zeros((ny, len(self.half_range)))
         responses = M[1:-1].reshape(ny - 1, nx, -1)
         feedback = np.matmul(K[1:], responses).reshape(ny - 1, -1, ny, M.shape[-1])
