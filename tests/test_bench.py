@@ -233,6 +233,22 @@ def test_every_controller_type_is_a_valid_label():
         assert resolve_controller(label).overrides == overrides
 
 
+def test_a_label_carries_its_own_overrides():
+    label = "ltv-mpc-nc30@controller.disturbance_bound.force_N=10"
+    case = resolve_controller(label)
+    assert case.controller == label
+    assert case.overrides == (
+        *CONTROLLER_PRESETS["ltv-mpc-nc30"],
+        "controller.disturbance_bound.force_N=10",
+    )
+    config = load_scenario("paper-ideal", case.overrides).scenario.controller
+    assert config.disturbance_bound.force_N == 10.0
+    with pytest.raises(ConfigError, match="not field=value"):
+        resolve_controller("ltv-mpc@force")
+    with pytest.raises(ConfigError, match="unknown controller"):
+        resolve_controller("ltv@controller.jit=false")
+
+
 def test_nc30_labels_set_the_control_horizon():
     for label in ("mpc-nc30", "ltv-mpc-nc30"):
         config = load_scenario("paper-ideal", CONTROLLER_PRESETS[label]).scenario.controller

@@ -649,3 +649,12 @@ def test_report_has_the_interval_percentiles_worst_runs_and_figures(reference):
     )
     assert custom.summary["successes"] == 0  # no obstacles: clearance is null, never > 0
     assert custom.summary["worst_order"] == "asc"
+
+
+def test_paired_difference_compares_run_by_run(reference):
+    out, frame = reference
+    same = campaign.paired_difference(out, out, "rms_position_error_m")
+    assert same["runs"] == len(frame)
+    assert same["max"] == same["min"] == 0.0
+    with pytest.raises(ConfigError, match="not a metric"):
+        campaign.paired_difference(out, out, "rms_error")

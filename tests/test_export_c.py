@@ -70,6 +70,7 @@ def test_exported_controller_reproduces_python_commands(tmp_path, scenario, over
         (["vehicle=videoray-pro3", "controller.R=null"], "underactuated"),
         (["controller.prediction_horizon=1000"], "static memory"),
         (["controller.solver_time_limit_ms=50"], "solve-time limit"),
+        (["controller.disturbance_bound.force_N=5"], "tightening is not exported"),
     ],
 )
 def test_unsupported_configurations_refused_in_one_line(

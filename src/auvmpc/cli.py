@@ -214,7 +214,11 @@ def reproduce(
 def bench(
     controllers: Annotated[
         list[str] | None,
-        typer.Option("--controllers", help="controller labels, repeated or comma-separated"),
+        typer.Option(
+            "--controllers",
+            help="controller labels, repeated or comma-separated; LABEL@field=value adds an "
+            "override to that row only",
+        ),
     ] = None,
     scenarios: Annotated[
         list[str] | None,

@@ -25,6 +25,7 @@ __all__ = [
     "DepthControllerConfig",
     "DepthObserverConfig",
     "DEFAULT_SAMPLE_TIME_S",
+    "DisturbanceBound",
     "NmpcMode",
     "QpStructure",
     "THRUST_MOVE_COST",
@@ -60,6 +61,38 @@ class QpStructure(StrEnum):
     AUTO = "auto"  # ltv-mpc: condensed while well conditioned, else sparse; nmpc: sparse
     SPARSE = "sparse"  # states kept, Riccati IPM (HPIPM): well posed for unstable vehicles
     CONDENSED = "condensed"  # states eliminated, dense QP (qp_solver): ill-conditioned there
+
+
+Bound = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+# The controllers that tighten their constraints for a disturbance bound (ocp/tightening.py).
+TIGHTENED_TYPES = (ControllerType.LTV_MPC, ControllerType.MPC)
+
+
+class DisturbanceBound(StrictModel):
+    """What the controller's prediction does not know, bounded (docs/tightening.md): at every
+    sample, in any sequence, a world-frame force of at most ``force_N + model_error_N`` in any
+    horizontal direction and a yaw moment of at most ``moment_Nm``. All zero: the nominal
+    controller, exactly."""
+
+    force_N: Bound = Field(
+        default=0.0,
+        description="largest unknown force on the vehicle (N): the current, or with "
+        "offset_free the part of it the estimator has not learnt",
+    )
+    model_error_N: Bound = Field(
+        default=0.0,
+        description="largest force-equivalent of the model's error (N): mass, damping, "
+        "thrust mismatch at the speeds the mission flies; added to force_N",
+    )
+    moment_Nm: Bound = Field(default=0.0, description="largest unknown yaw moment (N m)")
+
+    @property
+    def total_force_N(self) -> float:
+        return self.force_N + self.model_error_N
+
+    @property
+    def is_zero(self) -> bool:
+        return self.total_force_N == 0.0 and self.moment_Nm == 0.0
 
 
 class ControllerConfig(StrictModel):
@@ -179,6 +212,12 @@ class ControllerConfig(StrictModel):
     observer: ObserverConfig = Field(
         default_factory=ObserverConfig, description="tuning of the offset-free estimator"
     )
+    disturbance_bound: DisturbanceBound = Field(
+        default_factory=DisturbanceBound,
+        description="bound on the disturbance the prediction does not know; non-zero: ltv-mpc "
+        "and mpc tighten their obstacle and thrust constraints so that the true vehicle keeps "
+        "them under any disturbance inside it (docs/tightening.md)",
+    )
     nmpc_mode: NmpcMode = Field(default=NmpcMode.REAL_TIME, description="nmpc solution mode")
     baseline: BaselineConfig = Field(
         default_factory=BaselineConfig, description="gains of the classical baseline tracker"
@@ -192,6 +231,17 @@ class ControllerConfig(StrictModel):
                 "", value, "the depth controller (kind: depth scenarios, six-dof depth_controller)"
             )
         return value
+
+    @model_validator(mode="after")
+    def _tightened_type(self) -> ControllerConfig:
+        if not self.disturbance_bound.is_zero and self.type not in TIGHTENED_TYPES:
+            raise FieldError(
+                "disturbance_bound",
+                self.disturbance_bound.model_dump(),
+                f"{self.type.value} does not tighten its constraints; only "
+                f"{', '.join(kind.value for kind in TIGHTENED_TYPES)} do (leave it zero)",
+            )
+        return self
 
     @model_validator(mode="after")
     def _horizons(self) -> ControllerConfig:

@@ -78,6 +78,18 @@ class IncrementalMpc(ShelledController):
     def after_command(self, command: np.ndarray) -> None:
         """Called with every applied command (estimators propagate here)."""
 
+    def tightened(
+        self,
+        prediction: AffinePrediction,
+        nominal: np.ndarray,
+        soft: SoftRows,
+        previous: np.ndarray,
+    ) -> tuple[SoftRows, tuple[np.ndarray, np.ndarray] | None, dict[str, float]]:
+        """The soft rows and the per-step force limits (lower, upper) after the robust
+        back-offs of a disturbance bound, with what they took (``info`` entries). Nominal
+        plants: unchanged rows, the ocp's limits (None), nothing taken."""
+        return soft, None, {}
+
     # -- the loop ----------------------------------------------------------------------
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._predicted: np.ndarray | None = None  # (ny + 1, nx) states of the last plan
@@ -114,6 +126,7 @@ class IncrementalMpc(ShelledController):
             max_slack=solution.max_slack,
             predicted_states=solution.states,
             disturbance=disturbance,
+            details=solution.details,
         )
 
     def plan_check(
@@ -145,7 +158,7 @@ class IncrementalMpc(ShelledController):
             if self._predicted is not None
             else None
         )
-        iterations, max_slack, predicted = 0, 0.0, None
+        iterations, max_slack, predicted, details = 0, 0.0, None, {}
         solved = False
         for _ in range(self.linearisation_iterations):
             # Each pass re-linearises (model and soft rows) around the last plan.
@@ -157,12 +170,13 @@ class IncrementalMpc(ShelledController):
             if nominal is None:
                 nominal = free + sensitivity @ moves
             soft = self.soft_rows(nominal, reference, observation, correction)
+            soft, input_box, details = self.tightened(prediction, nominal, soft, previous)
             trust = None
             if prediction.nominal is not None and self.trust_region_weights is not None:
                 trust = (self.trust_region_weights, prediction.nominal)
             solved = False
             if not self.sparse_only:
-                problem = qp.problem(free, sensitivity, reference, previous, soft)
+                problem = qp.problem(free, sensitivity, reference, previous, soft, input_box)
                 if trust is not None:
                     weights, nominal_states = trust
                     qp.add_trust_region(problem, free, sensitivity, nominal_states, weights)
@@ -179,7 +193,9 @@ class IncrementalMpc(ShelledController):
                         max_slack = float(result.z[qp.n_moves :].max(initial=0.0))
                         predicted = free + sensitivity @ new_moves
             if not solved and self.sparse_qp is not None:
-                solution = self.sparse_qp.solve(state, previous, prediction, reference, soft, trust)
+                solution = self.sparse_qp.solve(
+                    state, previous, prediction, reference, soft, trust, input_box
+                )
                 iterations += int(solution.iterations)
                 solved, new_moves = solution.moves is not None, solution.moves
                 if solved:
@@ -189,7 +205,7 @@ class IncrementalMpc(ShelledController):
                 break
             moves = new_moves
             self.linearisation_nodes = predicted
-        return _Solution(solved, moves, predicted, iterations, max_slack)
+        return _Solution(solved, moves, predicted, iterations, max_slack, details)
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         # After a fallback the next sample linearises afresh.
@@ -206,6 +222,7 @@ class _Solution:
     states: np.ndarray | None  # (ny + 1, nx) predicted by the last pass that solved
     iterations: int
     max_slack: float
+    details: dict[str, float]  # what a robust tightening took (info entries), else empty
 
 
 def _shifted(states: np.ndarray) -> np.ndarray:

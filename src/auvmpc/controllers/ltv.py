@@ -43,6 +43,7 @@ class LtvMpc(LinearMpc):
             self.sparse_qp = SparseIncrementalQp(self.ocp, config.qp_iteration_limit)
             self.sparse_only = config.qp_structure is QpStructure.SPARSE
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
+        self._sampled = sampled
         self._rollout = sampled.linearised_rollout(config.prediction_horizon)
         self._steps = sampled.linearised_nodes(config.prediction_horizon)
 
@@ -60,13 +61,17 @@ class LtvMpc(LinearMpc):
         ny, n = self.horizon, self.model.n_thrusters
         forces = np.tile(np.reshape(disturbance, (3, 1)), (1, ny))
         nodes = self.linearisation_nodes
+        rollout, steps = self._rollout, self._steps
+        if self.tightening is not None:  # the same, with the Jacobians in the disturbance
+            rollout = self._sampled.disturbed_linearised_rollout(ny)
+            steps = self._sampled.disturbed_linearised_nodes(ny)
         if nodes is None:
-            successors, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
+            successors, jac_x, jac_u, *jac_d = rollout(state, nominal_input.T, forces)
             successors = np.asarray(successors).T  # (ny, 6)
             nodes = np.vstack([state, successors[:-1]])
         else:
             nodes = np.vstack([state, nodes[1:ny]])
-            successors, jac_x, jac_u = self._steps(nodes.T, nominal_input.T, forces)
+            successors, jac_x, jac_u, *jac_d = steps(nodes.T, nominal_input.T, forces)
             successors = np.asarray(successors).T
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
@@ -76,4 +81,7 @@ class LtvMpc(LinearMpc):
             - np.einsum("nij,nj->ni", B, nominal_input)
         )
         nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, 6)
-        return AffinePrediction(A=A, B=B, c=c, nominal=nominal)
+        G = None
+        if jac_d:
+            G = np.asarray(jac_d[0]).reshape(NX, ny, 3).transpose(1, 0, 2)
+        return AffinePrediction(A=A, B=B, c=c, nominal=nominal, G=G)

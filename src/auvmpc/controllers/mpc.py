@@ -32,10 +32,12 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc
+from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams, body_from_world
+from auvmpc.models.vehicle import VehicleParams, body_from_world, steady_speed
+from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
 __all__ = [
@@ -80,6 +82,7 @@ class LinearMpc(IncrementalMpc):
             if config.offset_free
             else None
         )
+        self.tightening = robust_tightening(model, config)
         self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
 
     @abstractmethod
@@ -105,6 +108,45 @@ class LinearMpc(IncrementalMpc):
 
     def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
         return align_heading(state, reference)
+
+    def tightened(
+        self,
+        prediction: AffinePrediction,
+        nominal: np.ndarray,
+        soft: SoftRows,
+        previous: np.ndarray,
+    ) -> tuple[SoftRows, tuple[np.ndarray, np.ndarray] | None, dict[str, float]]:
+        """The obstacle rows and the thrust box backed off for the disturbance bound
+        (ocp/tightening.py); unchanged without one."""
+        if self.tightening is None:
+            return soft, None, {}
+        backoffs = self.tightening.backoffs(
+            prediction.A,
+            prediction.B,
+            prediction.G,
+            nominal[:-1],
+            soft.steps,
+            soft.coefficients,
+        )
+        ocp = self.ocp
+        box = tightened_box(
+            ocp.input_lower,
+            ocp.input_upper,
+            backoffs.thrust,
+            np.asarray(ocp.move_steps),
+            previous,
+            ocp.max_move,
+        )
+        rows = SoftRows(soft.steps, soft.coefficients, soft.lower + backoffs.rows)
+        given_up = 2.0 * backoffs.thrust / (ocp.input_upper - ocp.input_lower)
+        return (
+            rows,
+            box,
+            {
+                "obstacle_backoff_m": float(backoffs.rows.max(initial=0.0)),
+                "thrust_backoff_fraction": float(given_up.max(initial=0.0)),
+            },
+        )
 
     def tracked_reference(
         self, state: np.ndarray, disturbance: np.ndarray, reference: np.ndarray
@@ -173,6 +215,38 @@ class LinearMpc(IncrementalMpc):
         reach = radii + self.ocp.keep_out_extra
         offsets = np.einsum("nk,nk->n", normals, centres) + reach
         return normals, offsets
+
+
+def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tightening | None:
+    """The back-offs for ``config.disturbance_bound``, or None for a zero bound (the nominal
+    controller). The ancillary gains: LQR gains of the model linearised in straight motion
+    at heading 0, from its top reverse to its top forward speed (ocp/tightening.py)."""
+    bound = config.disturbance_bound
+    if bound.is_zero:
+        return None
+    if model.underactuated:
+        raise ConfigError(
+            "controller.disturbance_bound",
+            bound.model_dump(),
+            f"{model.describe_actuation()}: the tightening's feedback at rest needs full "
+            "actuation (leave the bound zero)",
+        )
+    sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
+    half_range = np.broadcast_to((model.thrust_max - model.thrust_min) / 2.0, model.n_thrusters)
+    surge = model.T[0]
+    forward = float(np.maximum(surge * model.thrust_max, surge * model.thrust_min).sum())
+    reverse = float(-np.minimum(surge * model.thrust_max, surge * model.thrust_min).sum())
+    top = [steady_speed(model.Xu, model.Xuu, force) for force in (reverse, forward)]
+    speeds = np.arange(-top[0], top[1] + GAIN_SPEED_STEP, GAIN_SPEED_STEP)
+    allocation = np.linalg.pinv(model.T)
+    gains = []
+    for speed in speeds:
+        at = np.array([0.0, 0.0, 0.0, speed, 0.0, 0.0])
+        drag = -(model.Xu * speed + model.Xuu * speed * abs(speed))
+        holding = allocation @ np.array([drag, 0.0, 0.0])  # the thrust that keeps the speed
+        _, A, B = sampled.linearised_step(at, holding, np.zeros(3))
+        gains.append(tube_gain(np.asarray(A), np.asarray(B), half_range))
+    return Tightening(bound.total_force_N, bound.moment_Nm, speeds, np.array(gains), half_range)
 
 
 def _clamp_towards(vectors: np.ndarray, side: np.ndarray, max_angle: float) -> np.ndarray:
@@ -307,8 +381,15 @@ class PaperMpc(LinearMpc):
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
         d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
         offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[2]])
+        G = None
+        if self.tightening is not None:  # in the world force: rotated at the frozen heading
+            heading = state[HORIZONTAL.heading]
+            cos, sin = math.cos(heading), math.sin(heading)
+            world_to_body = np.array([[cos, sin, 0.0], [-sin, cos, 0.0], [0.0, 0.0, 1.0]])
+            G = np.broadcast_to(Bd[:, n:] @ world_to_body, (ny, NX, 3))
         return AffinePrediction(
             A=np.broadcast_to(Ad, (ny, NX, NX)),
             B=np.broadcast_to(Bd[:, :n], (ny, NX, n)),
             c=np.broadcast_to(offset, (ny, NX)),
+            G=G,
         )

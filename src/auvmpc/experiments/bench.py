@@ -82,14 +82,16 @@ class BenchCase:
 
 
 def resolve_controller(label: str) -> BenchCase:
-    """The case for a preset label or a bare controller type name.
+    """The case for a preset label or a bare controller type name, with its own overrides.
 
     Parameters
     ----------
     label : str
         A key of :data:`CONTROLLER_PRESETS`, ``do-mpc`` (type do-mpc, control horizon 30),
         or any ``controller.type`` value (the scenario's other controller settings are
-        then kept).
+        then kept); optionally followed by ``@field=value`` overrides for this row only,
+        e.g. ``ltv-mpc-nc30@controller.disturbance_bound.force_N=10`` (the whole string is
+        the row's label).
 
     Returns
     -------
@@ -100,13 +102,17 @@ def resolve_controller(label: str) -> BenchCase:
     ConfigError
         If ``label`` is neither, naming the ``--controllers`` option.
     """
+    name, *row_overrides = label.split("@")
+    for override in row_overrides:
+        if "=" not in override:
+            raise ConfigError("--controllers", label, f"{override!r} is not field=value")
     presets = CONTROLLER_PRESETS
-    if label in presets:
-        return BenchCase(label, presets[label])
-    if label in {kind.value for kind in ControllerType}:
-        return BenchCase(label, (f"controller.type={label}",))
+    if name in presets:
+        return BenchCase(label, (*presets[name], *row_overrides))
+    if name in {kind.value for kind in ControllerType}:
+        return BenchCase(label, (f"controller.type={name}", *row_overrides))
     known = sorted(set(presets) | {kind.value for kind in ControllerType})
-    raise ConfigError("--controllers", label, f"unknown controller; choose from {known}")
+    raise ConfigError("--controllers", name, f"unknown controller; choose from {known}")
 
 
 def run_benchmark(

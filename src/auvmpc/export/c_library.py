@@ -118,6 +118,12 @@ def _check_supported(resolved) -> tuple[ControllerConfig, int]:
             "vehicle", model.name, "underactuated: export-c supports fully actuated vehicles only"
         )
     config = exported_config(scenario.controller)
+    if not config.disturbance_bound.is_zero:
+        raise ConfigError(
+            "controller.disturbance_bound", config.disturbance_bound.model_dump(),
+            "export-c exports the nominal nmpc; the robust tightening is not exported "
+            "(leave the bound zero)",
+        )  # fmt: skip
     if config.solver_time_limit_ms is not None:
         raise ConfigError(
             "controller.solver_time_limit_ms", config.solver_time_limit_ms,

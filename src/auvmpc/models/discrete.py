@@ -65,7 +65,8 @@ class DiscreteModel:
             [following, ca.jacobian(following, state), ca.jacobian(following, thrust)],
         )
         self.linearised_step = compiled(linearised) if jit else linearised
-
+        self._symbols = (state, thrust, force, following)
+        self._jit = jit
         # The estimator's map of [x; d] (d a random walk) and its Jacobian.
         augmented = ca.vertcat(state, force)
         next_augmented = ca.vertcat(following, force)
@@ -74,6 +75,23 @@ class DiscreteModel:
             [augmented, thrust],
             [next_augmented, ca.jacobian(next_augmented, augmented)],
         )
+
+    @functools.cached_property
+    def disturbed_linearised_step(self) -> ca.Function:
+        """The linearised step plus the Jacobian in d, for the robust back-offs
+        (ocp/tightening.py); built on first use, so nominal controllers compile nothing more."""
+        state, thrust, force, following = self._symbols
+        disturbed = ca.Function(
+            "rk4_step_linearised_disturbed",
+            [state, thrust, force],
+            [
+                following,
+                ca.jacobian(following, state),
+                ca.jacobian(following, thrust),
+                ca.jacobian(following, force),
+            ],
+        )
+        return compiled(disturbed) if self._jit else disturbed
 
     @functools.cache  # noqa: B019 -- one per horizon; the model itself lives for the process
     def rollout(self, horizon: int) -> ca.Function:
@@ -89,6 +107,16 @@ class DiscreteModel:
     def linearised_nodes(self, horizon: int) -> ca.Function:
         """(X (6, N), F (n, N), d (3, N)) -> successors and Jacobians at N given nodes."""
         return self.linearised_step.map(horizon)
+
+    @functools.cache  # noqa: B019
+    def disturbed_linearised_rollout(self, horizon: int) -> ca.Function:
+        """As linearised_rollout, plus G (6, 3N): the Jacobians in d."""
+        return self.disturbed_linearised_step.mapaccum("disturbed_rollout", horizon)
+
+    @functools.cache  # noqa: B019
+    def disturbed_linearised_nodes(self, horizon: int) -> ca.Function:
+        """As linearised_nodes, plus G (6, 3N): the Jacobians in d."""
+        return self.disturbed_linearised_step.map(horizon)
 
 
 def _flat(function: ca.Function) -> Callable[..., np.ndarray]:

@@ -20,7 +20,7 @@ import numpy as np
 
 from auvmpc.models.layout import DEPTH, HORIZONTAL, StateLayout
 
-__all__ = ["DepthLog", "ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
+__all__ = ["BACKOFF_NAMES", "DepthLog", "ESTIMATE_NAMES", "REFERENCE_NAMES", "SimLog"]
 
 STATE_NAMES = HORIZONTAL.names
 REFERENCE_NAMES = tuple(f"{name}_ref" for name in STATE_NAMES)
@@ -28,6 +28,10 @@ DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
 # The world force and moment the controller's prediction used at sample k (its estimate with
 # offset-free tracking, zero without), the shell's ``info`` keys.
 ESTIMATE_NAMES = ("dist_X_hat", "dist_Y_hat", "dist_N_hat")
+# What the robust tightening took at sample k (ocp/tightening.py; zero for a nominal
+# controller): the largest obstacle back-off (m) and the largest fraction of a thruster's
+# range given up, the shell's ``info`` keys.
+BACKOFF_NAMES = ("obstacle_backoff_m", "thrust_backoff_fraction")
 
 
 @dataclass
@@ -55,6 +59,7 @@ class SimLog:
     # (N+1, m) what the sensor gave at t_k (the controller's input on rows 0..N-1); in memory
     # only for a horizontal run, whose log.csv keeps the truth.
     measured: np.ndarray
+    backoff: np.ndarray  # (N, 2) BACKOFF_NAMES over [t_k, t_k+1)
 
     @classmethod
     def allocate(cls, steps: int, n_thrusters: int, sample_time: float) -> SimLog:
@@ -72,6 +77,7 @@ class SimLog:
             sample_time=sample_time,
             initial_thrust=np.zeros(n_thrusters),
             measured=np.zeros((steps + 1, cls.measured_size)),
+            backoff=np.zeros((steps, len(BACKOFF_NAMES))),
         )
 
     @property
@@ -86,7 +92,7 @@ class SimLog:
         thrusters = [f"F{i + 1}" for i in range(self.n_thrusters)]
         return [
             "t", *STATE_NAMES, *REFERENCE_NAMES, *thrusters, "solve_ms", "status",
-            *DISTURBANCE_NAMES, "clearance_m", *ESTIMATE_NAMES,
+            *DISTURBANCE_NAMES, "clearance_m", *ESTIMATE_NAMES, *BACKOFF_NAMES,
         ]  # fmt: skip
 
     def to_csv_text(self) -> str:
@@ -111,6 +117,7 @@ class SimLog:
                         if applied
                         else [""] * len(ESTIMATE_NAMES)
                     ),
+                    *((_num(v) for v in self.backoff[k]) if applied else [""] * len(BACKOFF_NAMES)),
                 ]
             )
         return buffer.getvalue()
@@ -138,6 +145,8 @@ class SimLog:
                 log.status[k] = row["status"]
                 if ESTIMATE_NAMES[0] in row:  # logs written before these columns have none
                     log.disturbance_estimate[k] = [float(row[name]) for name in ESTIMATE_NAMES]
+                if BACKOFF_NAMES[0] in row:
+                    log.backoff[k] = [float(row[name]) for name in BACKOFF_NAMES]
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log

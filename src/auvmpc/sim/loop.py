@@ -18,7 +18,7 @@ from auvmpc.environment.disturbances import WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
 from auvmpc.sim.plant import HorizontalPlant, Plant, plant_step
 
 __all__ = ["Sensor", "StateReference", "closed_loop", "plant_step", "timed_command"]
@@ -126,6 +126,7 @@ def closed_loop(
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
+        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
         state = plant.step(state, thrust, t)
         if on_step is not None:
             on_step(k + 1, steps)

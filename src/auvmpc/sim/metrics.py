@@ -149,16 +149,10 @@ def compute_metrics(
         else None,
         "detour_m": path_length(log.state[:, _POSITION]) - path_length(log.reference[:, _POSITION]),
         "time_lost_s": time_lost(log),
+        **_pick(common, "solve_ms_median", "solve_ms_p99", "solve_ms_max", "thrust_effort_N2s"),
+        **tightening_metrics(log),
         **_pick(
-            common,
-            "solve_ms_median",
-            "solve_ms_p99",
-            "solve_ms_max",
-            "thrust_effort_N2s",
-            "solver_failures",
-            "fallback_steps",
-            "relaxed_steps",
-            "longest_fallback_streak",
+            common, "solver_failures", "fallback_steps", "relaxed_steps", "longest_fallback_streak"
         ),
         "max_abs_yaw_rate_rad_per_s": float(yaw_rate.max()),
         "transient_s": float(transient_s),
@@ -306,6 +300,20 @@ def compute_six_dof_metrics(
     elif trouble:
         metrics["verdict_reason"] = "; ".join([str(metrics["verdict_reason"]), *trouble])
     return metrics
+
+
+def tightening_metrics(log: SimLog) -> dict[str, float]:
+    """What the robust tightening (ocp/tightening.py) took, all zero for a nominal controller:
+    the largest and the mean (over the samples with obstacle rows) obstacle back-off, and the
+    largest and mean fraction of a thruster's range given up."""
+    obstacle, thrust = log.backoff[:, 0], log.backoff[:, 1]
+    with_rows = obstacle[obstacle > 0.0]
+    return {
+        "max_obstacle_backoff_m": float(obstacle.max(initial=0.0)),
+        "mean_obstacle_backoff_m": float(with_rows.mean()) if len(with_rows) else 0.0,
+        "max_thrust_backoff_fraction": float(thrust.max(initial=0.0)),
+        "mean_thrust_backoff_fraction": float(thrust.mean()) if len(thrust) else 0.0,
+    }
 
 
 # --- depth runs (kind: depth): the tank step experiment ------------------------------------

@@ -40,7 +40,7 @@ from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import Reference
-from auvmpc.sim.log import ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
 from auvmpc.sim.loop import timed_command
 
 __all__ = [
@@ -313,6 +313,7 @@ def closed_loop_six_dof(
         log.status[k] = str(result.status)
         log.depth_status[k] = str(depth_result.status)
         log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
+        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
         if profile:
             state = integrate(
                 model,

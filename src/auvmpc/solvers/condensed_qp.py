@@ -38,6 +38,7 @@ class AffinePrediction:
     B: np.ndarray  # (ny, nx, nu)
     c: np.ndarray  # (ny, nx)
     nominal: np.ndarray | None = None  # (ny + 1, nx) trajectory the model was linearised on
+    G: np.ndarray | None = None  # (ny, nx, 3) Jacobians in the world force and moment, if asked
 
 
 @dataclass
@@ -162,8 +163,10 @@ class CondensedQp:
         reference: np.ndarray,
         previous: np.ndarray,
         soft: SoftRows,
+        input_box: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> QpProblem:
-        """The QP in z = [moves, slacks]."""
+        """The QP in z = [moves, slacks]; ``input_box``: per-step force limits (ny, nu) in
+        place of the ocp's (a tightened box, ocp/tightening.py)."""
         n_moves, n_slack = self.n_moves, len(soft)
         nz = n_moves + n_slack
         weighted = (sensitivity[1:] * self.sqrt_state_weights[:, :, None]).reshape(-1, n_moves)
@@ -176,11 +179,19 @@ class CondensedQp:
         bound_lower = np.concatenate([-self._move_bound, np.zeros(n_slack)])
         bound_upper = np.concatenate([self._move_bound, np.full(n_slack, np.inf)])
         nc = len(self.move_steps)
-        input_rows = (
-            self._input_rows,
-            np.tile(self._input_lower - previous, nc),
-            np.tile(self._input_upper - previous, nc),
-        )
+        if input_box is None:
+            input_rows = (
+                self._input_rows,
+                np.tile(self._input_lower - previous, nc),
+                np.tile(self._input_upper - previous, nc),
+            )
+        else:
+            lower, upper = input_box
+            input_rows = (
+                self._input_rows,
+                (lower[self.move_steps] - previous).ravel(),
+                (upper[self.move_steps] - previous).ravel(),
+            )
         soft_rows = (
             (
                 np.einsum("rk,rkj->rj", soft.coefficients, sensitivity[soft.steps]),

@@ -66,9 +66,13 @@ class SparseIncrementalQp:
         self._row_capacity = 1  # soft rows per step the structure has room for
 
     # -- one sample ------------------------------------------------------------------------
-    def solve(self, state, previous, prediction, reference, soft, trust=None) -> SparseSolution:
+    def solve(
+        self, state, previous, prediction, reference, soft, trust=None, input_box=None
+    ) -> SparseSolution:
         """``prediction``: A (ny, nx, nx), B (ny, nx, nu), c (ny, nx); ``reference``
-        (ny + 1, nx); ``soft``: SoftRows; ``trust``: (weights (nx,), nominal (ny + 1, nx))."""
+        (ny + 1, nx); ``soft``: SoftRows; ``trust``: (weights (nx,), nominal (ny + 1, nx));
+        ``input_box``: per-step force limits (lower, upper), each (ny, nu), in place of the
+        ocp's (a tightened box, ocp/tightening.py)."""
         ny, nu = self.horizon, self.nu
         nx = len(state)
         nz = nx + nu
@@ -150,7 +154,10 @@ class SparseIncrementalQp:
             if moving:  # force limits on the new input
                 A[row : row + nu, p_cols] = np.eye(nu)
                 A[row : row + nu, du] = np.eye(nu)
-                lba[row : row + nu], uba[row : row + nu] = self.lower, self.upper
+                if input_box is None:
+                    lba[row : row + nu], uba[row : row + nu] = self.lower, self.upper
+                else:
+                    lba[row : row + nu], uba[row : row + nu] = input_box[0][k], input_box[1][k]
                 A_mask[row : row + nu, p_cols] = A_mask[row : row + nu, du] = identity
                 row += nu
             for r in soft_at[k]:  # a . (A_k x_k + B_k u_k + c_k) + s_k >= b

@@ -37,6 +37,7 @@ from auvmpc.experiments.campaign.report import (
     CampaignReport,
     campaign_report,
     load_results,
+    paired_difference,
 )
 from auvmpc.experiments.campaign.sampling import (
     RunSample,
@@ -81,6 +82,7 @@ __all__ = [
     "execute_run",
     "load_campaign",
     "load_results",
+    "paired_difference",
     "parse_criterion",
     "reproduce_command",
     "run_campaign",

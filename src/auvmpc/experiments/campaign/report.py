@@ -107,6 +107,36 @@ def load_results(out_dir: str | Path) -> pd.DataFrame:
     return frame
 
 
+def paired_difference(
+    out_dir: str | Path, baseline_dir: str | Path, metric: str
+) -> dict[str, float | int]:
+    """``metric`` of each run of ``out_dir`` minus that of the same run index in
+    ``baseline_dir``, summarised (runs both folders finished).
+
+    Two campaigns with one seed draw the same parameters for run k (docs/campaigns.md), so
+    the difference is what the configuration change alone costs on each draw; e.g. the
+    robust tightening's tracking cost, ``rms_position_error_m`` of ``encounter-robust`` minus
+    that of ``encounter`` (docs/tightening.md).
+    """
+    runs, baseline = (load_results(folder).set_index("index") for folder in (out_dir, baseline_dir))
+    for frame, folder in ((runs, out_dir), (baseline, baseline_dir)):
+        if metric not in frame.columns:
+            raise ConfigError("metric", metric, f"not a metric of the campaign in {folder}")
+    both = runs.index.intersection(baseline.index)
+    ok = both[(runs.loc[both, "status"] == "ok") & (baseline.loc[both, "status"] == "ok")]
+    difference = (runs.loc[ok, metric] - baseline.loc[ok, metric]).astype(float).to_numpy()
+    if not len(difference):
+        raise ConfigError("out_dir", str(out_dir), f"no run finished in both and {baseline_dir}")
+    return {
+        "runs": int(len(difference)),
+        "mean": float(difference.mean()),
+        "median": float(np.median(difference)),
+        "p95": float(np.percentile(difference, 95)),
+        "max": float(difference.max()),
+        "min": float(difference.min()),
+    }
+
+
 def _typed_column(raw: list[Any], index: pd.Index) -> pd.Series:
     """Whole numbers as nullable Int64, other numbers as float64 (NaN if missing), the
     rest (JSON text, strings) as objects: the same dtype whatever rows failed."""
