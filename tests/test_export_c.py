@@ -104,19 +104,16 @@ def test_verify_refuses_a_run_of_another_controller(tmp_path):
     assert record["controller"]["control_horizon"] is None
 
 
-def _blasfeo_folder(tmp_path, features: tuple[str, ...], library: bytes | None = None):
+def _blasfeo_folder(tmp_path, features: tuple[str, ...], target: str = "GENERIC"):
     """A folder standing in for a BLASFEO built for some CPU: the casadi wheel's own library
-    (or ``library``'s bytes) as libblasfeo.so, and a blasfeo_target.h needing ``features``."""
+    as libblasfeo.so, and a blasfeo_target.h naming ``target`` and needing ``features``."""
     folder = tmp_path / "blasfeo"
     folder.mkdir()
     _, wheel_libraries = _casadi_hpipm()
-    target = folder / "libblasfeo.so"
-    if library is None:
-        shutil.copyfile(next(wheel_libraries.glob("libblasfeo.so*")), target)
-    else:
-        target.write_bytes(library)
+    shutil.copyfile(next(wheel_libraries.glob("libblasfeo.so*")), folder / "libblasfeo.so")
     (folder / "blasfeo_target.h").write_text(
-        "".join(
+        f"#ifndef TARGET_{target}\n#define TARGET_{target}\n#endif\n"
+        + "".join(
             f"#ifndef TARGET_NEED_FEATURE_{f}\n#define TARGET_NEED_FEATURE_{f} 1\n#endif\n"
             for f in features
         )  # fmt: skip
@@ -178,6 +175,27 @@ def test_cpu_features_are_read_from_cpuinfo(tmp_path):
     arm.write_text("Features\t: fp asimd evtstrm aes\n")
     assert missing_features(("NEON", "NEONv2", "FMA"), arm) == ["FMA"]
     assert missing_features(("AVX2",), tmp_path / "absent") == ["AVX2"]
+    # BLASFEO's ARMv8 targets need VFPv4 and NEONv2; 64-bit Arm calls them fp and asimd
+    assert missing_features(("VFPv4", "NEONv2"), arm) == []
     header = tmp_path / "blasfeo_target.h"
     header.write_text("#define TARGET_NEED_FEATURE_AVX2 1\n/* #undef TARGET_NEED_FEATURE_SSE3 */\n")
     assert required_features(tmp_path) == ("AVX2",)
+
+
+@needs_cc
+@pytest.mark.parametrize(
+    ("target", "header", "message"),
+    [
+        ("X64_INTEL_SKYLAKE_X", True, "packs 8 doubles per panel.*built for 4 \\(GENERIC\\)"),
+        ("GENERIC", False, "no blasfeo_target.h"),
+    ],
+)
+def test_a_blasfeo_the_wheels_hpipm_cannot_use_is_refused(tmp_path, target, header, message):
+    """Another panel size would change the matrix layout the wheel's HPIPM was compiled for
+    (silently wrong commands); without its target header its CPU needs are unknown."""
+    folder = _blasfeo_folder(tmp_path, (), target)
+    if not header:
+        (folder / "blasfeo_target.h").unlink()
+    with pytest.raises(ConfigError, match=message):
+        export_c(load_scenario("paper-ideal", _FREE), tmp_path / "export", blasfeo=folder)
+    assert not (tmp_path / "export").exists()

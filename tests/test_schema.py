@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from auvmpc.scenario.json_schema import json_schema, reference_markdown
+from auvmpc.experiments.json_schema import json_schema, reference_markdown
 from tests.test_cli import run_cli
 
 jsonschema = pytest.importorskip("jsonschema")

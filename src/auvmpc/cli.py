@@ -577,7 +577,7 @@ def schema(
     """Print the JSON Schema of a scenario, vehicle or campaign file (from the pydantic models)."""
     import json
 
-    from auvmpc.scenario.json_schema import SchemaKind, json_schema, reference_markdown
+    from auvmpc.experiments.json_schema import SchemaKind, json_schema, reference_markdown
 
     if markdown:
         sys.stdout.write(reference_markdown())

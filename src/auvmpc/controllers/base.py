@@ -9,6 +9,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from auvmpc.environment.obstacles import ObstacleState
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import ActuatorLimits
@@ -28,61 +29,6 @@ __all__ = [
     "project_to_limits",
     "tracked_reference",
 ]
-
-
-@dataclass(frozen=True)
-class ObstacleState:
-    """A keep-out disc as the controller sees it at the current sample, and its prediction.
-
-    Known exactly (no obstacle sensor): ``covariance`` is None and the disc keeps its radius.
-    Tracked (environment/obstacle_sensor.py): ``center`` and ``velocity`` are the tracker's
-    estimate, ``covariance`` its (4, 4) covariance of [x, y, vx, vy] now, and the predicted
-    keep-out radius at ``dt`` ahead grows by ``confidence_gain`` times the largest standard
-    deviation of the predicted position (constant-velocity model with white acceleration
-    noise of spectral density ``acceleration_psd``; Bar-Shalom, Li, Kirubarajan 2001, sec. 6.2):
-
-        P_pos(dt) = P_pp + dt (P_pv + P_vp) + dt^2 P_vv + acceleration_psd dt^3 / 3 I,
-        radius(dt) = radius + confidence_gain sqrt(lambda_max(P_pos(dt))).
-    """
-
-    center: np.ndarray  # (2,) world position now (m)
-    radius: float  # m
-    velocity: np.ndarray  # (2,) world velocity (m/s); zero for a fixed obstacle
-    covariance: np.ndarray | None = None  # (4, 4) of [x, y, vx, vy]; None: known exactly
-    acceleration_psd: float = 0.0  # m^2/s^3, the prediction's white-acceleration noise
-    confidence_gain: float = 0.0  # sqrt of the chi-square(2) quantile of the confidence
-
-    def center_at(self, dt: float) -> np.ndarray:
-        """Predicted centre ``dt`` seconds ahead (constant velocity)."""
-        return self.center + self.velocity * dt
-
-    def predict(self, dts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted centres (n, 2) and keep-out radii (n,) at ``dts`` (n,) seconds ahead."""
-        dts = np.asarray(dts, dtype=float)
-        centres = self.center + np.outer(dts, self.velocity)
-        if self.covariance is None:
-            return centres, np.full(len(dts), self.radius)
-        return centres, self.radius + self.confidence_gain * np.sqrt(
-            self.largest_position_variance(dts)
-        )
-
-    def largest_position_variance(self, dts: np.ndarray) -> np.ndarray:
-        """Largest eigenvalue of the predicted position covariance (n,) (m^2); 0 if known."""
-        dts = np.asarray(dts, dtype=float)
-        if self.covariance is None:
-            return np.zeros(len(dts))
-        P = self.covariance
-        cross = P[:2, 2:] + P[2:, :2]
-        growth = self.acceleration_psd * dts**3 / 3.0
-        pos = (
-            P[:2, :2][None]
-            + dts[:, None, None] * cross[None]
-            + (dts**2)[:, None, None] * P[2:, 2:][None]
-            + growth[:, None, None] * np.eye(2)[None]
-        )
-        half_trace = 0.5 * (pos[:, 0, 0] + pos[:, 1, 1])
-        spread = np.hypot(0.5 * (pos[:, 0, 0] - pos[:, 1, 1]), pos[:, 0, 1])
-        return half_trace + spread
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ exactly, position and velocity (``visible_obstacles``). With one:
   centre plus Gaussian noise of ``position_std_m`` per axis. The vehicle position used for
   the range test is the true one at the latest control sample. Which obstacle a detection
   belongs to is known (no data association problem);
-* a constant-velocity Kalman filter per obstacle (estimation.py) starts at its first
+* a constant-velocity Kalman filter per obstacle (estimation/ekf.py) starts at its first
   detection, coasts (predicts only) through missed detections, and is dropped
   ``drop_after_s`` seconds after its last detection;
 * at every control sample each live track is handed to the controller as an
@@ -33,8 +33,7 @@ import scipy.stats
 from pydantic import Field
 
 from auvmpc.config import NonNegative, StrictModel
-from auvmpc.controllers.base import ObstacleState
-from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.environment.obstacles import ObstacleConfig, ObstacleState
 from auvmpc.estimation import ConstantVelocityKalman
 
 __all__ = ["ObstacleSensorConfig", "ObstaclePerception", "Prediction", "confidence_gain"]

@@ -6,7 +6,9 @@ and FMA, HPIPM's median step takes twice the instructions it needs there
 built per CPU (its ``TARGET``), so ``export-c --blasfeo DIR`` links the one in DIR instead:
 HPIPM stays the wheel's, the linear algebra under it is the target's. Its
 ``blasfeo_target.h`` says which instruction-set features it needs; a replay on a CPU without
-them would stop on an illegal instruction, so ``verify-c`` checks them first.
+them would stop on an illegal instruction, so ``verify-c`` checks them first. The wheel's
+HPIPM was compiled for BLASFEO's panel-major matrices of the wheel's panel size, so a target
+with another panel size (AVX-512's SKYLAKE_X: 8 doubles, not 4) is refused at export.
 """
 
 from __future__ import annotations
@@ -28,29 +30,74 @@ _CPUINFO_FLAGS = {
     "AVX2": ("avx2",),
     "FMA": ("fma",),
     "AVX512F": ("avx512f",),
-    "VFPv3": ("vfpv3", "vfp"),
-    "VFPv4": ("vfpv4",),
+    # 64-bit Arm lists "fp" (VFPv4 and more) and "asimd" (NEON) where 32-bit Arm lists these
+    "VFPv3": ("vfpv3", "fp"),
+    "VFPv4": ("vfpv4", "fp"),
     "NEON": ("neon", "asimd"),
     "NEONv2": ("asimd",),
 }
 
 
-def blasfeo_folder(path: Path | str) -> Path:
-    """The folder ``path`` (absolute), if it holds a ``libblasfeo.so``; else one line."""
+def blasfeo_folder(path: Path | str, wheel_include: Path) -> Path:
+    """The folder ``path`` (absolute), if it holds a ``libblasfeo.so`` whose target header is
+    found and whose panel size is that of the wheel's BLASFEO (``wheel_include``, the folder
+    of the headers the wheel's HPIPM was built with); else one line naming ``--blasfeo``."""
     folder = Path(path).expanduser().resolve()
     if not (folder / LIBRARY).is_file():
         raise ConfigError("--blasfeo", str(path), f"no {LIBRARY} in that folder")
+    header = _target_header(folder)
+    if header is None:
+        raise ConfigError(
+            "--blasfeo", str(path),
+            f"no {_HEADER} beside {LIBRARY} or in an include/ folder next to it: the CPU "
+            "features that library needs cannot be checked",
+        )  # fmt: skip
+    target, wheel_target = _target(header), _target(wheel_include / _HEADER)
+    sizes = _panel_sizes(wheel_include / "blasfeo_block_size.h")
+    if sizes.get(target) != sizes.get(wheel_target):
+        raise ConfigError(
+            "--blasfeo", str(path),
+            f"its target {target} packs {sizes.get(target, 'an unknown number of')} doubles per "
+            f"panel; the casadi wheel's HPIPM was built for {sizes.get(wheel_target)} "
+            f"({wheel_target}): choose a target with that panel size",
+        )  # fmt: skip
     return folder
 
 
 def required_features(folder: Path) -> tuple[str, ...]:
-    """The CPU features the BLASFEO in ``folder`` was built to need (its ``blasfeo_target.h``
-    beside it or in an ``include`` folder next to it; none found: none known)."""
+    """The CPU features the BLASFEO in ``folder`` was built to need (its target header)."""
+    header = _target_header(folder)
+    return () if header is None else tuple(_FEATURE.findall(header.read_text()))
+
+
+def _target_header(folder: Path) -> Path | None:
+    """``blasfeo_target.h`` beside the library, in ``include/`` in it, or in ``../include``."""
     for candidate in (folder / _HEADER, folder / "include" / _HEADER,
                       folder.parent / "include" / _HEADER):  # fmt: skip
         if candidate.is_file():
-            return tuple(_FEATURE.findall(candidate.read_text()))
-    return ()
+            return candidate
+    return None
+
+
+def _target(header: Path) -> str:
+    """The TARGET_... a ``blasfeo_target.h`` defines (the first; TARGET_NEED_* are not)."""
+    for name in re.findall(r"#define\s+TARGET_(\w+)", header.read_text()):
+        if not name.startswith("NEED_"):
+            return name
+    return "unknown"
+
+
+def _panel_sizes(block_size_header: Path) -> dict[str, int]:
+    """Each target's double-precision panel size (``D_PS``) in ``blasfeo_block_size.h``."""
+    sizes, targets = {}, []
+    for line in block_size_header.read_text().splitlines():
+        named = re.findall(r"defined\s*\(\s*TARGET_(\w+)\s*\)", line)
+        if named:
+            targets = named
+        panel = re.match(r"#define\s+D_PS\s+(\d+)", line)
+        if panel:
+            sizes.update(dict.fromkeys(targets, int(panel.group(1))))
+    return sizes
 
 
 def missing_features(features: tuple[str, ...], cpuinfo: Path = Path("/proc/cpuinfo")) -> list[str]:

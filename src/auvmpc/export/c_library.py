@@ -301,12 +301,12 @@ def export_c(
     the casadi wheel's HPIPM instead of the wheel's portable one (export/blasfeo_target.py).
     """
     config, slots = _check_supported(resolved)
-    tuned = None if blasfeo is None else blasfeo_folder(blasfeo)
-    check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     hpipm = _casadi_hpipm()
     if hpipm is None:
         raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
     include, libraries = hpipm
+    tuned = None if blasfeo is None else blasfeo_folder(blasfeo, include)
+    check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     model = resolved.model
     program = MultipleShootingProgram(model, config, slots)
     qp = stage_qp(program)

@@ -1,6 +1,6 @@
 """Scenarios: the typed schema (:mod:`.model`), what a scenario resolves to for its vehicle
 (:mod:`.resolved`), the loader with overrides (:mod:`.loader`), the checks before a run
-(:mod:`.sanity`) and the file formats as JSON Schema (:mod:`.json_schema`)."""
+(:mod:`.sanity`)."""
 
 from auvmpc.controllers.config import ControllerConfig, ControllerType
 from auvmpc.scenario.loader import (

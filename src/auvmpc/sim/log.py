@@ -101,23 +101,27 @@ class SimLog:
         writer.writerow(self.columns())
         for k in range(self.steps + 1):
             applied = k < self.steps
-            thrust = [_num(f) for f in self.thrust[k]] if applied else [""] * self.n_thrusters
+            thrust = [csv_number(f) for f in self.thrust[k]] if applied else [""] * self.n_thrusters
             writer.writerow(
                 [
-                    _num(self.t[k]),
-                    *(_num(v) for v in self.state[k]),
-                    *(_num(v) for v in self.reference[k]),
+                    csv_number(self.t[k]),
+                    *(csv_number(v) for v in self.state[k]),
+                    *(csv_number(v) for v in self.reference[k]),
                     *thrust,
-                    _num(self.solve_ms[k]) if applied else "",
+                    csv_number(self.solve_ms[k]) if applied else "",
                     self.status[k] if applied else "",
-                    *(_num(v) for v in self.disturbance_world[k]),
-                    _num(self.clearance_m[k]) if math.isfinite(self.clearance_m[k]) else "",
+                    *(csv_number(v) for v in self.disturbance_world[k]),
+                    csv_number(self.clearance_m[k]) if math.isfinite(self.clearance_m[k]) else "",
                     *(
-                        (_num(v) for v in self.disturbance_estimate[k])
+                        (csv_number(v) for v in self.disturbance_estimate[k])
                         if applied
                         else [""] * len(ESTIMATE_NAMES)
                     ),
-                    *((_num(v) for v in self.backoff[k]) if applied else [""] * len(BACKOFF_NAMES)),
+                    *(
+                        (csv_number(v) for v in self.backoff[k])
+                        if applied
+                        else [""] * len(BACKOFF_NAMES)
+                    ),
                 ]
             )
         return buffer.getvalue()
@@ -193,11 +197,12 @@ class DepthLog(SimLog):
             applied = k < self.steps
             writer.writerow(
                 [
-                    _num(self.t[k]), *(_num(v) for v in self.state[k]), _num(self.z_ref[k]),
-                    *([_num(f) for f in self.thrust[k]] if applied else [""] * nv),
-                    _num(self.solve_ms[k]) if applied else "",
+                    csv_number(self.t[k]), *(csv_number(v) for v in self.state[k]),
+                    csv_number(self.z_ref[k]),
+                    *([csv_number(f) for f in self.thrust[k]] if applied else [""] * nv),
+                    csv_number(self.solve_ms[k]) if applied else "",
                     self.status[k] if applied else "",
-                    _num(self.z_measured[k]), _num(self.wave_force[k]),
+                    csv_number(self.z_measured[k]), csv_number(self.wave_force[k]),
                 ]
             )  # fmt: skip
         return buffer.getvalue()
@@ -228,7 +233,7 @@ class DepthLog(SimLog):
 _DEPTH = DEPTH.index("z")
 
 
-def _num(value: float) -> str:
+def csv_number(value: float) -> str:
     """Shortest text that reads back to the same float."""
     return repr(float(value))
 

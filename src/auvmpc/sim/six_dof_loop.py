@@ -24,7 +24,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,8 +39,9 @@ from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, check_pitch, depth_rate, integrate, six_dof_model
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import Reference
-from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog, csv_number
 from auvmpc.sim.loop import timed_command
+from auvmpc.sim.plant import substeps_for
 
 __all__ = [
     "EXTRA_STATE_NAMES",
@@ -174,10 +174,10 @@ class SixDofLog(SimLog):
             writer.writerow(
                 [
                     *row,
-                    *(_num(v) for v in self.full_state[k, EXTRA_INDEX]),
-                    *(_num(v) for v in self.depth_reference[k]),
-                    *(_num(v) for v in self.current_world[k]),
-                    _num(self.depth_solve_ms[k]) if applied else "",
+                    *(csv_number(v) for v in self.full_state[k, EXTRA_INDEX]),
+                    *(csv_number(v) for v in self.depth_reference[k]),
+                    *(csv_number(v) for v in self.current_world[k]),
+                    csv_number(self.depth_solve_ms[k]) if applied else "",
                     self.depth_status[k] if applied else "",
                 ]
             )
@@ -207,10 +207,6 @@ class SixDofLog(SimLog):
                 log.depth_solve_ms[k] = number(row, "depth_solve_ms")
                 log.depth_status[k] = row["depth_status"]
         return log
-
-
-def _num(value: float) -> str:
-    return repr(float(value))
 
 
 def closed_loop_six_dof(
@@ -250,7 +246,7 @@ def closed_loop_six_dof(
     """
     sample_time = controller.sample_time
     steps = int(round(duration / sample_time))
-    substeps = max(1, math.ceil(sample_time / max_plant_step - 1e-9))
+    substeps = substeps_for(sample_time, max_plant_step)
     mapping = ThrustMapping(plant, sample_time)
     n = mapping.n_horizontal
     model = six_dof_model(plant)
@@ -271,9 +267,10 @@ def closed_loop_six_dof(
     profile = current is not None and bool(current.config.depth_profile)
     for k in range(steps + 1):
         t = log.t[k]
+        previewed = reference.states(t + preview)  # its first row is the reference at t
         log.full_state[k] = state
         log.state[k] = horizontal_state(state)
-        log.reference[k] = reference.state(t)
+        log.reference[k] = previewed[0]
         log.depth_reference[k] = reference.depths([t])[0, :2]
         log.clearance_m[k] = clearance(state[_POSITION], t, obstacles, vehicle_radius)
         velocity = np.zeros(3)
@@ -286,7 +283,7 @@ def closed_loop_six_dof(
             k=k,
             t=t,
             state=sensor.measure(horizontal_state(state)),
-            reference=reference.states(t + preview),
+            reference=previewed,
             obstacles=visible_obstacles(obstacles, t)
             if perception is None
             else perception.observe(t, state[_POSITION]),

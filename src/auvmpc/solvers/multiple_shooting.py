@@ -24,8 +24,8 @@ from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 
 if TYPE_CHECKING:  # read, never imported at run time: solvers sit below controllers
-    from auvmpc.controllers.base import ObstacleState
     from auvmpc.controllers.config import ControllerConfig
+    from auvmpc.environment.obstacles import ObstacleState
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "Sample", "Solution"]
 

@@ -76,7 +76,7 @@ static struct {
     double max_slack;
     int iterations;
 #if AUVMPC_OFFSET_FREE
-    /* the offset-free EKF on [x; d_world] (estimation.py, AugmentedEkf) */
+    /* the offset-free EKF on [x; d_world] (estimation/ekf.py, AugmentedEkf) */
     double estimate[NA], covariance[NA][NA];
     int initialised;
     const casadi_real *observer_arg[AUVMPC_OBSERVER_SZ_ARG + 1];
@@ -107,7 +107,7 @@ static int all_finite(const double *v, int size) {
 }
 
 #if AUVMPC_OFFSET_FREE
-/* -- the offset-free estimator: an EKF on [x; d_world], d a random walk (estimation.py) -- */
+/* -- the offset-free estimator: an EKF on [x; d_world], d a random walk (estimation/ekf.py) -- */
 
 static void observer_reset(const double *initial_state) {
     for (int i = 0; i < NA; ++i) {
@@ -190,7 +190,7 @@ static int eigenvalues_inside(double a[NA][NA]) {
 }
 
 /* The symmetric part of m with its eigenvalues clipped to [floor, ceiling], rebuilt only
- * when a bound is crossed (estimation.py, condition_covariance); into c.covariance. */
+ * when a bound is crossed (estimation/ekf.py, condition_covariance); into c.covariance. */
 static void condition_covariance(double m[NA][NA]) {
     double symmetric[NA][NA], work[NA][NA], vectors[NA][NA], values[NA];
     for (int i = 0; i < NA; ++i)
