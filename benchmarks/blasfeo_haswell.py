@@ -21,6 +21,9 @@ import zipfile
 from pathlib import Path
 
 WHEEL = "comma-deps-acados==0.2.2.post92"  # its BLASFEO: TARGET_X64_INTEL_HASWELL
+# pip checks the download against this (the wheel measured on 2026-11-24), so a replaced
+# file on the registry is refused rather than unpacked
+WHEEL_SHA256 = "fb317ea65c68d410e19b46f824c333203a097d02dac6fbbdc1f378c2b32b456f"
 MEMBERS = {
     "acados/install/lib/libblasfeo.so": "libblasfeo.so",
     "acados/install/include/blasfeo/include/blasfeo_target.h": "blasfeo_target.h",
@@ -31,14 +34,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="folder to unpack into")
     out = parser.parse_args().out
-    if out.exists() and any(out.iterdir()):
-        print(f"error: --out: {out} is not empty", file=sys.stderr)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        print(f"error: --out: {out} exists and is not an empty folder", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory() as scratch:
+        requirement = Path(scratch) / "requirement.txt"
+        requirement.write_text(f"{WHEEL} --hash=sha256:{WHEEL_SHA256}\n")
         subprocess.run(
             [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-             "--only-binary", ":all:", "--platform", "manylinux_2_28_x86_64", "-d", scratch,
-             WHEEL],
+             "--require-hashes", "--only-binary", ":all:", "--platform",
+             "manylinux_2_28_x86_64", "-d", scratch, "-r", str(requirement)],
             check=True,
         )  # fmt: skip
         (wheel,) = Path(scratch).glob("*.whl")
