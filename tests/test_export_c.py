@@ -5,14 +5,15 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.run import simulate, write_run
-from auvmpc.export.blasfeo_target import missing_features, required_features
 from auvmpc.export.c_library import export_c, verify_c
 from auvmpc.native import compiler
 from auvmpc.scenario import load_scenario
+from auvmpc.solvers.blasfeo_target import BLASFEO_ENV, missing_features, required_features
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
 from tests.conftest import C_EXPORT_COMMAND_TOL_N
 from tests.test_cli import run_cli
@@ -199,3 +200,19 @@ def test_a_blasfeo_the_wheels_hpipm_cannot_use_is_refused(tmp_path, target, head
     with pytest.raises(ConfigError, match=message):
         export_c(load_scenario("paper-ideal", _FREE), tmp_path / "export", blasfeo=folder)
     assert not (tmp_path / "export").exists()
+
+
+@needs_cc
+def test_the_python_step_takes_its_blasfeo_from_the_environment(tmp_path, monkeypatch):
+    """AUVMPC_BLASFEO_DIR: the real-time nmpc's compiled QP step links that folder's BLASFEO
+    (here a copy of the wheel's, so the commands agree to the C export's bound); a folder the
+    wheel's HPIPM cannot use is refused in one line naming the variable."""
+    scenario = load_scenario("paper-obstacles", _FREE)
+    wheel = simulate(scenario).log.thrust
+    folder = _blasfeo_folder(tmp_path, ())
+    monkeypatch.setenv(BLASFEO_ENV, str(folder))
+    linked = simulate(scenario).log.thrust
+    assert np.abs(linked - wheel).max() <= C_EXPORT_COMMAND_TOL_N
+    (folder / "blasfeo_target.h").write_text("#define TARGET_X64_INTEL_SKYLAKE_X\n")
+    with pytest.raises(ConfigError, match=f"^{BLASFEO_ENV}: .*packs 8 doubles per panel"):
+        simulate(scenario)

@@ -35,6 +35,7 @@ from auvmpc.controllers.config import CONTROLLER_PRESETS
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import simulate
 from auvmpc.scenario import ControllerType, ResolvedScenario, builtin_scenarios, load_scenario
+from auvmpc.solvers.blasfeo_target import BLASFEO_ENV
 
 __all__ = [
     "BenchCase",
@@ -414,6 +415,9 @@ def _caption(rows: Sequence[dict[str, Any]], machine: dict[str, Any] | None) -> 
             f"({machine['cpus_allowed']} allowed); {machine['platform']}; "
             f"Python {machine['python']}; {packages}"
         )
+    blasfeo = os.environ.get(BLASFEO_ENV)
+    if blasfeo:
+        parts.append(f"nmpc's QP step on the BLASFEO in {blasfeo} ({BLASFEO_ENV})")
     pinned = {row.get("pinned_cpu") for row in rows}
     if pinned and None not in pinned:
         parts.append("pinned to CPU " + ", ".join(str(cpu) for cpu in sorted(pinned)))

@@ -38,15 +38,15 @@ from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.estimation import covariance_bounds
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
-from auvmpc.export.blasfeo_target import (
+from auvmpc.models.discrete import horizontal_model
+from auvmpc.native import compiler
+from auvmpc.references import make_reference
+from auvmpc.solvers.blasfeo_target import (
     LIBRARY,
     blasfeo_folder,
     missing_features,
     required_features,
 )
-from auvmpc.models.discrete import horizontal_model
-from auvmpc.native import compiler
-from auvmpc.references import make_reference
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
 from auvmpc.solvers.multiple_shooting import (

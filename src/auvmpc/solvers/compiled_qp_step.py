@@ -22,6 +22,7 @@ import numpy as np
 
 from auvmpc import native
 from auvmpc.native import compiler
+from auvmpc.solvers.blasfeo_target import runtime_blasfeo
 from auvmpc.solvers.multiple_shooting import SLOT_FIELDS
 
 if TYPE_CHECKING:  # sparse_rti imports this module
@@ -119,27 +120,36 @@ def compiled_qp_step(qp: StageQp, horizon: int, thrusters: int, slots: int,
 
 
 def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
-    if native.compiler() is None or _casadi_hpipm() is None:
+    hpipm = _casadi_hpipm()
+    if native.compiler() is None or hpipm is None:
         return None
-    return _built_library(stage, terminal, native.cache_folder())
+    blasfeo = runtime_blasfeo(hpipm[0]) or hpipm[1]
+    return _built_library(stage, terminal, native.cache_folder(), blasfeo)
 
 
 # Per process too: generating the C and hashing it costs ~8 ms a controller.
 @functools.lru_cache(maxsize=16)
-def _built_library(stage: ca.Function, terminal: ca.Function, folder: Path) -> ctypes.CDLL | None:
+def _built_library(
+    stage: ca.Function, terminal: ca.Function, folder: Path, blasfeo: Path
+) -> ctypes.CDLL | None:
     """The library in the cache ``folder`` (native.cache_folder(), where shared_library
-    looks), built there unless it is there already."""
+    looks), built there unless it is there already, with the BLASFEO in the folder
+    ``blasfeo`` under the wheel's HPIPM (the wheel's own, or $AUVMPC_BLASFEO_DIR's)."""
     include, libraries = _casadi_hpipm()
     with tempfile.TemporaryDirectory(prefix="auvmpc-rti-") as scratch:
         generator = ca.CodeGenerator(_DATA_NAME + ".c", {"with_header": True})
         generator.add(stage)
         generator.add(terminal)
         generator.generate(scratch + os.sep)
+        # BLASFEO's folder first, so HPIPM's linear algebra resolves to it (as in export-c).
         options = [
-            f"-I{scratch}", f"-I{include}", f"-L{libraries}", "-lhpipm", "-lblasfeo",
-            f"-Wl,-rpath,{libraries}",
+            f"-I{scratch}", f"-I{include}", "-Wl,--no-as-needed", f"-L{blasfeo}", "-lblasfeo",
+            f"-L{libraries}", "-lhpipm", f"-Wl,-rpath,{blasfeo}", f"-Wl,-rpath,{libraries}",
         ]  # fmt: skip
-        # The library folder is baked in by -rpath: another venv needs its own build.
+        # The library folders are baked in by -rpath: another venv needs its own build.
         return native.shared_library(
-            "rti", [Path(scratch) / (_DATA_NAME + ".c"), _DRIVER], options, salt=[str(libraries)]
+            "rti",
+            [Path(scratch) / (_DATA_NAME + ".c"), _DRIVER],
+            options,
+            salt=[str(libraries), str(blasfeo)],
         )

@@ -1,10 +1,12 @@
-"""A BLASFEO built for the target CPU, linked by a C export under the casadi wheel's HPIPM.
+"""A BLASFEO built for the target CPU, linked under the casadi wheel's HPIPM instead of the
+wheel's own: by a C export (``export-c --blasfeo DIR``) and by the real-time nmpc's compiled
+QP step in Python (``AUVMPC_BLASFEO_DIR=DIR``).
 
 The casadi wheel's BLASFEO is the portable GENERIC build (no SIMD): on an x86-64 with AVX2
 and FMA, HPIPM's median step takes twice the instructions it needs there
 (docs/performance.md, "The exported step and the 0.2 ms floor"). BLASFEO is meant to be
-built per CPU (its ``TARGET``), so ``export-c --blasfeo DIR`` links the one in DIR instead:
-HPIPM stays the wheel's, the linear algebra under it is the target's. Its
+built per CPU (its ``TARGET``), so the one in DIR can be linked instead: HPIPM stays the
+wheel's, the linear algebra under it is the target's. Its
 ``blasfeo_target.h`` says which instruction-set features it needs; a replay on a CPU without
 them would stop on an illegal instruction, so ``verify-c`` checks them first. The wheel's
 HPIPM was compiled for BLASFEO's panel-major matrices of the wheel's panel size, so a target
@@ -13,14 +15,24 @@ with another panel size (AVX-512's SKYLAKE_X: 8 doubles, not 4) is refused at ex
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
 from auvmpc.errors import ConfigError
 
-__all__ = ["LIBRARY", "blasfeo_folder", "missing_features", "required_features"]
+__all__ = [
+    "BLASFEO_ENV",
+    "LIBRARY",
+    "blasfeo_folder",
+    "missing_features",
+    "required_features",
+    "runtime_blasfeo",
+]
 
 LIBRARY = "libblasfeo.so"
+# Where the Python side's compiled QP step takes its BLASFEO from (unset: the wheel's).
+BLASFEO_ENV = "AUVMPC_BLASFEO_DIR"
 _HEADER = "blasfeo_target.h"
 _FEATURE = re.compile(r"#define\s+TARGET_NEED_FEATURE_(\w+)\s+1\b")
 # BLASFEO's feature names -> the flags /proc/cpuinfo lists for them (x86: flags, Arm: Features).
@@ -38,17 +50,33 @@ _CPUINFO_FLAGS = {
 }
 
 
-def blasfeo_folder(path: Path | str, wheel_include: Path) -> Path:
+def runtime_blasfeo(wheel_include: Path) -> Path | None:
+    """The BLASFEO folder ``$AUVMPC_BLASFEO_DIR`` names for this process's compiled QP steps,
+    checked as :func:`blasfeo_folder` does and for this CPU's features; None when unset."""
+    value = os.environ.get(BLASFEO_ENV, "")
+    if not value:
+        return None
+    folder = blasfeo_folder(value, wheel_include, field=BLASFEO_ENV)
+    missing = missing_features(required_features(folder))
+    if missing:
+        raise ConfigError(
+            BLASFEO_ENV, value,
+            f"its BLASFEO needs CPU features this machine lacks ({', '.join(missing)})",
+        )  # fmt: skip
+    return folder
+
+
+def blasfeo_folder(path: Path | str, wheel_include: Path, field: str = "--blasfeo") -> Path:
     """The folder ``path`` (absolute), if it holds a ``libblasfeo.so`` whose target header is
     found and whose panel size is that of the wheel's BLASFEO (``wheel_include``, the folder
-    of the headers the wheel's HPIPM was built with); else one line naming ``--blasfeo``."""
+    of the headers the wheel's HPIPM was built with); else one line naming ``field``."""
     folder = Path(path).expanduser().resolve()
     if not (folder / LIBRARY).is_file():
-        raise ConfigError("--blasfeo", str(path), f"no {LIBRARY} in that folder")
+        raise ConfigError(field, str(path), f"no {LIBRARY} in that folder")
     header = _target_header(folder)
     if header is None:
         raise ConfigError(
-            "--blasfeo", str(path),
+            field, str(path),
             f"no {_HEADER} beside {LIBRARY} or in an include/ folder next to it: the CPU "
             "features that library needs cannot be checked",
         )  # fmt: skip
@@ -56,7 +84,7 @@ def blasfeo_folder(path: Path | str, wheel_include: Path) -> Path:
     sizes = _panel_sizes(wheel_include / "blasfeo_block_size.h")
     if sizes.get(target) != sizes.get(wheel_target):
         raise ConfigError(
-            "--blasfeo", str(path),
+            field, str(path),
             f"its target {target} packs {sizes.get(target, 'an unknown number of')} doubles per "
             f"panel; the casadi wheel's HPIPM was built for {sizes.get(wheel_target)} "
             f"({wheel_target}): choose a target with that panel size",
