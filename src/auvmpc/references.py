@@ -796,10 +796,6 @@ class DepthStep:
         depth = self.config.depth(times)
         return np.column_stack([depth, np.zeros_like(depth)])
 
-    def state(self, t: float) -> np.ndarray:
-        """(2,) ``[z_ref, 0]`` at one time ``t`` (s)."""
-        return np.array([self.config.depth(t), 0.0])
-
 
 # --------------------------------------------------------------------------------------------
 # 3-D references: a horizontal path for the horizontal controller plus a depth profile

@@ -12,7 +12,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
-from auvmpc.models.discrete import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates, turn_up_time
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
@@ -93,6 +93,14 @@ class DisturbanceBound(StrictModel):
     @property
     def is_zero(self) -> bool:
         return self.total_force_N == 0.0 and self.moment_Nm == 0.0
+
+
+def check_control_horizon(control_horizon: int | None, prediction_horizon: int) -> None:
+    """The moves fit in the horizon (a control horizon longer than it means nothing)."""
+    if control_horizon is not None and control_horizon > prediction_horizon:
+        raise FieldError(
+            "control_horizon", control_horizon, f"exceeds prediction_horizon {prediction_horizon}"
+        )
 
 
 class ControllerConfig(StrictModel):
@@ -245,12 +253,7 @@ class ControllerConfig(StrictModel):
 
     @model_validator(mode="after")
     def _horizons(self) -> ControllerConfig:
-        if self.control_horizon is not None and self.control_horizon > self.prediction_horizon:
-            raise FieldError(
-                "control_horizon",
-                self.control_horizon,
-                f"exceeds prediction_horizon {self.prediction_horizon}",
-            )
+        check_control_horizon(self.control_horizon, self.prediction_horizon)
         steps = self.move_steps
         if steps is not None:
             if (
@@ -427,12 +430,7 @@ class DepthControllerConfig(StrictModel):
 
     @model_validator(mode="after")
     def _horizons(self) -> DepthControllerConfig:
-        if self.control_horizon is not None and self.control_horizon > self.prediction_horizon:
-            raise FieldError(
-                "control_horizon",
-                self.control_horizon,
-                f"exceeds prediction_horizon {self.prediction_horizon}",
-            )
+        check_control_horizon(self.control_horizon, self.prediction_horizon)
         return self
 
     def move_schedule(self) -> tuple[int, ...]:

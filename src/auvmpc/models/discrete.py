@@ -17,11 +17,11 @@ import numpy as np
 
 from auvmpc.codegen import compiled
 from auvmpc.models.integrators import rk4
-from auvmpc.models.layout import HORIZONTAL, StateLayout
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics
 from auvmpc.native import native_function
 
-__all__ = ["HORIZONTAL", "DiscreteModel", "StateLayout", "horizontal_model"]
+__all__ = ["DiscreteModel", "horizontal_model"]
 
 
 # The world-frame force X, Y (N) and moment N (N m) that the offset-free estimator estimates.

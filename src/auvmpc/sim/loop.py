@@ -47,8 +47,6 @@ class Sensor(Protocol):
 class StateReference(Protocol):
     """The reference in the plant's state layout, vectorised over time."""
 
-    def state(self, t: float) -> np.ndarray: ...
-
     def states(self, t: np.ndarray) -> np.ndarray: ...
 
 
