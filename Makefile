@@ -8,7 +8,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 OUT ?= results/paper
 
-.PHONY: setup reproduce test bench lint docs clean
+.PHONY: setup reproduce test bench lint docs clean blasfeo
 
 setup: $(STAMP)
 
@@ -26,6 +26,14 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/auvmpc bench
+
+# A BLASFEO built for x86-64 with AVX2 and FMA, for export-c --blasfeo and AUVMPC_BLASFEO_DIR
+# (docs/onboard.md): fetched once from the package registry, never at run time.
+BLASFEO_HASWELL := $(VENV)/blasfeo-x64-haswell
+blasfeo: $(BLASFEO_HASWELL)/libblasfeo.so
+
+$(BLASFEO_HASWELL)/libblasfeo.so: $(STAMP)
+	$(BIN)/python benchmarks/blasfeo_haswell.py --out $(BLASFEO_HASWELL)
 
 # The documentation site (mkdocs-material + mkdocstrings) into site/; strict: a broken
 # link or reference fails the build.

@@ -113,6 +113,54 @@ def test_the_fast_first_pass_lands_near_the_exact_step(preset, penalty, slots):
         np.testing.assert_allclose(ours, theirs, rtol=0, atol=FAST_STEP_RTOL * scale)
 
 
+def _step_with(program: MultipleShootingProgram, settings) -> compiled_qp_step.CompiledQpStep:
+    N, n, slots = program.horizon, program.n_thrusters, program.n_slots
+    return compiled_qp_step.compiled_qp_step(stage_qp(program), N, n, slots, tuple(settings))
+
+
+# hpipm_settings(): the bound for infinity, the number of passes, then per pass the mode,
+# iteration limit, mu0, tolerance, warm start and hot-start limit: the fast pass first.
+_GENERAL, _HOT_LIMIT = 2, 5
+
+
+@pytest.mark.parametrize(("preset", "penalty", "slots"), CASES[:2])
+def test_a_hot_try_that_fails_leaves_no_trace(preset, penalty, slots):
+    """The driver keeps the previous solution while the hot-started try runs and puts it back
+    when the try does not solve: the fast pass then starts where it would have without it,
+    and the step is the same to the bit."""
+    program = _program(preset, penalty, slots)
+    settings = list(hpipm_settings())
+    assert settings[_GENERAL + _HOT_LIMIT] == 3, "the fast pass has a hot try"
+    settings[_GENERAL + _HOT_LIMIT] = 1  # one iteration from an unrelated QP's solution
+    tried, plain = _step_with(program, settings), _step_with(program, settings)
+    solver, rng = SparseRealTimeIteration(program, compiled=False), np.random.default_rng(3)
+    for _ in range(3):  # each started from the previous, unrelated, QP's solution
+        arguments = _qp_arguments(program, solver, rng)
+        status, iterations = tried(*arguments, hot_start=True)
+        plain_status, plain_iterations = plain(*arguments, hot_start=False)
+        assert status == plain_status == 0
+        assert iterations == plain_iterations + 1, "the try ran one iteration and failed"
+        np.testing.assert_array_equal(tried.dz, plain.dz)
+        np.testing.assert_array_equal(tried.dv, plain.dv)
+
+
+@pytest.mark.parametrize(("preset", "penalty", "slots"), CASES)
+def test_the_hot_try_solves_a_repeated_qp_without_iterating(preset, penalty, slots):
+    """Hot-started from the solution of the same QP, the try starts inside the fast pass's
+    tolerance and needs no iteration (the first solve, warm from zero, took 8-17), and the
+    step is the same, within that tolerance."""
+    program = _program(preset, penalty, slots)
+    solver = SparseRealTimeIteration(program, compiled=True)
+    step = solver._step
+    arguments = _qp_arguments(program, solver, np.random.default_rng(5))
+    assert step(*arguments, hot_start=True)[0] == 0
+    first = step.dz.copy(), step.dv.copy()
+    assert step(*arguments, hot_start=True) == (0, 0)
+    for again, before in zip((step.dz, step.dv), first, strict=True):
+        scale = np.abs(before).max()
+        np.testing.assert_allclose(again, before, rtol=0, atol=FAST_STEP_RTOL * scale)
+
+
 def test_non_finite_iterate_is_refused_before_the_solver():
     program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
     solver = SparseRealTimeIteration(program, compiled=True)

@@ -59,7 +59,9 @@ class CompiledQpStep:
         library.auvmpc_rti_create.restype = ctypes.c_void_p
         library.auvmpc_rti_create.argtypes = [ctypes.c_int] * 6 + [_DOUBLE_P, ctypes.c_int]
         library.auvmpc_rti_step.restype = ctypes.c_int
-        library.auvmpc_rti_step.argtypes = [ctypes.c_void_p] * 15
+        library.auvmpc_rti_step.argtypes = (
+            [ctypes.c_void_p] * 12 + [ctypes.c_int] + [ctypes.c_void_p] * 3
+        )
         library.auvmpc_rti_free.argtypes = [ctypes.c_void_p]
         library.auvmpc_rti_memory_bytes.restype = ctypes.c_long
         library.auvmpc_rti_memory_bytes.argtypes = [ctypes.c_void_p]
@@ -84,10 +86,9 @@ class CompiledQpStep:
         self._iterations = np.zeros(1, dtype=np.intc)
         self.dz = np.zeros((horizon + 1, qp.states))
         self.dv = np.zeros((horizon, qp.inputs))
-        self._addresses = (
-            self._handle,
-            *(a.ctypes.data for a in (*self._inputs, self.dz, self.dv, self._iterations)),
-        )
+        inputs = (self._handle, *(a.ctypes.data for a in self._inputs))
+        results = tuple(a.ctypes.data for a in (self.dz, self.dv, self._iterations))
+        self._arguments = {hot: (*inputs, int(hot), *results) for hot in (False, True)}
         self._step = library.auvmpc_rti_step
 
     def __del__(self) -> None:
@@ -101,12 +102,13 @@ class CompiledQpStep:
         data and the stage buffers."""
         return int(self._library.auvmpc_rti_memory_bytes(self._handle))
 
-    def __call__(self, *arrays: np.ndarray) -> tuple[int, int]:
+    def __call__(self, *arrays: np.ndarray, hot_start: bool = False) -> tuple[int, int]:
         """(X, P, F, x_hat, F_prev, ref, W, d, slots, used, movable) in the layout of
-        hpipm_ocp_step.c -> (status, iterations)."""
+        hpipm_ocp_step.c -> (status, iterations). ``hot_start``: the first QP of a sample
+        (solvers/hpipm.py, hpipm_settings)."""
         for buffer, values in zip(self._inputs, arrays, strict=True):
             np.copyto(buffer, values)  # shapes as allocated, or a ValueError
-        status = self._step(*self._addresses)
+        status = self._step(*self._arguments[bool(hot_start)])
         return int(status), int(self._iterations[0])
 
 

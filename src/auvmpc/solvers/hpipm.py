@@ -23,9 +23,13 @@ _TOLERANCE = 1e-8
 _SPEED, _ROBUST = 1.0, 3.0
 # HPIPM's warm start: 0 cold, 1 from the primal solution it holds (the previous QP's).
 _COLD, _WARM = 0.0, 1.0
-# The compiled step's first pass (hpipm_settings): mode, mu0, tolerance, warm start. The
+# The compiled step's fast pass (hpipm_settings): mode, mu0, tolerance, warm start. The
 # tolerance is that of one real-time iteration, which the next sample's iteration corrects.
 _FAST_PASS = (_SPEED, 1e2, 1e-4, _WARM)
+# Iterations of the fast pass's hot-started try: where the active set barely moves between
+# samples one iteration solves the QP; where it moves, a hot start can wander (up to 31
+# iterations when uncapped, docs/performance.md), so the fast pass takes over after 3.
+_HOT_PASS_LIMIT = 3.0
 _OPTIONS = {
     "mode": "robust",
     "mu0": _MU0,
@@ -69,24 +73,34 @@ def hpipm_settings(
 ) -> tuple[float, ...]:
     """Settings of the compiled HPIPM driver (solvers/hpipm_ocp_step.c): the bound standing
     for infinity, the number of passes, then per pass the mode, iteration limit, mu0,
-    tolerance and warm start.
+    tolerance, warm start and the iterations of a hot-started try before the pass.
 
-    The first pass is HPIPM's ``speed`` mode from mu0 = 1e2 to residuals of 1e-4, started
-    from the controller's previous QP solution (_FAST_PASS); the second, only on a failure of
-    the first, ``robust`` from a cold start to 1e-8, as everywhere else. Measured on the
-    paper scenarios (docs/performance.md): 1 interior-point iteration at the median on
-    ``paper-ideal`` and 2 on ``paper-obstacles``, against 4 and 5 for ``speed`` from a cold
-    start to 1e-8; the thrust step differs from the 1e-8 one by 2e-5 N at the median (at
-    most 0.03 N, on a transient) and the runs' RMS errors by under 0.02 %. ``speed_abs``,
-    which stops on the duality measure alone, was 20 % faster but up to 10 % off the exact
-    step on perturbed QPs (tests/test_compiled_qp_step.py), against 1.4 % for ``speed``.
-    ``robust_only``: the second pass alone (the QP solved to 1e-8 every time).
+    The fast pass is HPIPM's ``speed`` mode from mu0 = 1e2 to residuals of 1e-4, started from
+    the controller's previous QP solution (_FAST_PASS); the robust one, only on a failure of
+    the first, ``robust`` from a cold start to 1e-8, as everywhere else. For the first QP of a
+    sample (the caller's ``hot_start``) the fast pass first tries at most _HOT_PASS_LIMIT
+    iterations hot-started from that solution's primal and dual parts, and, where they do not
+    solve the QP, starts as it would have without them. Not for a sample's later SQP steps,
+    whose QPs' solutions shrink towards zero: a held solution within the tolerance of the
+    next one would be taken again, and the cold start's 10 steps stopped 2e-6 N from the NLP's
+    optimum (4.6e-8 N without: tests/test_nmpc.py).
+
+    Measured on the exported step (docs/performance.md): the hot try takes the BlueROV2
+    lawnmower's median step from 2 interior-point iterations to 1 (4.06 M -> 2.74 M
+    instructions) and costs ``paper-obstacles`` 6 % (its median stays at 2). The fast pass
+    alone was 1 iteration at the median on ``paper-ideal`` and 2 on ``paper-obstacles``,
+    against 4 and 5 for ``speed`` from a cold start to 1e-8, its thrust step 2e-5 N from the
+    1e-8 one at the median (at most 0.03 N, on a transient) and the runs' RMS errors within
+    0.02 %. ``speed_abs``, which stops on the duality measure alone, was 20 % faster but up to
+    10 % off the exact step on perturbed QPs (tests/test_compiled_qp_step.py), against 1.4 %
+    for ``speed``. ``robust_only``: the robust pass alone (the QP solved to 1e-8 every time).
     """
     limit = float(iteration_limit or ITERATION_LIMIT)
-    robust = (_ROBUST, limit, _MU0, _TOLERANCE, _COLD)
+    robust = (_ROBUST, limit, _MU0, _TOLERANCE, _COLD, 0.0)
     if robust_only:
         return (_INFINITY, 1.0, *robust)
-    return (_INFINITY, 2.0, _FAST_PASS[0], limit, *_FAST_PASS[1:], *robust)
+    fast = (_FAST_PASS[0], limit, *_FAST_PASS[1:], min(_HOT_PASS_LIMIT, limit))
+    return (_INFINITY, 2.0, *fast, *robust)
 
 
 def slack_scale(penalty: float) -> float:

@@ -17,9 +17,10 @@
  * nx_0 = 0). As a bound lb = ub it was ten two-sided inequalities for the interior point
  * (measured: the most iterations of one step on paper-obstacles fell from 123 to 22).
  *
- * The QP is solved by up to two interior-point passes, each with its own settings (solvers/
- * hpipm.py, hpipm_settings, says which and why): a fast one, started from this controller's
- * previous QP solution, then, only if that fails, a robust one from HPIPM's cold start.
+ * The QP is solved by up to three interior-point passes, each with its own settings (solvers/
+ * hpipm.py, hpipm_settings, says which and why): a few hot-started iterations from this
+ * controller's previous QP solution, primal and dual; if they do not solve it, a fast pass
+ * from the previous primal solution; only if that fails, a robust one from a cold start.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -61,9 +62,10 @@ static void release(void *memory) { (void) memory; }
 #define NOT_FINITE (-1)
 #define EVALUATION_FAILED (-2)
 #define MAX_PASSES 2
-#define SETTINGS_PER_PASS 5
+#define SETTINGS_PER_PASS 6
 #define GENERAL_SETTINGS 2 /* infinity, passes */
-#define MEMORY_SLOTS (3 + 2 * MAX_PASSES)
+#define MEMORY_SLOTS (4 + 2 * MAX_PASSES)
+#define HOT_START 3 /* HPIPM's warm_start value: from the primal and dual solution it holds */
 
 enum { OUT_A, OUT_B, OUT_b, OUT_Q, OUT_S, OUT_R, OUT_q, OUT_r, OUT_C, OUT_D, OUT_lg, OUT_ug,
        OUT_lbu, OUT_ubu, OUT_lbp_next, OUT_ubp_next };
@@ -74,7 +76,9 @@ typedef struct {
     struct d_ocp_qp_dim dim;
     struct d_ocp_qp qp;
     struct d_ocp_qp_sol sol;
+    struct d_ocp_qp_sol start; /* the previous solution, kept while a hot-started pass runs */
     int passes; /* interior-point settings tried in turn until one solves */
+    int hot_limit[MAX_PASSES]; /* iterations of a pass's hot-started try, 0: none */
     struct d_ocp_qp_ipm_arg arg[MAX_PASSES];
     struct d_ocp_qp_ipm_ws ws[MAX_PASSES];
     void *hpipm_memory[MEMORY_SLOTS];
@@ -146,8 +150,9 @@ static int sizes_agree(int nz, int nv, int ng) {
 /* Sizes: horizon N, thrusters n, obstacle slots S, and the stage QP's nz, nv, ng (checked
  * against the generated functions). settings (count values): the bound standing for
  * infinity, the number of passes, then per pass HPIPM's mode, iteration limit, mu0,
- * tolerance (stationarity, equality, inequality, complementarity) and warm start (0: cold,
- * 1: from the primal solution HPIPM holds, the previous call's). NULL when memory runs out or
+ * tolerance (stationarity, equality, inequality, complementarity), warm start (0: cold,
+ * 1: from the primal solution HPIPM holds, the previous call's) and the iterations of a
+ * hot-started try before it (from that solution's primal and dual parts; 0: none). NULL when memory runs out or
  * the sizes or settings disagree. */
 void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const double *settings,
                         int count) {
@@ -189,12 +194,14 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     release(nx); release(nu); release(nbx); release(nbu); release(rows); release(ns);
     void *qp_memory = ok ? allocate(s, d_ocp_qp_memsize(&s->dim)) : NULL;
     void *sol_memory = qp_memory ? allocate(s, d_ocp_qp_sol_memsize(&s->dim)) : NULL;
-    if (!sol_memory) {
+    void *start_memory = sol_memory ? allocate(s, d_ocp_qp_sol_memsize(&s->dim)) : NULL;
+    if (!start_memory) {
         auvmpc_rti_free(s);
         return NULL;
     }
     d_ocp_qp_create(&s->dim, &s->qp, qp_memory);
     d_ocp_qp_sol_create(&s->dim, &s->sol, sol_memory);
+    d_ocp_qp_sol_create(&s->dim, &s->start, start_memory);
 
     for (int p = 0; p < s->passes; ++p) {
         const double *pass = settings + GENERAL_SETTINGS + SETTINGS_PER_PASS * p;
@@ -215,6 +222,7 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
         d_ocp_qp_ipm_arg_set_tol_ineq(&tolerance, arg);
         d_ocp_qp_ipm_arg_set_tol_comp(&tolerance, arg);
         d_ocp_qp_ipm_arg_set_warm_start(&warm_start, arg);
+        s->hot_limit[p] = (int) pass[5];
         void *ws_memory = allocate(s, d_ocp_qp_ipm_ws_memsize(&s->dim, arg));
         if (!ws_memory) {
             auvmpc_rti_free(s);
@@ -298,12 +306,42 @@ static int has_nan(const double *v, int size) {
     return 0;
 }
 
+/* Pass p with its own settings, from where sol stands; HPIPM's status (0: solved). */
+static int run_pass(Step *s, int p, int *iterations) {
+    int status, pass_iterations;
+    d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg[p], &s->ws[p]);
+    d_ocp_qp_ipm_get_status(&s->ws[p], &status);
+    d_ocp_qp_ipm_get_iter(&s->ws[p], &pass_iterations);
+    *iterations += pass_iterations;
+    return status;
+}
+
+/* Pass p hot-started from the solution sol holds, primal and dual, for at most its hot limit
+ * of iterations: whether that solved the QP. If not, sol is put back as it was, so that the
+ * pass itself starts where it would have without the try. Same settings and workspace as the
+ * pass (its memory is sized for the pass's larger iteration limit). */
+static int hot_try(Step *s, int p, int *iterations) {
+    struct d_ocp_qp_ipm_arg *arg = &s->arg[p];
+    int limit = arg->iter_max, warm_start = arg->warm_start, hot = HOT_START;
+    d_ocp_qp_sol_copy_all(&s->sol, &s->start);
+    d_ocp_qp_ipm_arg_set_iter_max(&s->hot_limit[p], arg);
+    d_ocp_qp_ipm_arg_set_warm_start(&hot, arg);
+    int status = run_pass(s, p, iterations);
+    d_ocp_qp_ipm_arg_set_iter_max(&limit, arg);
+    d_ocp_qp_ipm_arg_set_warm_start(&warm_start, arg);
+    if (status != 0) d_ocp_qp_sol_copy_all(&s->start, &s->sol);
+    return status == 0;
+}
+
 /* The HPIPM status (0: solved), NOT_FINITE when the QP data are not finite,
- * EVALUATION_FAILED when the generated functions report an error. */
+ * EVALUATION_FAILED when the generated functions report an error. hot_start: try each pass
+ * hot-started first, where its settings give a hot limit (the first QP of a sample: hpipm.py,
+ * hpipm_settings, says why not the others). */
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
-                    const double *movable, double *dz, double *dv, int *iterations) {
+                    const double *movable, int hot_start, double *dz, double *dv,
+                    int *iterations) {
     Step *s = (Step *) handle;
     const int N = s->N, n = s->n, nz = s->nz, nv = s->nv;
     *iterations = 0;
@@ -359,11 +397,8 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
 
     int status = 0;
     for (int p = 0; p < s->passes; ++p) {
-        int pass_iterations;
-        d_ocp_qp_ipm_solve(&s->qp, &s->sol, &s->arg[p], &s->ws[p]);
-        d_ocp_qp_ipm_get_status(&s->ws[p], &status);
-        d_ocp_qp_ipm_get_iter(&s->ws[p], &pass_iterations);
-        *iterations += pass_iterations;
+        if (hot_start && s->hot_limit[p] > 0 && hot_try(s, p, iterations)) break;
+        status = run_pass(s, p, iterations);
         if (status == 0) break;
     }
     memcpy(dz, s->fixed, nz * sizeof(double));

@@ -108,9 +108,12 @@ class SparseRealTimeIteration:
                  sample.disturbance, sample.slots, used, self._movable)  # fmt: skip
         total, status, slack = 0, "not run", np.zeros(N)
         with np.errstate(over="ignore", invalid="ignore"):
-            for _ in range(iterations):
+            for sqp_step in range(iterations):
                 previous = np.vstack([sample.previous, thrust])
-                code, used_iterations = self._step(states, previous, thrust, *fixed)
+                hot_start = sqp_step == 0 and not cold
+                code, used_iterations = self._step(
+                    states, previous, thrust, *fixed, hot_start=hot_start
+                )
                 total += used_iterations
                 if code == _NOT_FINITE:
                     # A diverged iterate: never hand NaN to the solver.
@@ -343,8 +346,10 @@ class CasadiQpStep:
         self.dz = np.zeros((N + 1, nz))
         self.dv = np.zeros((N, nv))
 
-    def __call__(self, X, P, F, x_hat, previous, reference, weight, force, slots, used, movable):
-        """The arguments of CompiledQpStep, in its (row-major) layout -> (status, iterations)."""
+    def __call__(self, X, P, F, x_hat, previous, reference, weight, force, slots, used, movable,
+                 hot_start=False):  # fmt: skip
+        """The arguments of CompiledQpStep, in its (row-major) layout -> (status, iterations).
+        Every QP is solved to 1e-8 from HPIPM's cold start: ``hot_start`` changes nothing."""
         N, nz, nv = self._sizes
         H, g, A, lba, uba, lbx, ubx = self._data(
             X.T, P.T, F.T, x_hat, previous, reference.T, weight.T, force, slots.T, used, movable

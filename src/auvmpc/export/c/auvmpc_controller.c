@@ -36,7 +36,8 @@ void *auvmpc_rti_create(int horizon, int n, int slots, int nz, int nv, int ng,
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
-                    const double *movable, double *dz, double *dv, int *iterations);
+                    const double *movable, int hot_start, double *dz, double *dv,
+                    int *iterations);
 long auvmpc_rti_memory_bytes(const void *handle);
 
 static const double thrust_lower[NT] = AUVMPC_THRUST_LOWER;
@@ -421,8 +422,8 @@ static int solve(const Iterate *guess, int iterations, int cold) {
         memcpy(c.P[1], it->thrust, sizeof it->thrust);
         int code = auvmpc_rti_step(c.qp, it->states[0], c.P[0], it->thrust[0], c.state,
                                    c.previous, c.reference[0], c.weights[0], c.disturbance,
-                                   c.slots[0], c.used, c.movable, c.dz[0], c.dv[0],
-                                   &used_iterations);
+                                   c.slots[0], c.used, c.movable, pass == 0 && !cold, c.dz[0],
+                                   c.dv[0], &used_iterations);
         c.iterations += used_iterations;
         if (code != SOLVED) return -1; /* NOT_FINITE data, an evaluation error, HPIPM failed */
         if (!all_finite(c.dz[0], (N + 1) * NZ) || !all_finite(c.dv[0], N * NV)) return -1;
