@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +25,12 @@ needs_cc = pytest.mark.skipif(
 )
 # Every move free, as export-c exports it; a short run keeps the test quick.
 _FREE = ["controller.type=nmpc", "controller.control_horizon=null", "duration=5"]
+
+
+_LIGHT_LAWNMOWER = str(
+    Path(__file__).parents[1] / "benchmarks" / "scenarios" / "bluerov2-light-lawnmower.yaml"
+)
+_DISC_AHEAD = "obstacles=[{center: [10.0, 0.2], radius: 0.6}]"
 
 
 def _run(tmp_path, scenario: str, overrides: list[str]):
@@ -48,6 +55,8 @@ def _run(tmp_path, scenario: str, overrides: list[str]):
                 "{center: [7.0, 2.0], radius: 0.4}]"
             ],
         ),
+        # every cold start diverges when re-simulated: the multiple-shooting retry in C too
+        (_LIGHT_LAWNMOWER, [_DISC_AHEAD]),
     ],
 )
 def test_exported_controller_reproduces_python_commands(tmp_path, scenario, overrides):

@@ -333,7 +333,9 @@ def test_solver_failure_after_a_good_step_applies_the_plan_clipped(mode, monkeyp
     failed = SimpleNamespace(
         iterate=None, resume=None, iterations=0, solve_time_s=0.0, status="injected failure"
     )
-    monkeypatch.setattr(controller._solver, "solve", lambda guess, sample, iterations, cold: failed)
+    monkeypatch.setattr(
+        controller._solver, "solve", lambda guess, sample, iterations, cold, **_: failed
+    )
     max_step = model.thrust_rate_limit * SAMPLE_TIME
     applied = first.thrust
     for k in (1, 2, 3):
@@ -477,4 +479,23 @@ def test_offset_free_tracking_under_current_and_inertia_uncertainty(level):
     assert metrics["transient_s"] == 30.0
     assert metrics["rms_position_error_after_transient_m"] < DISTURBED_RMS_AFTER_TRANSIENT_M
     assert metrics["final_position_error_m"] < DISTURBED_FINAL_ERROR_M
+    _assert_no_violations(metrics)
+
+
+def test_a_cold_start_that_diverges_when_re_simulated_recovers_by_multiple_shooting():
+    """The light BlueROV2 (yaw inertia 0.28 kg m2, yaw damping -0.07) with a disc 10 m ahead:
+    every cold start's re-simulated rollout spun up and the real-time nmpc fell back on all
+    40 samples of these 20 s (before the multiple-shooting retry); now it solves every one."""
+    from pathlib import Path
+
+    scenario = Path(__file__).parents[1] / "benchmarks/scenarios/bluerov2-light-lawnmower.yaml"
+    overrides = [
+        "controller.type=nmpc",
+        "controller.control_horizon=null",
+        "duration=20",
+        "obstacles=[{center: [10.0, 0.2], radius: 0.6}]",
+    ]
+    metrics = simulate(load_scenario(str(scenario), overrides)).metrics
+    assert metrics["fallback_steps"] == 0
+    assert metrics["min_obstacle_clearance_m"] >= 0
     _assert_no_violations(metrics)

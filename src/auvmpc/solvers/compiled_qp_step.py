@@ -104,8 +104,8 @@ class CompiledQpStep:
 
     def __call__(self, *arrays: np.ndarray, hot_start: bool = False) -> tuple[int, int]:
         """(X, P, F, x_hat, F_prev, ref, W, d, slots, used, movable) in the layout of
-        hpipm_ocp_step.c -> (status, iterations). ``hot_start``: the first QP of a sample
-        (solvers/hpipm.py, hpipm_settings)."""
+        hpipm_ocp_step.c -> (status, iterations). ``hot_start``: the first QP of a sample that
+        continues a previous solution (solvers/hpipm.py, hpipm_settings)."""
         for buffer, values in zip(self._inputs, arrays, strict=True):
             np.copyto(buffer, values)  # shapes as allocated, or a ValueError
         status = self._step(*self._arguments[bool(hot_start)])

@@ -152,8 +152,8 @@ static int sizes_agree(int nz, int nv, int ng) {
  * infinity, the number of passes, then per pass HPIPM's mode, iteration limit, mu0,
  * tolerance (stationarity, equality, inequality, complementarity), warm start (0: cold,
  * 1: from the primal solution HPIPM holds, the previous call's) and the iterations of a
- * hot-started try before it (from that solution's primal and dual parts; 0: none). NULL when memory runs out or
- * the sizes or settings disagree. */
+ * hot-started try before it (from that solution's primal and dual parts; 0: none). NULL
+ * when memory runs out or the sizes or settings disagree. */
 void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const double *settings,
                         int count) {
     if (N < 1 || nz != NX + n || count < GENERAL_SETTINGS || !sizes_agree(nz, nv, ng))
@@ -335,8 +335,8 @@ static int hot_try(Step *s, int p, int *iterations) {
 
 /* The HPIPM status (0: solved), NOT_FINITE when the QP data are not finite,
  * EVALUATION_FAILED when the generated functions report an error. hot_start: try each pass
- * hot-started first, where its settings give a hot limit (the first QP of a sample: hpipm.py,
- * hpipm_settings, says why not the others). */
+ * hot-started first, where its settings give a hot limit (the first QP of a sample that
+ * continues a previous solution: hpipm.py, hpipm_settings, says why not the others). */
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
@@ -397,7 +397,10 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
 
     int status = 0;
     for (int p = 0; p < s->passes; ++p) {
-        if (hot_start && s->hot_limit[p] > 0 && hot_try(s, p, iterations)) break;
+        if (hot_start && s->hot_limit[p] > 0 && hot_try(s, p, iterations)) {
+            status = 0;
+            break;
+        }
         status = run_pass(s, p, iterations);
         if (status == 0) break;
     }

@@ -93,11 +93,14 @@ class SparseRealTimeIteration:
         self._movable, self._weights = movable, weights
 
     def reset(self) -> None:
-        """Nothing is carried between samples."""
+        """Nothing to reset: the compiled step keeps HPIPM's last solution (its hot start),
+        which the next sample's QP only starts from."""
 
-    def solve(self, guess, sample, iterations: int, cold: bool):
+    def solve(self, guess, sample, iterations: int, cold: bool, resimulate: bool | None = None):
         """``iterations`` SQP steps from ``guess``; on a cold start the states are re-simulated
-        from x_hat under the new thrusts after each step (module docstring of nmpc)."""
+        from x_hat under the new thrusts after each step (module docstring of nmpc), unless
+        ``resimulate`` is False (the multiple-shooting update, as from a shifted solution)."""
+        resimulate = cold if resimulate is None else resimulate
         program = self.program
         n, N = program.n_thrusters, program.horizon
         started = time.perf_counter()
@@ -129,7 +132,7 @@ class SparseRealTimeIteration:
                 thrust = thrust + dz[:N, 6:] + dv[:, :n]  # dF_k = dp_k + w_k (stage_qp)
                 if program.n_slots:
                     slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
-                if cold:
+                if resimulate:
                     disturbance = np.tile(sample.disturbance[:, None], (1, N))
                     rolled = program.rollout(sample.state, thrust.T, disturbance)
                     states = np.vstack([sample.state, np.asarray(rolled).T])

@@ -411,8 +411,9 @@ static void reference_guess(Iterate *guess) {
 }
 
 /* `iterations` Gauss-Newton SQP steps from `guess` (SparseRealTimeIteration.solve); 0 and
- * c.iterate on success. On a cold start the states are re-simulated after each step. */
-static int solve(const Iterate *guess, int iterations, int cold) {
+ * c.iterate on success. With `resimulate` (a cold start's first try) the states are
+ * re-simulated after each step, else moved by the QP's step (multiple shooting). */
+static int solve(const Iterate *guess, int iterations, int cold, int resimulate) {
     Iterate *it = &c.iterate;
     if (it != guess) *it = *guess;
     for (int k = 0; k < N; ++k) c.slack[k] = 0.0;
@@ -432,7 +433,7 @@ static int solve(const Iterate *guess, int iterations, int cold) {
                 it->thrust[k][i] = it->thrust[k][i] + c.dz[k][NX + i] + c.dv[k][i];
         if (S > 0)
             for (int k = 0; k < N; ++k) c.slack[k] = c.dv[k][NV - 1] / AUVMPC_SLACK_SCALE;
-        if (cold) {
+        if (resimulate) {
             memcpy(it->states[0], c.state, sizeof c.state);
             for (int k = 0; k < N; ++k)
                 if (model_step(it->states[k], it->thrust[k], c.disturbance, it->states[k + 1]))
@@ -489,12 +490,16 @@ static int propose(const double *measured, const double *reference,
         if (turns != 0.0)
             for (int k = 0; k <= N; ++k) c.iterate.states[k][2] += TWO_PI * turns;
     }
-    int failed = solve(&c.iterate, iterations, cold);
+    int retry = AUVMPC_ITERATIONS > AUVMPC_COLD_ITERATIONS ? AUVMPC_ITERATIONS
+                                                          : AUVMPC_COLD_ITERATIONS;
+    int failed = solve(&c.iterate, iterations, cold, cold);
     if (failed && !cold) { /* the shifted iterate can be what failed: again from the reference */
-        int retry = AUVMPC_ITERATIONS > AUVMPC_COLD_ITERATIONS ? AUVMPC_ITERATIONS
-                                                              : AUVMPC_COLD_ITERATIONS;
         reference_guess(&c.iterate);
-        failed = solve(&c.iterate, retry, 1);
+        failed = solve(&c.iterate, retry, 1, 1);
+    }
+    if (failed) { /* the re-simulated cold start can diverge: multiple shooting (NonlinearMpc) */
+        reference_guess(&c.iterate);
+        failed = solve(&c.iterate, retry, 1, 0);
     }
     if (!failed && !shift(&c.iterate, &c.next_guess)) c.has_next_guess = 1;
     if (!failed && !all_finite(c.iterate.thrust[0], N * NT)) failed = 1;
