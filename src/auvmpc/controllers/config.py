@@ -182,8 +182,8 @@ class ControllerConfig(StrictModel):
     )
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
         default=None,
-        description="cap on QP iterations (IPOPT iterations for nmpc full: below ~20 every "
-        "step falls back); hitting it counts as a solver failure",
+        description="cap on QP iterations per interior-point pass (IPOPT iterations for nmpc "
+        "full: below ~20 every step falls back); hitting it counts as a solver failure",
     )
     solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
         default=None,

@@ -166,41 +166,30 @@ class NonlinearMpc(ShelledController):
             return Proposal(plan=None, disturbance=disturbance)
         sample = self.program.sample(state, previous, reference, disturbance, observation.obstacles)
         cold = self._guess is None
+        cold_iterations = max(_COLD_START_ITERATIONS, self.config.linearisation_iterations)
         if cold:
-            guess = self.program.reference_guess(sample)
-            iterations = max(_COLD_START_ITERATIONS, self.config.linearisation_iterations)
+            guess, iterations = self.program.reference_guess(sample), cold_iterations
         else:
             guess = _aligned_guess(self._guess, state)
             iterations = self.config.linearisation_iterations
         solution = self._solver.solve(guess, sample, iterations, cold)
-        if solution.iterate is None and not cold and self.config.nmpc_mode is NmpcMode.REAL_TIME:
-            # The shifted iterate itself can be what failed (a prediction that left the
-            # range where the model's RK4 step is stable, and went non-finite): start again
-            # from the reference within the same sample, as after a reset. Measured on the
-            # random-vehicle sweep: 1 fallback in 100 vehicles without it, none with it.
-            retry = self._solver.solve(
-                self.program.reference_guess(sample),
-                sample,
-                max(_COLD_START_ITERATIONS, self.config.linearisation_iterations),
-                True,
-            )
-            retry.solve_time_s += solution.solve_time_s
-            solution = retry
-        if solution.iterate is None and self.config.nmpc_mode is NmpcMode.REAL_TIME:
-            # The re-simulated cold start can itself diverge: on a light, weakly yaw-damped
-            # vehicle (bluerov2-light-lawnmower with a disc ahead) the open-loop rollout of a
-            # 15 s plan spins up, and every sample fell back. Once more from the reference
-            # with the multiple-shooting update, which keeps the states where the QP puts
-            # them: that run then had 0 fallbacks (tests/test_nmpc.py).
-            retry = self._solver.solve(
-                self.program.reference_guess(sample),
-                sample,
-                max(_COLD_START_ITERATIONS, self.config.linearisation_iterations),
-                True,
-                resimulate=False,
-            )
-            retry.solve_time_s += solution.solve_time_s
-            solution = retry
+        if self.config.nmpc_mode is NmpcMode.REAL_TIME:
+            # Failed: start again from the reference within the same sample, as after a reset,
+            # each try only if every one before failed. (1) After a shifted iterate (it can be
+            # what failed: a prediction that left the range where the model's RK4 step is
+            # stable), re-simulated as a cold start: on the random-vehicle sweep 1 fallback in
+            # 100 vehicles without it, none with it. (2) With the multiple-shooting update: the
+            # re-simulated rollout of a 15 s plan can itself spin up (the light BlueROV2 with a
+            # disc ahead fell back on every sample; 0 fallbacks with it, tests/test_nmpc.py).
+            for resimulate in ([] if cold else [True]) + [False]:
+                if solution.iterate is not None:
+                    break
+                retry = self._solver.solve(
+                    self.program.reference_guess(sample), sample, cold_iterations, True,
+                    resimulate=resimulate,
+                )  # fmt: skip
+                retry.solve_time_s += solution.solve_time_s
+                solution = retry
         # Where the next solve starts: this solution shifted, also when the shell finds it
         # late (a solve that needs more than one sample gets it over several), or the last
         # point of a solve stopped at its limits; after any other failure, cold (its

@@ -74,7 +74,17 @@ class CondensedRealTimeIteration:
     def reset(self) -> None:
         """Nothing is carried between samples except the backend's active set."""
 
-    def solve(self, guess: Iterate, sample: Sample, iterations: int, cold: bool) -> Solution:
+    def solve(
+        self,
+        guess: Iterate,
+        sample: Sample,
+        iterations: int,
+        cold: bool,
+        resimulate: bool | None = None,
+    ) -> Solution:
+        """As SparseRealTimeIteration.solve: on a cold start the states are re-simulated after
+        each step unless ``resimulate`` is False."""
+        simulate_states = cold if resimulate is None else resimulate
         started = time.perf_counter()
         iterate: Iterate | None = guess
         total = 0
@@ -82,7 +92,7 @@ class CondensedRealTimeIteration:
         # A diverging iterate overflows to inf/NaN; the QP backend then reports a failure.
         with np.errstate(over="ignore", invalid="ignore"):
             for _ in range(iterations):
-                iterate, count, status = self._step(iterate, sample, simulate_states=cold)
+                iterate, count, status = self._step(iterate, sample, simulate_states)
                 total += count
                 if iterate is None:
                     break
