@@ -48,6 +48,7 @@ class ControlStatus(StrEnum):
     OK = "ok"
     RELAXED = "relaxed"  # obstacle constraints softened by slack to stay feasible
     FALLBACK = "fallback"  # solver failed or timed out: previous plan's next move applied
+    RECOVERY = "recovery"  # the shell's stabilising feedback applied (plan used up, or a spin)
     SATURATED = "saturated"  # command clipped to the thrust or rate limits
 
 

@@ -155,14 +155,21 @@ class BaselineController(ShelledController):
 
     preview_steps = 1  # one sample ahead: the mean reference acceleration over the hold
 
-    def __init__(self, model: VehicleParams, sample_time: float, gains: BaselineConfig) -> None:
+    def __init__(
+        self,
+        model: VehicleParams,
+        sample_time: float,
+        gains: BaselineConfig,
+        check_actuation: bool = True,
+    ) -> None:
         if not (math.isfinite(sample_time) and sample_time > 0):
             raise ValueError(f"sample_time must be finite and > 0, got {sample_time!r}")
         if not isinstance(gains, BaselineConfig):
             raise TypeError(f"gains must be a BaselineConfig, got {type(gains).__name__}")
-        model.require_full_actuation(
-            "baseline", "it commands surge, sway and yaw forces through the pseudo-inverse"
-        )
+        if check_actuation:  # the shell's recovery takes the least-squares force instead
+            model.require_full_actuation(
+                "baseline", "it commands surge, sway and yaw forces through the pseudo-inverse"
+            )
         self.model = model
         self.sample_time = float(sample_time)
         self.limits = horizontal_limits(model)
@@ -184,6 +191,11 @@ class BaselineController(ShelledController):
     def disturbance_estimate(self) -> np.ndarray:
         """Integral state ``[X, Y, N]``: world-frame force (N) and yaw moment (N m), a copy."""
         return np.array([*self._force_integral, self._moment_integral])
+
+    def assume_disturbance(self, disturbance: np.ndarray) -> None:
+        """Start the integral state at a known ``[X, Y, N]`` (world force N, moment N m)."""
+        self._force_integral = np.array(disturbance[:2], dtype=float)
+        self._moment_integral = float(disturbance[2])
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:

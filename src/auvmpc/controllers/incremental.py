@@ -104,6 +104,14 @@ class IncrementalMpc(ShelledController):
         moves = qp.shifted_moves(self._plan, previous)
         started = time.perf_counter()
         solution = self._solve(observation, state, disturbance, reference, previous, moves, None)
+        if not solution.solved and self._predicted is not None:
+            # Re-initialise within the same sample, as after a reset: linearised afresh along
+            # the model's run under the held thrust (the shifted plan may be what failed).
+            self._predicted = None
+            cold = qp.shifted_moves(None, previous)
+            retry = self._solve(observation, state, disturbance, reference, previous, cold, None)
+            retry.iterations += solution.iterations
+            solution, moves = retry, cold
         if solution.solved:
             correction = self.plan_check(
                 observation, state, disturbance, qp.plan(solution.moves, previous), solution.states

@@ -129,6 +129,7 @@ class NonlinearMpc(ShelledController):
             self._solver = CondensedRealTimeIteration(self.program, config)
         else:  # unreachable: NmpcMode has no other member
             raise NotImplementedError(config.nmpc_mode)
+        self._rescue: IpoptSolver | None = None  # the real-time mode's last resort
         self._observer = (
             DisturbanceObserver(model, config.sample_time, config.observer, config.model_substeps)
             if config.offset_free
@@ -190,6 +191,16 @@ class NonlinearMpc(ShelledController):
                 )  # fmt: skip
                 retry.solve_time_s += solution.solve_time_s
                 solution = retry
+            if solution.iterate is None:
+                # (3) The same program solved to convergence from the reference, within half a
+                # sample: the converged OCP tracked every hard-survey case where a real-time
+                # iteration's cold starts could not come back (docs/recovery.md).
+                rescue = self._rescue_solver().solve(
+                    self.program.reference_guess(sample), sample, 0, True
+                )
+                rescue.solve_time_s += solution.solve_time_s
+                rescue.iterations += solution.iterations
+                solution = rescue
         # Where the next solve starts: this solution shifted, also when the shell finds it
         # late (a solve that needs more than one sample gets it over several), or the last
         # point of a solve stopped at its limits; after any other failure, cold (its
@@ -206,6 +217,19 @@ class NonlinearMpc(ShelledController):
             predicted_states=None if iterate is None else iterate.states.copy(),
             disturbance=disturbance,
         )
+
+    def _rescue_solver(self) -> IpoptSolver:
+        """IPOPT on the same program, stopped after half a sample (built when first needed)."""
+        if self._rescue is None:
+            limit_ms = 500.0 * self.sample_time
+            if self.config.solver_time_limit_ms is not None:
+                limit_ms = min(limit_ms, self.config.solver_time_limit_ms)
+            config = self.config.model_copy(update={"solver_time_limit_ms": limit_ms})
+            self._rescue = IpoptSolver(self.program, config)
+        return self._rescue
+
+    def forget_plan(self) -> None:
+        self._next_guess = None
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Propagate the estimator with the applied thrust; move the warm start on."""

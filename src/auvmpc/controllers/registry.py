@@ -11,6 +11,7 @@ from auvmpc.controllers.config import (
     ControllerType,
     DepthControllerConfig,
 )
+from auvmpc.controllers.recovery import StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.models.vehicle import VehicleParams
 
@@ -26,6 +27,15 @@ REGISTRY: dict[str, tuple[str, str]] = {
     DEPTH_MPC: ("auvmpc.controllers.depth_mpc", "DepthMpc"),  # kind: depth, 6-DOF's depth
 }
 
+# The optimising horizontal controllers, whose shell recovers with the stabilising feedback
+# (the baseline is that feedback; the depth MPC's recovery is its previous plan).
+RECOVERED_TYPES = (
+    ControllerType.MPC,
+    ControllerType.LTV_MPC,
+    ControllerType.NMPC,
+    ControllerType.DO_MPC,
+)
+
 
 def build_controller(
     config: ControllerConfig | DepthControllerConfig,
@@ -39,6 +49,11 @@ def build_controller(
     name (a depth controller's ``water_depth_m``)."""
     module, name = REGISTRY[config.type]
     controller_class = getattr(importlib.import_module(module), name)
-    return controller_class.from_config(
+    controller = controller_class.from_config(
         model, config.for_vehicle(model), obstacle_count=obstacle_count, **surroundings
     )
+    if config.type in RECOVERED_TYPES:
+        controller.recovery = StabilisingFeedback(
+            model, controller.sample_time, config.vehicle_radius + config.obstacle_margin
+        )
+    return controller

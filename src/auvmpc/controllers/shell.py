@@ -4,11 +4,14 @@ A back end (the paper's MPC, LTV-MPC, NMPC, the do-mpc yardstick, the depth MPC)
 *proposes* a thrust plan; :class:`ShelledController` decides what is applied:
 
 * a proposal that failed, is not finite, or came later than ``solver_time_limit_ms`` is
-  replaced by the previous plan's next move (FALLBACK);
+  replaced by the previous plan's next move (FALLBACK) for at most
+  :data:`PLAN_FALLBACK_STEPS` samples in a row; after that, without a plan, and
+  whenever the vehicle spins, by a stabilising feedback (RECOVERY, controllers/recovery.py)
+  where the controller has one (the horizontal MPCs), and the back end starts again cold;
 * whatever is applied is projected into the hard thrust and thrust-rate box, so no back end
   can command thrust outside the limits;
 * the status says what happened (OK, RELAXED when a soft constraint's slack is active,
-  SATURATED when the projection moved the command, FALLBACK);
+  SATURATED when the projection moved the command, FALLBACK, RECOVERY);
 * ``info`` has the same keys for every back end (:data:`INFO_KEYS`).
 """
 
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,8 +31,20 @@ from auvmpc.controllers.base import (
     Observation,
     next_planned_move,
 )
+from auvmpc.models.layout import HORIZONTAL
 
-__all__ = ["INFO_KEYS", "Proposal", "ShelledController"]
+if TYPE_CHECKING:
+    from auvmpc.controllers.recovery import StabilisingFeedback
+
+__all__ = [
+    "INFO_KEYS",
+    "PLAN_FALLBACK_STEPS",
+    "Proposal",
+    "SPIN_ANGLE_PER_SAMPLE_RAD",
+    "SPIN_REFERENCE_FACTOR",
+    "ShelledController",
+    "spin_limit",
+]
 
 # A slack below this is solver tolerance, not a relaxed constraint (m for obstacle rows).
 SLACK_ACTIVE = 1e-6
@@ -40,11 +56,32 @@ INFO_KEYS = (
     "max_slack",  # largest slack of the soft constraints (m for obstacles)
     "solve_ms",  # the back end's own solve time
     "relaxed",  # 1 if a soft constraint was relaxed
-    "fallback",  # 1 if the previous plan's next move was applied
+    "fallback",  # 1 if no optimiser's proposal was applied (the plan's move or the feedback)
     "dist_X_hat",  # the world-frame force and moment the prediction used (N, N, N m);
     "dist_Y_hat",  # zero without an estimator
     "dist_N_hat",
+    "recovery",  # 1 if the shell's stabilising feedback was applied
+    "spinning",  # 1 while the shell judges the vehicle to spin (recovery.spin_limit)
 )
+_YAW_RATE = HORIZONTAL.index("r")
+
+# Samples a failed optimiser may be covered by its last plan before the feedback takes over:
+# the plan was feasible and rate-limited when it was made, and the back end re-initialises
+# in the meantime (the bar: never more than 3 samples in a row without an optimiser).
+PLAN_FALLBACK_STEPS = 2
+# A spin is a yaw rate the sampled controller cannot see: more heading per sample than this
+# (rad; 1.5 rad/s at 0.5 s; on 50 hard-survey cases the real-time NMPC stayed below 1.0 rad/s
+# but where it spun, ltv-mpc's spins reached 2-7 rad/s, docs/recovery.md) ...
+SPIN_ANGLE_PER_SAMPLE_RAD = 0.75
+# ... and more than this times the fastest reference yaw rate in the preview (a tight turn
+# is not a spin).
+SPIN_REFERENCE_FACTOR = 3.0
+
+
+def spin_limit(observation: Observation, sample_time: float) -> float:
+    """The yaw rate above which the vehicle counts as spinning at this sample (rad/s)."""
+    turn = float(np.max(np.abs(observation.reference[:, _YAW_RATE]), initial=0.0))
+    return max(SPIN_ANGLE_PER_SAMPLE_RAD / sample_time, SPIN_REFERENCE_FACTOR * turn)
 
 
 @dataclass
@@ -70,6 +107,9 @@ class ShelledController(Controller):
 
     limits: ActuatorLimits
     solver_time_limit_ms: float | None = None
+    # What the shell applies when no optimiser is in control (set by the registry for the
+    # horizontal MPCs); None: the previous plan's moves, then the last command held.
+    recovery: StabilisingFeedback | None = None
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> ShelledController:
@@ -86,10 +126,15 @@ class ShelledController(Controller):
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Told the command actually applied, and whether the proposal was discarded."""
 
+    def forget_plan(self) -> None:
+        """The next proposal must start cold (not from this sample's solution): called
+        before :meth:`applied` when the shell's feedback took over."""
+
     # -- the shell ---------------------------------------------------------------------
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._previous = np.array(initial_thrust, dtype=float)
         self._plan: np.ndarray | None = None  # what a fallback follows
+        self._unsolved = 0  # samples in a row without an applied proposal
         self.restart(initial_state, initial_thrust)
 
     @property
@@ -103,18 +148,34 @@ class ShelledController(Controller):
         limit = self.solver_time_limit_ms
         late = limit is not None and 1e3 * proposal.solve_time_s > limit
         usable = proposal.plan is not None and bool(np.all(np.isfinite(proposal.plan)))
-        if usable and not late:
+        spinning = self._spin(observation)
+        recovered = False
+        if usable and not late and not spinning:
             wanted = proposal.plan[0]
             self._plan = np.array(proposal.plan, dtype=float)
+            self._unsolved = 0
             fell_back = False
+            if self.recovery is not None:
+                self.recovery.release()
         else:
-            wanted, self._plan = next_planned_move(self._plan, previous)
+            self._unsolved += 1
             fell_back = True
+            recovered = self.recovery is not None and (
+                spinning or self._plan is None or self._unsolved > PLAN_FALLBACK_STEPS
+            )
+            if recovered:
+                wanted = self.recovery.command(observation, previous, proposal.disturbance)
+                self._plan = None
+                self.forget_plan()
+            else:
+                wanted, self._plan = next_planned_move(self._plan, previous)
         command, _ = self.limits.project(wanted, previous, self.sample_time)
         self._previous = command
         self.applied(command, fell_back)
         relaxed = not fell_back and proposal.max_slack > SLACK_ACTIVE
-        if fell_back:
+        if recovered:
+            status = ControlStatus.RECOVERY
+        elif fell_back:
             status = ControlStatus.FALLBACK
         elif relaxed:
             status = ControlStatus.RELAXED
@@ -136,7 +197,17 @@ class ShelledController(Controller):
                 "solve_ms": 1e3 * proposal.solve_time_s,
                 "relaxed": float(relaxed),
                 "fallback": float(fell_back),
-                **dict(zip(INFO_KEYS[5:], map(float, disturbance), strict=True)),
+                **dict(zip(INFO_KEYS[5:8], map(float, disturbance), strict=True)),
+                "recovery": float(recovered),
+                "spinning": float(spinning),
                 **proposal.details,
             },
         )
+
+    def _spin(self, observation: Observation) -> bool:
+        """Whether the vehicle spins (:func:`spin_limit`) at this sample; only where there is
+        a feedback to stop it. No hysteresis: the optimiser gets each calm sample back."""
+        if self.recovery is None:
+            return False
+        yaw_rate = abs(float(observation.state[_YAW_RATE]))
+        return yaw_rate > spin_limit(observation, self.sample_time)

@@ -84,8 +84,11 @@ def actuation_metrics(
     )
     rate_violations = np.abs(increments) > max_step + LIMIT_TOLERANCE_N
     solve = log.solve_ms
-    fallback = np.array([status == ControlStatus.FALLBACK for status in log.status], dtype=bool)
+    # No optimiser in control: the previous plan's move, or the shell's feedback.
+    unsolved = (ControlStatus.FALLBACK, ControlStatus.RECOVERY)
+    fallback = np.array([status in unsolved for status in log.status], dtype=bool)
     relaxed_steps = sum(status == ControlStatus.RELAXED for status in log.status)
+    recovery_steps = sum(status == ControlStatus.RECOVERY for status in log.status)
     return {
         "max_abs_thrust_N": float(np.abs(log.thrust).max()) if log.steps else 0.0,
         "max_abs_thrust_rate_N_per_s": float(np.abs(increments).max() / log.sample_time)
@@ -100,6 +103,7 @@ def actuation_metrics(
         "solver_failures": int(fallback.sum()),
         "fallback_steps": int(fallback.sum()),
         "relaxed_steps": int(relaxed_steps),
+        "recovery_steps": int(recovery_steps),
         "longest_fallback_streak": longest_run(fallback),
     }
 
@@ -152,7 +156,12 @@ def compute_metrics(
         **_pick(common, "solve_ms_median", "solve_ms_p99", "solve_ms_max", "thrust_effort_N2s"),
         **tightening_metrics(log),
         **_pick(
-            common, "solver_failures", "fallback_steps", "relaxed_steps", "longest_fallback_streak"
+            common,
+            "solver_failures",
+            "fallback_steps",
+            "relaxed_steps",
+            "recovery_steps",
+            "longest_fallback_streak",
         ),
         "max_abs_yaw_rate_rad_per_s": float(yaw_rate.max()),
         "transient_s": float(transient_s),

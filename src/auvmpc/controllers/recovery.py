@@ -1,0 +1,82 @@
+"""What the safety shell applies when no optimiser is in control: a stabilising feedback.
+
+After a failed solve the shell (controllers/shell.py) follows the last good plan for at
+most ``PLAN_FALLBACK_STEPS`` samples (it was feasible and rate-limited when it was made, and
+the back end re-initialises meanwhile); after that, and whenever the vehicle spins, it applies
+:class:`StabilisingFeedback`: the classical tracker of controllers/baseline.py (feedback
+linearisation on the nominal model, PD, yaw first in the allocation, inside the hard limits)
+without its integrators, fed the optimiser's own disturbance estimate instead, tracking the
+reference or, where the way there crosses an obstacle, holding station. It damps the yaw
+rate and any drift on any vehicle, since its gains are accelerations and the model supplies
+the inertia. Never blind plan-following for long, never zero thrust.
+
+The shell also applies it while the vehicle spins (``shell.spin_limit``), then starts the
+optimiser again cold (docs/recovery.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from auvmpc.controllers.base import Observation
+from auvmpc.controllers.baseline import BaselineConfig, BaselineController
+from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.vehicle import VehicleParams
+
+__all__ = ["StabilisingFeedback"]
+
+_POSITION, _HEADING = HORIZONTAL.position, HORIZONTAL.heading
+
+
+class StabilisingFeedback:
+    """The shell's recovery law for horizontal vehicles (module docstring).
+
+    It tracks the reference, where the optimiser's cold start converges best, unless the
+    straight way there crosses an obstacle's keep-out disc (the feedback knows no
+    obstacles): then it holds station where that was first found, at the reference's
+    heading, until the optimiser is back or the way is clear."""
+
+    def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
+        gains = BaselineConfig(along_ki=0.0, cross_ki=0.0, heading_ki=0.0)
+        self._law = BaselineController(model, sample_time, gains, check_actuation=False)
+        self._keep_out_extra = keep_out_extra  # vehicle radius + margin, m
+        self._hold: np.ndarray | None = None  # (2,) world position held, m
+
+    def release(self) -> None:
+        """The optimiser is in control again: the next hold starts afresh."""
+        self._hold = None
+
+    def command(
+        self, observation: Observation, previous: np.ndarray, disturbance: np.ndarray | None
+    ) -> np.ndarray:
+        """Thrust for the coming sample, inside the hard limits around ``previous``."""
+        state = np.asarray(observation.state, dtype=float)
+        target = observation.reference[:2]
+        if self._blocked(state[_POSITION], target[0, _POSITION], observation):
+            if self._hold is None:
+                self._hold = state[_POSITION].copy()
+            target = np.zeros((2, HORIZONTAL.size))
+            target[:, _POSITION] = self._hold
+            target[:, _HEADING] = observation.reference[0, _HEADING]
+        else:
+            self._hold = None
+        self._law.restart(state, previous)
+        if disturbance is not None and np.size(disturbance) == 3:
+            self._law.assume_disturbance(np.ravel(disturbance))
+        towards = Observation(observation.k, observation.t, state, target)
+        return self._law.propose(towards, previous).plan[0]
+
+    def _blocked(self, start: np.ndarray, end: np.ndarray, observation: Observation) -> bool:
+        """Whether the segment start-end passes inside any obstacle's keep-out disc."""
+        way = end - start
+        length2 = float(way @ way)
+        for obstacle in observation.obstacles:
+            along = (
+                0.0
+                if length2 == 0.0
+                else float(np.clip((obstacle.center - start) @ way / length2, 0.0, 1.0))
+            )
+            gap = float(np.hypot(*(start + along * way - obstacle.center)))
+            if gap < obstacle.radius + self._keep_out_extra:
+                return True
+        return False
