@@ -91,6 +91,8 @@ __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc"
 # real-time iteration then goes on from a (nearly) converged solution, as it assumes.
 # Measured: 10 steps bring the first thrust within 5e-8 N of IPOPT's on the paper oval.
 _COLD_START_ITERATIONS = 10
+# IPOPT iterations of the last-resort solve after every real-time try failed.
+RESCUE_IPOPT_ITERATIONS = 150
 
 
 class NonlinearMpc(ShelledController):
@@ -192,11 +194,12 @@ class NonlinearMpc(ShelledController):
                 retry.solve_time_s += solution.solve_time_s
                 solution = retry
             if solution.iterate is None:
-                # (3) The same program solved to convergence from the reference, within half a
-                # sample: the converged OCP tracked every hard-survey case where a real-time
-                # iteration's cold starts could not come back (docs/recovery.md).
+                # (3) The same program solved by IPOPT (docs/recovery.md): it backtracks where a
+                # real-time iteration's rollout leaves the model's stable range (non-finite
+                # states on light, strongly powered vehicles), and from the vehicle at rest
+                # where it is, since the reference may run through the disc it is avoiding.
                 rescue = self._rescue_solver().solve(
-                    self.program.reference_guess(sample), sample, 0, True
+                    self.program.resting_guess(sample), sample, 0, True
                 )
                 rescue.solve_time_s += solution.solve_time_s
                 rescue.iterations += solution.iterations
@@ -219,12 +222,12 @@ class NonlinearMpc(ShelledController):
         )
 
     def _rescue_solver(self) -> IpoptSolver:
-        """IPOPT on the same program, stopped after half a sample (built when first needed)."""
+        """IPOPT on the same program, at most RESCUE_IPOPT_ITERATIONS iterations (an
+        iteration limit, not a wall-clock one, so that runs repeat to the bit); built when
+        first needed."""
         if self._rescue is None:
-            limit_ms = 500.0 * self.sample_time
-            if self.config.solver_time_limit_ms is not None:
-                limit_ms = min(limit_ms, self.config.solver_time_limit_ms)
-            config = self.config.model_copy(update={"solver_time_limit_ms": limit_ms})
+            limit = self.config.qp_iteration_limit or RESCUE_IPOPT_ITERATIONS
+            config = self.config.model_copy(update={"qp_iteration_limit": limit})
             self._rescue = IpoptSolver(self.program, config)
         return self._rescue
 

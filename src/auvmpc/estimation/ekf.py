@@ -235,6 +235,11 @@ class AugmentedEkf:
         self.covariance = condition_covariance(propagated, self._floor, self._ceiling)
 
 
+# Times the vehicle's thrust authority (per axis) above which a disturbance estimate is
+# implausible: a current the vehicle could not hold against at twice its full thrust.
+PLAUSIBLE_AUTHORITY_MULTIPLE = 2.0
+
+
 class DisturbanceObserver:
     """EKF on [x; d_world] for the horizontal model; exact Jacobians from CasADi."""
 
@@ -253,6 +258,13 @@ class DisturbanceObserver:
             np.diag(np.concatenate([measurement, np.square(config.initial_disturbance_std)])),
             angle_index=HORIZONTAL.heading,
         )
+        # Beyond this the estimate is no force the water could exert on the vehicle: the
+        # filter has diverged (seen after a spin: 1.9e5 N on a 100 N vehicle, kept by
+        # every later step), and starts again from the measurement.
+        authority = np.asarray(model.thrust_authority)
+        self._plausible_force = PLAUSIBLE_AUTHORITY_MULTIPLE * float(authority[:2].max())
+        self._plausible_moment = PLAUSIBLE_AUTHORITY_MULTIPLE * float(authority[2])
+        self.restarts = 0
 
     def reset(self, initial_state: np.ndarray) -> None:
         self._filter.reset(np.concatenate([np.asarray(initial_state, float), np.zeros(ND)]))
@@ -265,7 +277,12 @@ class DisturbanceObserver:
     def correct(self, measured_state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fuse a measurement; returns (state estimate (6,), disturbance estimate (3,))."""
         estimate = self._filter.correct(measured_state)
-        return estimate[:NX], estimate[NX:]
+        force, moment = np.hypot(*estimate[NX : NX + 2]), abs(estimate[NX + 2])
+        if not (force <= self._plausible_force and moment <= self._plausible_moment):
+            self.restarts += 1
+            self.reset(measured_state)
+            estimate = self._filter.estimate
+        return estimate[:NX].copy(), estimate[NX:].copy()
 
     def predict(self, applied_thrust: np.ndarray) -> None:
         """Propagate the estimate over one sample with the thrust actually applied."""

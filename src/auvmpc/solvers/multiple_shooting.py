@@ -261,6 +261,21 @@ class MultipleShootingProgram:
             slack=np.zeros((self.horizon, self.n_slots)),
         )
 
+    def resting_guess(self, sample: Sample) -> Iterate:
+        """A guess that stays where the vehicle is: every state the measured position and
+        heading at rest, the last thrust held, no slack (outside every disc the vehicle is
+        outside of, where the reference may pass through one)."""
+        rest = np.array(sample.state, dtype=float)
+        rest[HORIZONTAL.body_velocity] = 0.0
+        rest[HORIZONTAL.index("r")] = 0.0
+        states = np.tile(rest, (self.horizon + 1, 1))
+        states[0] = sample.state
+        return Iterate(
+            states=states,
+            thrust=np.tile(sample.previous, (self.n_moves, 1)),
+            slack=np.zeros((self.horizon, self.n_slots)),
+        )
+
     def clearances(self, states: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """Distance minus reach (ny, slots) at steps 1..ny, and its gradient in p (ny, slots, 2)."""
         steps = self.sample_time * np.arange(1, self.horizon + 1)
