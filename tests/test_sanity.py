@@ -241,3 +241,29 @@ def test_start_in_an_obstacle_is_printed_and_stored(monkeypatch, capsys, tmp_pat
     assert code == 0
     assert stderr.startswith("warning: obstacles.0: the start position (2, 8.3) is 0.3 m")
     assert json.loads((out / "run.json").read_text())["warnings"][0].startswith("obstacles.0")
+
+
+# The before-stop smoke's light-yaw vehicle: yaw turn-up 0.009 s, 54 of them in 0.5 s.
+LIGHT_YAW = (
+    "vehicle={name: light, mass: 20.0, m11: 26.0, m22: 34.0, Iz_rb: 0.12, Iz_added: 0.06, "
+    "Xu: -5.0, Xuu: -120.0, Yv: -8.0, Yvv: -60.0, Nr: -0.1, Nrr: -0.5, thrust_limits: "
+    "[-150, 150], thrust_rate_limit: 300, thrusters: [{position: [0.18, 0.12], angle_deg: -45},"
+    " {position: [0.18, -0.12], angle_deg: 45}, {position: [-0.18, 0.12], angle_deg: -135},"
+    " {position: [-0.18, -0.12], angle_deg: 135}]}"
+)
+
+
+@pytest.mark.parametrize("controller", ["ltv-mpc", "mpc"])
+def test_a_linearised_controller_too_slow_for_the_yaw_is_warned_in_one_line(controller):
+    from auvmpc.models.vehicle import turn_up_time
+    from auvmpc.scenario.sanity import LINEARISED_TURN_UP_SAMPLES
+
+    resolved = load_scenario("paper-ideal", [LIGHT_YAW, f"controller.type={controller}"])
+    turn_up = turn_up_time(resolved.model)
+    assert 0.5 > LINEARISED_TURN_UP_SAMPLES * turn_up  # the case the rule is for
+    warnings = [w for w in preflight(resolved) if w.startswith("controller.sample_time")]
+    assert len(warnings) == 1 and "\n" not in warnings[0]
+    assert f"{turn_up:.3g} s" in warnings[0] and controller in warnings[0]
+    # the default controller predicts on the exact model: nothing to warn of
+    nmpc = load_scenario("paper-ideal", [LIGHT_YAW, "controller.type=nmpc"])
+    assert not [w for w in preflight(nmpc) if w.startswith("controller.sample_time")]

@@ -80,7 +80,6 @@ def test_apply_override_creates_missing_mappings():
         (["plant.scale.Iz_rb=-0.5"], "plant.scale.Iz_rb", "-0.5"),
         (["plant.scale.hull_colour=2"], "plant.scale.hull_colour", "2"),
         (["obstacles.0.radius=-1"], "obstacles.0.radius", "-1"),
-        (["duration=100.2"], "duration", "100.2"),  # not a whole number of samples
         (["initial_thrust=[20, 0, 0, 0]"], "initial_thrust", "20"),  # above the 15 N limit
         (["seed=-1"], "seed", "-1"),
         (["nonsense"], "--set", "nonsense"),
@@ -144,9 +143,21 @@ def test_new_scenarios_default_to_the_better_tracker_paper_ones_keep_the_papers(
     }
     path = tmp_path / "fresh.yaml"
     path.write_text(yaml.safe_dump(data))
-    fresh = load_scenario(path).scenario.controller
-    assert fresh.type == "ltv-mpc"
+    resolved = load_scenario(path)
+    fresh = resolved.scenario.controller
+    assert fresh.type == "nmpc" and fresh.nmpc_mode == "real-time"
+    assert resolved.choices["type"]["value"] == "nmpc"  # said, with its reason
     assert fresh.move_schedule() == tuple(range(fresh.prediction_horizon))
     for name in PAPER_SCENARIOS:
         paper = load_scenario(name).scenario.controller
         assert paper.type == "mpc" and paper.move_schedule() == (0, 1)
+
+
+def test_a_duration_between_samples_is_rounded_up_with_a_note():
+    """A user types 100.2 s at 0.5 s samples: the run lasts 100.5 s and says so."""
+    from auvmpc.scenario.sanity import preflight
+
+    resolved = load_scenario("paper-obstacles", ["duration=100.2"])
+    assert resolved.scenario.duration == 100.5
+    notes = [w for w in preflight(resolved) if w.startswith("duration:")]
+    assert len(notes) == 1 and "100.2" in notes[0] and "100.5" in notes[0]

@@ -35,7 +35,10 @@ SUPPORT_ROUND_OFF_TOL = 1e-9
 # (12, 1), so the vehicle (0.5 m disc, 0.1 m margin) passes on the -y side; a constant 10 N
 # current along +y pushes it towards the disc; the prediction does not know the current
 # (offset_free false) and the bound says 10 N.
+# The tightening is ltv-mpc's and mpc's (the default nmpc refuses a bound).
+LTV_MPC = "controller.type=ltv-mpc"
 SIDE_PASS = [
+    LTV_MPC,
     "obstacle_sensor=null",
     "obstacles=[{center: [12.0, 1.0], radius: 0.5}]",
     "disturbance.current_force_world=[0.0, 10.0]",
@@ -157,8 +160,8 @@ def _forced_zero_tightening(monkeypatch):
 @pytest.mark.parametrize(
     "overrides",
     [
-        ["duration=40"],
-        ["duration=40", "vehicle=bluerov2-heavy", "controller.R=null"],
+        ["duration=40", LTV_MPC],
+        ["duration=40", LTV_MPC, "vehicle=bluerov2-heavy", "controller.R=null"],
         ["duration=40", "controller.type=mpc"],
     ],
     ids=["ltv-mpc-jmse2210", "ltv-mpc-bluerov2-heavy", "mpc-jmse2210"],
@@ -207,6 +210,7 @@ def test_worst_direction_current_beside_an_obstacle_tightened_keeps_clear():
     ("overrides", "message"),
     [
         (["controller.disturbance_bound.force_N=-1"], r"controller\.disturbance_bound\.force_N"),
+        (["controller.disturbance_bound.force_N=1"], "nmpc does not tighten"),  # the default
         (["controller.disturbance_bound.moment_Nm=inf"], r"disturbance_bound\.moment_Nm"),
         (["controller.disturbance_bound.forse_N=1"], "unknown key"),
         (
@@ -224,7 +228,12 @@ def test_bad_bounds_are_refused_in_one_line(overrides, message):
 def test_underactuated_vehicle_refuses_a_bound_in_one_line():
     scenario = load_scenario(
         "encounter-head-on",
-        ["vehicle=videoray-pro3", "controller.R=null", "controller.disturbance_bound.force_N=1"],
+        [
+            LTV_MPC,
+            "vehicle=videoray-pro3",
+            "controller.R=null",
+            "controller.disturbance_bound.force_N=1",
+        ],
     )
     with pytest.raises(ConfigError, match="disturbance_bound") as caught:
         simulate(scenario)

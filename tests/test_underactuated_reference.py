@@ -15,7 +15,6 @@ from auvmpc.controllers.config import (
     ControllerConfig,
     default_sample_time,
 )
-from auvmpc.errors import ConfigError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.experiments.run import simulate
 from auvmpc.models.vehicle import (
@@ -179,9 +178,12 @@ def test_an_omitted_sample_time_is_chosen_and_recorded():
     assert given.for_vehicle(resolved.model).sample_time == 0.5
 
 
-def test_a_duration_the_chosen_sample_does_not_divide_is_refused():
-    with pytest.raises(ConfigError, match="duration"):
-        ResolvedScenario(validate_scenario(scenario_data(duration=60.1)), Path.cwd())
+def test_a_duration_the_chosen_sample_does_not_divide_is_rounded_up_with_a_note():
+    resolved = ResolvedScenario(validate_scenario(scenario_data(duration=60.1)), Path.cwd())
+    sample_time = resolved.scenario.controller.sample_time
+    steps = resolved.scenario.duration / sample_time
+    assert steps == round(steps) and 60.1 < resolved.scenario.duration < 60.1 + sample_time
+    assert len(resolved.notes) == 1 and resolved.notes[0].startswith("duration: 60.1 s")
 
 
 def test_the_force_estimate_of_an_underactuated_vehicle_is_slower(videoray):

@@ -184,6 +184,42 @@ def run(
 
 
 @app.command()
+def explain(
+    scenario: Annotated[str, typer.Argument(help="built-in name or path to a scenario YAML")],
+    controller: Annotated[
+        str | None, typer.Option("--controller", help="as for run: a type or a bench label")
+    ] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="override any field: a.b.c=value (value read as YAML)"),
+    ] = None,
+) -> None:
+    """Say what a run of this scenario would use that it does not state, and why, and what the
+    checks before a run find; run nothing."""
+    from rich.table import Table
+
+    from auvmpc.api import controller_overrides
+    from auvmpc.scenario import load_scenario
+    from auvmpc.scenario.sanity import preflight
+
+    resolved = load_scenario(scenario, [*controller_overrides(controller), *(set_ or [])])
+    choices = getattr(resolved, "choices", {})
+    table = Table(title=f"{resolved.scenario.name}: chosen for {resolved.model.name}")
+    for column in ("setting", "value", "why"):
+        table.add_column(column, overflow="fold")
+    for name, choice in choices.items():
+        table.add_row(f"controller.{name}", str(choice["value"]), choice["why"])
+    if choices:
+        console.print(table)
+    else:
+        console.print("the scenario states every setting the vehicle would decide")
+    warnings = preflight(resolved)
+    _warn(warnings)
+    if not warnings:
+        console.print("checks before a run: nothing to report")
+
+
+@app.command()
 def reproduce(
     out: Annotated[Path, typer.Option("--out", help="folder for runs, tables, figures")] = Path(
         "results/paper"

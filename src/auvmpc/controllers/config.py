@@ -107,8 +107,9 @@ class ControllerConfig(StrictModel):
     """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
 
     type: ControllerType = Field(
-        default=ControllerType.LTV_MPC,
-        description="which controller (default: the best tracker of docs/paper-reproduction.md)",
+        default=ControllerType.NMPC,
+        description="which controller (default: the real-time nmpc, the one that measured best "
+        "on the hard-survey sweep, docs/robustness-sweeps.md)",
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
@@ -286,6 +287,58 @@ class ControllerConfig(StrictModel):
         if observer is not self.observer:
             update["observer"] = observer
         return self.model_copy(update=update) if update else self
+
+    def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
+        """What :meth:`for_vehicle` (and the schema's defaults) chose for ``model`` among the
+        settings this config leaves out, each as ``{"value": ..., "why": "..."}``: run.json's
+        ``choices`` and ``auvmpc explain`` (docs/tuning.md has the rules)."""
+        filled = self.for_vehicle(model)
+        given = self.model_fields_set
+        chosen: dict[str, dict[str, Any]] = {}
+        if "type" not in given:
+            chosen["type"] = {
+                "value": str(filled.type),
+                "why": "the default: the real-time nmpc tracked the hard-survey cases where "
+                "ltv-mpc spun and was lost, at a few times less cost (docs/recovery.md)",
+            }
+        if self.sample_time is None:
+            turn_up = turn_up_time(model)
+            why = (
+                f"underactuated: at most {TURN_UP_SAMPLES:g} x its yaw turn-up time "
+                f"{turn_up:.3g} s, on the grid {list(SAMPLE_TIME_GRID_S)}"
+                if model.underactuated
+                else "fully actuated: the paper's 0.5 s (it pushes sideways without turning; "
+                f"yaw turn-up time {turn_up:.3g} s, a spin is the safety shell's to stop)"
+            )
+            chosen["sample_time"] = {"value": filled.sample_time, "why": why}
+        if self.model_substeps is None:
+            rates = damping_rates(model, _STABILITY_SPEED, _STABILITY_SPEED, _STABILITY_YAW_RATE)
+            chosen["model_substeps"] = {
+                "value": filled.model_substeps,
+                "why": f"fewest RK4 steps per sample stable for its damping up to "
+                f"{_STABILITY_SPEED:g} m/s and {_STABILITY_YAW_RATE:g} rad/s (fastest rate "
+                f"{max(rates):.3g} /s, RK4 stable below {RK4_STABLE_STEP:g} per step)",
+            }
+        if self.R is None:
+            chosen["R"] = {
+                "value": list(filled.R),
+                "why": f"{THRUST_MOVE_COST:g} / h^2, h half the thrust range "
+                f"({(model.thrust_max - model.thrust_min) / 2.0:.4g} N): moving a thruster by h "
+                "costs the same on any vehicle",
+            }
+        if "prediction_horizon" not in given:
+            chosen["prediction_horizon"] = {
+                "value": filled.prediction_horizon,
+                "why": f"the default 30 samples ({30 * filled.sample_time:g} s ahead)",
+            }
+        observer = self.observer
+        if observer.initial_disturbance_std is None or observer.disturbance_rate_std is None:
+            chosen["observer"] = {
+                "value": filled.observer.model_dump(mode="json"),
+                "why": "disturbance statistics as fractions of its thrust authority "
+                f"{[round(float(a), 4) for a in model.thrust_authority]} (N, N, N m)",
+            }
+        return chosen
 
     def ocp(self, model: VehicleParams) -> TrackingOcp:
         """The tracking problem this configuration poses for ``model``'s horizontal thrusters."""

@@ -80,6 +80,7 @@ class _Finished:
             "plant": self.simulated_plant().model_dump(mode="json"),
             "model": self.resolved.model.model_dump(mode="json"),
             "metrics": self.metrics,
+            "choices": getattr(self.resolved, "choices", {}),
             "warnings": list(self.warnings),
             "provenance": self.provenance,
         }

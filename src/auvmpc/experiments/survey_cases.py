@@ -153,6 +153,8 @@ def hard_survey_case(rng: np.random.Generator, index: int = 0) -> dict[str, Any]
             "type": "waypoints",
             "points": [[round(float(x), 4), round(float(y), 4)] for x, y in points],
             "speed": round(speed, 4),
+            # a turn the vehicle's size allows: 1 m for the small ones, 1.5 footprints above
+            "corner_radius": round(max(1.0, 1.5 * radius), 3),
         },
         initial_state=[
             round(float(rng.uniform(-0.5, 0.5) * radius), 4),
@@ -174,7 +176,8 @@ def loop_case(rng: np.random.Generator, index: int = 0) -> dict[str, Any]:
     speed = rng.uniform(*SPEED_M_PER_S)
     size = rng.uniform(4.0, 8.0) * scale
     if rng.uniform() < 0.5:
-        reference = {"type": "circle", "center": [0, 0], "radius": round(size, 4), "speed": round(speed, 4)}
+        reference = {"type": "circle", "center": [0, 0], "radius": round(size, 4),
+                     "speed": round(speed, 4)}  # fmt: skip
         initial = [size, 0.0, math.pi / 2]
         length = 2 * math.pi * size
     else:

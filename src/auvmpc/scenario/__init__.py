@@ -19,7 +19,7 @@ from auvmpc.scenario.model import (
     SixDofScenario,
     SixDofSensingConfig,
     check_one_sample_time,
-    check_whole_samples,
+    whole_samples,
 )
 from auvmpc.scenario.resolved import (
     ResolvedDepthScenario,
@@ -42,7 +42,7 @@ __all__ = [
     "apply_override",
     "builtin_scenarios",
     "check_one_sample_time",
-    "check_whole_samples",
+    "whole_samples",
     "load_scenario",
     "planar_twin",
     "scenario_to_dict",

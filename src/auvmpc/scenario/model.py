@@ -32,7 +32,7 @@ __all__ = [
     "SixDofScenario",
     "SixDofSensingConfig",
     "check_one_sample_time",
-    "check_whole_samples",
+    "whole_samples",
 ]
 
 
@@ -91,24 +91,18 @@ class Scenario(StrictModel):
         default=20.0, description="start of the window for the steady-state metrics (s)"
     )
 
-    @model_validator(mode="after")
-    def _whole_samples(self) -> Scenario:
-        # An omitted sample time is checked once the vehicle has chosen it (ResolvedScenario).
-        if self.controller.sample_time is not None:
-            check_whole_samples(self.duration, self.controller.sample_time, FieldError)
-        return self
 
-
-def check_whole_samples(duration: float, sample_time: float, error=ConfigError) -> None:
-    """Raise ``error`` on ``duration`` unless it is a whole number of samples."""
+def whole_samples(duration: float, sample_time: float) -> tuple[float, str | None]:
+    """``duration`` rounded up to a whole number of samples, and a note when it had to be
+    (None when it already was one, to round-off)."""
     steps = duration / sample_time
-    if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-        raise error(
-            "duration",
-            duration,
-            f"not a whole number of samples of {sample_time} s (controller.sample_time; "
-            "chosen for the vehicle when omitted)",
-        )
+    if abs(steps - round(steps)) <= 1e-9 * max(1.0, steps):
+        return duration, None
+    rounded = math.ceil(steps) * sample_time
+    return rounded, (
+        f"duration: {duration:g} s is not a whole number of samples of {sample_time:g} s "
+        f"(controller.sample_time); the run lasts {rounded:g} s ({math.ceil(steps)} samples)"
+    )
 
 
 class SixDofDisturbanceConfig(StrictModel):

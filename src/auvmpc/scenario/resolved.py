@@ -26,7 +26,7 @@ from auvmpc.scenario.model import (
     Scenario,
     SixDofScenario,
     check_one_sample_time,
-    check_whole_samples,
+    whole_samples,
 )
 
 __all__ = [
@@ -57,13 +57,20 @@ class ResolvedScenario:
         # (run.json's scenario) holds every value the controller used. Overrides apply to
         # ``given``: a filled-in value must not outlive a change of vehicle or sample time.
         plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
+        # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
+        self.choices = scenario.controller.choices(self.model)
         self.scenario = scenario = scenario.model_copy(
             update={
                 "controller": scenario.controller.for_vehicle(self.model),
                 "plant": scenario.plant.model_copy(update={"max_step": plant_step}),
             }
         )
-        check_whole_samples(scenario.duration, scenario.controller.sample_time)
+        # What was decided for the user that they should hear of (run.json ``warnings``).
+        self.notes: list[str] = []
+        duration, note = whole_samples(scenario.duration, scenario.controller.sample_time)
+        if note is not None:
+            self.notes.append(note)
+            self.scenario = scenario = scenario.model_copy(update={"duration": duration})
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:

@@ -33,7 +33,7 @@ import numpy as np
 
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
     ResolvedScenario,
@@ -149,7 +149,38 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
     check_memory(resolved)
     if isinstance(resolved, ResolvedDepthScenario):
         return []
-    return _check_start(resolved.scenario) + _check_reference(resolved)
+    return (
+        resolved.notes
+        + _check_start(resolved.scenario)
+        + _check_sample_time(resolved)
+        + _check_reference(resolved)
+    )
+
+
+# Linearised controllers (ltv-mpc, mpc) predict a sample with the model linearised at its
+# start; a yaw that turns up faster than a sample's 1/LINEARISED_TURN_UP_SAMPLES leaves that
+# linearisation within the sample. Measured at 0.5 s (docs/recovery.md): ltv-mpc spun and
+# was lost on hard-survey vehicles with turn-up times of 0.006-0.059 s (8.5-83 per sample);
+# it tracks the BlueROV2 Heavy (0.082 s, 6.1 per sample) on every generality run.
+LINEARISED_TURN_UP_SAMPLES = 8.0
+_LINEARISED = ("mpc", "ltv-mpc")
+
+
+def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
+    """A linearised controller whose sample is long against the vehicle's yaw response."""
+    config = resolved.scenario.controller
+    if str(config.type) not in _LINEARISED:
+        return []
+    turn_up = turn_up_time(resolved.model)
+    if config.sample_time <= LINEARISED_TURN_UP_SAMPLES * turn_up:
+        return []
+    return [
+        f"controller.sample_time: {config.sample_time:g} s is more than "
+        f"{LINEARISED_TURN_UP_SAMPLES:g} x {resolved.model.name}'s yaw turn-up time "
+        f"{turn_up:.3g} s (Iz r_top / M_max): {config.type} linearises once per sample and "
+        f"may spin on it; use nmpc (the default) or a sample time <= "
+        f"{LINEARISED_TURN_UP_SAMPLES * turn_up:.3g} s"
+    ]
 
 
 def _check_start(scenario: Scenario) -> list[str]:
