@@ -57,6 +57,7 @@ def _campaign_from_payload(payload: str) -> Campaign:
         data["base_source"],
         data["base_data"],
         data["base_dir"],
+        controller_overrides=tuple(data["controller_overrides"]),
     )
     return _with_implicit_overrides(campaign)
 
