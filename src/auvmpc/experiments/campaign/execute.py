@@ -27,6 +27,7 @@ from auvmpc.errors import ConfigError
 if TYPE_CHECKING:
     pass
 
+from auvmpc.experiments.campaign.paired import paired_columns
 from auvmpc.experiments.campaign.sampling import (
     plan_run,
     sample_run,
@@ -69,6 +70,9 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
     ``error``, full ``traceback``), never raised: only a broken worker or environment
     makes this function raise.
 
+    With a yardstick, the run is simulated twice (:func:`paired.paired_columns`): its
+    metrics gain the yardstick's, prefixed ``yardstick_``, and the paired columns.
+
     Returns
     -------
     dict
@@ -85,7 +89,10 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
     error = trace = None
     try:
         _, _, data = plan_run(campaign, index)
-        metrics = simulate(_resolve(campaign, data)).metrics
+        result = simulate(_resolve(campaign, data))
+        metrics = result.metrics
+        if campaign.spec.yardstick is not None:
+            metrics = {**metrics, **paired_columns(campaign, index, result)}
         status = "ok"
     except Exception as exc:  # the run's own failure is a result, recorded once
         status, error, trace = "failed", _one_line(exc), traceback.format_exc()
