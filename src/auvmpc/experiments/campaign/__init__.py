@@ -18,8 +18,9 @@ Data flow::
         -> one row per run in DIR/results.sqlite -> load_results(DIR) -> campaign_report
 
 Modules: ``spec`` (campaign files), ``sampling`` (parameters of run k, validation),
-``store`` (SQLite), ``execute`` (workers, local pool, Dask), ``report`` (results and
-report), ``criterion`` (success expressions).
+``store`` (SQLite), ``execute`` (workers, local pool, Dask), ``paired`` (the yardstick twin
+of every run and the report's paired section), ``report`` (results and report),
+``criterion`` (success expressions).
 """
 
 from __future__ import annotations
