@@ -22,7 +22,7 @@ from auvmpc.experiments.campaign import (
     scenario_for_run,
     validate_campaign,
 )
-from auvmpc.experiments.survey_cases import YARDSTICK, make_case
+from auvmpc.experiments.survey_cases import CASE_KINDS, YARDSTICK, make_case
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
 from tests.test_campaign import write_campaign
 from tests.test_cli import run_cli
@@ -90,6 +90,10 @@ def test_a_bad_cases_or_yardstick_field_is_one_line_naming_it(tmp_path, changes,
     with pytest.raises(ConfigError, match=message) as caught:
         validate_campaign(load_campaign(write_campaign(tmp_path, data)))
     assert "\n" not in str(caught.value)
+
+
+def test_the_file_accepts_exactly_the_kinds_survey_cases_generates():
+    assert {kind.value for kind in campaign.spec.CaseKind} == set(CASE_KINDS)
 
 
 # Hashes of the built-in campaigns and of a campaign on a scenario file, computed on main at
