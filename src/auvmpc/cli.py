@@ -134,6 +134,9 @@ def run(
     index: Annotated[
         int | None, typer.Option("--index", help="run index within --from-campaign")
     ] = None,
+    yardstick: Annotated[
+        bool, typer.Option("--yardstick", help="with --from-campaign: the run's yardstick twin")
+    ] = False,
     overwrite: Overwrite = False,
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
@@ -151,16 +154,18 @@ def run(
             raise ConfigError("SCENARIO", scenario, "give a scenario or --from-campaign, not both")
         if index is None:
             raise ConfigError("--index", None, "--from-campaign needs the run index")
-        resolved = scenario_for_run(from_campaign, index, overrides)
+        resolved = scenario_for_run(from_campaign, index, overrides, yardstick=yardstick)
     else:
         if scenario is None:
             raise ConfigError("SCENARIO", None, "name one (or --from-campaign DIR --index K)")
         if index is not None:
             raise ConfigError("--index", index, "only with --from-campaign")
+        if yardstick:
+            raise ConfigError("--yardstick", True, "only with --from-campaign")
         resolved = load_scenario(scenario, overrides)
     name = resolved.scenario.name
     if from_campaign is not None:
-        name = f"{name}-run{index}"
+        name = f"{name}-run{index}{'-yardstick' if yardstick else ''}"
     label = f"{name}-{controller or resolved.scenario.controller.type}"
     out_dir = out if out is not None else Path("runs") / label
     check_output_folder(out_dir, OutputKind.RUN, overwrite=overwrite)  # before, not after
@@ -349,6 +354,14 @@ def campaign(
         bool,
         typer.Option("--overwrite", help="discard an earlier auvmpc campaign there, start over"),
     ] = False,
+    controller: Annotated[
+        str | None,
+        typer.Option(
+            "--controller",
+            help="controller label as for 'run --controller' (e.g. ltv-mpc, nmpc), applied to "
+            "the tested runs, not the yardstick: another campaign, so another --out",
+        ),
+    ] = None,
 ) -> None:
     """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
     from auvmpc.experiments.campaign import campaign_report as make_report
@@ -356,7 +369,7 @@ def campaign(
     from auvmpc.experiments.outputs import OutputKind, check_output_folder
 
     check_output_folder(out, OutputKind.CAMPAIGN, overwrite=overwrite, resume=True)
-    loaded = load_campaign(file)
+    loaded = load_campaign(file, controller=controller)
 
     def kept() -> str:
         rows = count_finished(out)
@@ -387,7 +400,7 @@ def campaign(
         highlight=False,
     )
     if report:
-        result = make_report(out, criterion)
+        result = make_report(out, criterion, workers=workers or 1)
         console.print(result.markdown, highlight=False, markup=False)
     console.print(f"wrote {out}")
 
@@ -407,6 +420,9 @@ def campaign_report(
         str | None, typer.Option("--worst-order", help="desc: largest is worst; asc: smallest")
     ] = None,
     figures: Annotated[bool, typer.Option(help="draw PNG figures")] = True,
+    workers: Annotated[
+        int, typer.Option("--workers", help="processes re-simulating the worst yardstick pairs")
+    ] = 1,
 ) -> None:
     """Success rate with a 95 % interval, metric percentiles, worst runs, plots."""
     from auvmpc.experiments.campaign import campaign_report as make_report
@@ -418,6 +434,7 @@ def campaign_report(
         worst_by=worst_by,
         worst_order=worst_order,
         figures=figures,
+        workers=workers,
     )
     console.print(result.markdown, highlight=False, markup=False)
     console.print(f"wrote {', '.join(str(path) for path in result.files[-2:])}")

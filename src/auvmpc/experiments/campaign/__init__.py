@@ -1,9 +1,10 @@
 """Robustness campaigns: one scenario run many times with sampled parameters.
 
-A campaign file names a base scenario, distributions over any scenario field, a number
-of runs and one master seed (``docs/campaigns.md`` has the full format). Run ``k``'s
-parameters and scenario seed are a pure function of ``(master seed, k)``, so any run can
-be reproduced alone (:func:`run_overrides`, :func:`scenario_for_run`).
+A campaign file names a base scenario (or a kind of generated case), distributions over
+any scenario field, a number of runs and one master seed (``docs/campaigns.md`` has the
+full format). Run ``k``'s parameters and scenario seed are a pure function of
+``(master seed, k)``, so any run can be reproduced alone (:func:`run_overrides`,
+:func:`scenario_for_run`).
 
 Runs execute on local processes (``concurrent.futures``, spawn start method) or on a Dask
 distributed cluster. Only the coordinating process writes results: one SQLite
@@ -17,8 +18,9 @@ Data flow::
         -> one row per run in DIR/results.sqlite -> load_results(DIR) -> campaign_report
 
 Modules: ``spec`` (campaign files), ``sampling`` (parameters of run k, validation),
-``store`` (SQLite), ``execute`` (workers, local pool, Dask), ``report`` (results and
-report), ``criterion`` (success expressions).
+``store`` (SQLite), ``execute`` (workers, local pool, Dask), ``paired`` (the yardstick twin
+of every run and the report's paired section), ``report`` (results and report),
+``criterion`` (success expressions).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """``python -m auvmpc.experiments.campaign FILE --out DIR [--workers N] [--runs N]
-[--scheduler ADDR]``:
+[--scheduler ADDR] [--controller LABEL]``:
 a minimal entry point without the CLI's dependencies (the kill-and-resume tests use it)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 from auvmpc import interrupts
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.campaign.execute import run_campaign
-from auvmpc.experiments.campaign.spec import RESULTS_FILE
+from auvmpc.experiments.campaign.spec import RESULTS_FILE, load_campaign
 from auvmpc.experiments.campaign.store import count_finished
 
 
@@ -29,11 +29,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--runs", type=int, default=None, help="run only the first N runs")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    parser.add_argument(
+        "--controller", default=None, help="controller label of the tested runs (not the yardstick)"
+    )
     args = parser.parse_args(argv)
     previous = interrupts.install()
     try:
         summary = run_campaign(
-            args.campaign, args.out, workers=args.workers, runs=args.runs, scheduler=args.scheduler
+            load_campaign(args.campaign, controller=args.controller),
+            args.out,
+            workers=args.workers,
+            runs=args.runs,
+            scheduler=args.scheduler,
         )
     except ConfigError as error:
         print(f"error: {error}", file=sys.stderr)

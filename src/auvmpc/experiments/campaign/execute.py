@@ -27,6 +27,7 @@ from auvmpc.errors import ConfigError
 if TYPE_CHECKING:
     pass
 
+from auvmpc.experiments.campaign.paired import paired_columns
 from auvmpc.experiments.campaign.sampling import (
     plan_run,
     sample_run,
@@ -57,6 +58,7 @@ def _campaign_from_payload(payload: str) -> Campaign:
         data["base_source"],
         data["base_data"],
         data["base_dir"],
+        controller_overrides=tuple(data["controller_overrides"]),
     )
     return _with_implicit_overrides(campaign)
 
@@ -67,6 +69,9 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
     An exception inside the run is the run's result (status ``failed``, one-line
     ``error``, full ``traceback``), never raised: only a broken worker or environment
     makes this function raise.
+
+    With a yardstick, the run is simulated twice (:func:`paired.paired_columns`): its
+    metrics gain the yardstick's, prefixed ``yardstick_``, and the paired columns.
 
     Returns
     -------
@@ -84,7 +89,10 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
     error = trace = None
     try:
         _, _, data = plan_run(campaign, index)
-        metrics = simulate(_resolve(campaign, data)).metrics
+        result = simulate(_resolve(campaign, data))
+        metrics = result.metrics
+        if campaign.spec.yardstick is not None:
+            metrics = {**metrics, **paired_columns(campaign, index, result)}
         status = "ok"
     except Exception as exc:  # the run's own failure is a result, recorded once
         status, error, trace = "failed", _one_line(exc), traceback.format_exc()

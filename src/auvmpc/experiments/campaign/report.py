@@ -31,15 +31,21 @@ from auvmpc.experiments.campaign.criterion import (
     parse_criterion,
     wilson_interval,
 )
+from auvmpc.experiments.campaign.paired import (
+    PAIRED_FIGURES,
+    paired_summary,
+    worst_case_figures,
+    worst_cases,
+)
 from auvmpc.experiments.campaign.sampling import (
     reproduce_command,
 )
 from auvmpc.experiments.campaign.spec import (
     FIGURES_DIR,
+    NONDETERMINISTIC_COLUMNS,
     PERCENTILES,
     REPORT_FILE,
     REPORT_JSON,
-    TIMING_METRICS,
     Campaign,
 )
 from auvmpc.experiments.campaign.store import (
@@ -181,6 +187,8 @@ def campaign_report(
     worst_order: Literal["desc", "asc"] | None = None,
     figures: bool = True,
     write: bool = True,
+    paired_figures: int = PAIRED_FIGURES,
+    workers: int = 1,
 ) -> CampaignReport:
     """Success rate, metric percentiles, worst runs and plots of a campaign folder.
 
@@ -203,6 +211,11 @@ def campaign_report(
         Write ``report.md``, ``report.json`` and ``figures/*.png`` into ``out_dir``; for a
         criterion other than the campaign file's, ``report-<criterion>.md``, ``.json`` and
         ``figures-<criterion>/`` next to them (:func:`report_names`), never over them.
+    paired_figures : int
+        With a yardstick: the worst runs simulated again, controller and yardstick, and
+        drawn (with ``figures``); 0 for none.
+    workers : int
+        Processes simulating those runs again.
     """
     from auvmpc.experiments.outputs import atomic_write_text
 
@@ -249,7 +262,7 @@ def campaign_report(
             rank_by: _plain(row[rank_by]),
             "passed": bool(row["_passed"]),
             "parameters": {c: _plain(row[c]) for c in campaign.parameter_columns},
-            "command": reproduce_command(campaign, int(row["index"])),
+            "command": reproduce_command(campaign, int(row["index"]), out),
             "from_campaign": shlex.join(
                 ["auvmpc", "run", "--from-campaign", str(out), "--index", str(row["index"])]
             ),
@@ -260,7 +273,7 @@ def campaign_report(
         {
             "index": int(row["index"]),
             "error": row["error"],
-            "command": reproduce_command(campaign, int(row["index"])),
+            "command": reproduce_command(campaign, int(row["index"]), out),
         }
         for _, row in frame[frame["status"] != "ok"].iterrows()
     ]
@@ -268,7 +281,7 @@ def campaign_report(
         "campaign": campaign.spec.name,
         "description": campaign.spec.description,
         "hash": campaign.hash,
-        "base": campaign.base_source,
+        "base": campaign.base_label,
         "seed": campaign.spec.seed,
         "runs_in_file": campaign.spec.runs,
         "rows": n,
@@ -294,6 +307,15 @@ def campaign_report(
         else {}
     )
     summary["figures"] = [f"{figures_dir}/{name}.png" for name in drawn]
+    if campaign.spec.yardstick is not None:
+        summary["paired"] = paired_summary(frame, campaign, out)
+        if figures and paired_figures > 0:
+            indices = worst_cases(frame, paired_figures)
+            cases, worst_drawn = worst_case_figures(
+                frame, campaign, out, indices, figures_dir, workers
+            )
+            summary["paired"]["worst"] = cases
+            drawn.update(worst_drawn)
     summary["sessions"] = stored_sessions(out)
     markdown = _markdown(summary)
     files: list[Path] = []
@@ -482,13 +504,14 @@ def _markdown(summary: Mapping[str, Any]) -> str:
         "Verdicts of the finished runs: "
         + (", ".join(f"{k} {v}" for k, v in summary["verdicts"].items()) or "none recorded"),
         "",
+        *(_paired_markdown(summary["paired"]) + [""] if "paired" in summary else []),
         "## Metrics over the finished runs",
         "",
         "| metric | n | min | p5 | p50 | p95 | max |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for name, stats in summary["metrics"].items():
-        note = " (wall clock)" if name in TIMING_METRICS else ""
+        note = " (wall clock)" if name in NONDETERMINISTIC_COLUMNS else ""
         lines.append(
             f"| `{name}`{note} | {stats['n']} | "
             + " | ".join(_fmt(stats[k]) for k in ("min", "p5", "p50", "p95", "max"))
@@ -518,8 +541,7 @@ def _markdown(summary: Mapping[str, Any]) -> str:
             + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in row["parameters"].items()),
             "",
             "  ```sh",
-            f"  {row['from_campaign']}",
-            f"  {row['command']}",
+            *dict.fromkeys([f"  {row['from_campaign']}", f"  {row['command']}"]),
             "  ```",
         ]
     if summary["failed_runs"]:
@@ -536,3 +558,63 @@ def _markdown(summary: Mapping[str, Any]) -> str:
         lines += ["", "## Figures", ""]
         lines += [f"![{Path(path).stem}]({path})" for path in summary["figures"]]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _paired_markdown(paired: Mapping[str, Any]) -> list[str]:
+    """The report's section "Controller against the yardstick"."""
+    lines = [
+        "## Controller against the yardstick",
+        "",
+        f"Controller: {paired['controller']}; yardstick: the same run with "
+        + ", ".join(f"`{text}`" for text in paired["yardstick"])
+        + f" applied last. {paired['paired_runs']} runs where both finished"
+        + f"; {paired['warned_runs']} runs warned before they started (`warnings`).",
+        "",
+        "| | controller | yardstick |",
+        "|---|---:|---:|",
+    ]
+    for row in paired["table"]:
+        lines.append(f"| {row['row']} | {_fmt(row['controller'])} | {_fmt(row['yardstick'])} |")
+    lines += [
+        "",
+        f"Where the yardstick is not lost ({paired['judged_runs']} runs): controller lost in "
+        f"{_fmt(paired['judged_lost'])}, `rms_over_bar` > 1 in {_fmt(paired['judged_over_bar'])}.",
+        "",
+        f"### Runs where the yardstick itself is lost ({len(paired['yardstick_lost'])})",
+        "",
+        "The bar does not apply to them; a contact counts everywhere.",
+        "",
+    ]
+    if not paired["yardstick_lost"]:
+        lines.append("None.")
+    for row in paired["yardstick_lost"]:
+        lines.append(
+            f"- run {row['index']}: controller lost {_fmt(row['lost'])}, min clearance "
+            f"{_fmt(row['min_obstacle_clearance_m'])} m, `rms_over_bar` "
+            f"{_fmt(row['rms_over_bar'])}: `{row['command']}`"
+        )
+    if paired["yardstick_failed"]:
+        lines += ["", "### Runs whose yardstick failed", ""]
+        lines += [f"- run {row['index']}: {row['error']}" for row in paired["yardstick_failed"]]
+    if paired.get("worst"):
+        lines += [
+            "",
+            "### Worst cases, simulated again",
+            "",
+            "Every lost run and contact first, then the largest `rms_over_bar`; each run "
+            "simulated again (same scenario, same seed) with the controller and with the "
+            "yardstick.",
+        ]
+        for case in paired["worst"]:
+            note = "" if case["reproduced"] else " (the rerun's RMS error differs from the stored)"
+            lines += [
+                "",
+                f"**Run {case['index']}**: `rms_over_bar` {_fmt(case['rms_over_bar'])}, lost "
+                f"{_fmt(case['lost'])} (yardstick {_fmt(case['yardstick_lost'])}), min "
+                f"clearance {_fmt(case['min_obstacle_clearance_m'])} m{note}",
+                "",
+            ]
+            for who in ("controller", "yardstick"):
+                lines.append(f"![run {case['index']} {who}]({case['figures'][who]})")
+            lines += ["", "```sh", *case["commands"].values(), "```"]
+    return lines

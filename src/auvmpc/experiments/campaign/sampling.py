@@ -149,7 +149,11 @@ def _combine(current: Any, value: Any, mode: ApplyMode, path: str) -> Any:
 
 
 def plan_run(
-    campaign: Campaign, index: int, replace: Mapping[str, Any] | None = None
+    campaign: Campaign,
+    index: int,
+    replace: Mapping[str, Any] | None = None,
+    *,
+    yardstick: bool = False,
 ) -> tuple[RunSample, list[str], dict[str, Any]]:
     """Run ``index``: its sample, its ``field=value`` overrides and its scenario mapping.
 
@@ -161,11 +165,16 @@ def plan_run(
     ----------
     replace : mapping, optional
         Parameter path -> value used instead of the draw (validation of the extremes).
+    yardstick : bool
+        The run's yardstick twin: without the controller label's overrides, with
+        ``spec.yardstick`` applied last (``campaign.spec.yardstick`` must be set).
     """
+    if yardstick and campaign.spec.yardstick is None:
+        raise ConfigError("yardstick", campaign.spec.name, "the campaign has no yardstick")
     sample = sample_run(campaign, index)
     draws = {**sample.draws, **(replace or {})}
-    data = _fixed_data(campaign, implicit=True)
-    overrides = [*campaign.fixed_overrides, f"seed={sample.seed}"]
+    data = _fixed_data(campaign, implicit=True, index=index, yardstick=yardstick)
+    overrides = [*campaign.fixed_overrides(yardstick), f"seed={sample.seed}"]
     apply_override(data, overrides[-1])
     defaults: dict[str, Any] | None = None
     for path, distribution in campaign.spec.parameters.items():
@@ -177,7 +186,8 @@ def plan_run(
             current = _lookup(data, target.split("."))
             if current is None:
                 defaults = defaults or _resolved_dict(
-                    _fixed_data(campaign, implicit=True), campaign
+                    _fixed_data(campaign, implicit=True, index=index, yardstick=yardstick),
+                    campaign,
                 )
                 current = _lookup(defaults, target.split("."))
             value = _combine(current, value, distribution.apply, path)
@@ -203,6 +213,12 @@ def plan_run(
         text = f"{target}={_yaml_text(items[:count])}"
         _apply_parameter(data, text, path, count)
         overrides.append(text)
+    for i, text in enumerate(campaign.spec.yardstick if yardstick else ()):
+        try:
+            apply_override(data, text)
+        except ConfigError as error:
+            raise ConfigError(f"yardstick.{i}", text, str(error)) from None
+        overrides.append(text)
     return sample, overrides, data
 
 
@@ -213,24 +229,43 @@ def _apply_parameter(data: dict[str, Any], text: str, path: str, value: Any) -> 
         raise ConfigError(f"parameters.{path}", value, error.reason) from None
 
 
-def run_overrides(campaign: Campaign, index: int) -> list[str]:
-    """``field=value`` strings such that ``auvmpc run BASE --set ...`` reproduces run ``index``."""
-    return plan_run(campaign, index)[1]
+def run_overrides(campaign: Campaign, index: int, *, yardstick: bool = False) -> list[str]:
+    """``field=value`` strings such that ``auvmpc run BASE --set ...`` reproduces run ``index``
+    (or its yardstick twin)."""
+    return plan_run(campaign, index, yardstick=yardstick)[1]
 
 
-def reproduce_command(campaign: Campaign, index: int) -> str:
-    """The shell command that reruns run ``index`` alone with ``auvmpc run``."""
+def reproduce_command(
+    campaign: Campaign,
+    index: int,
+    out_dir: str | Path | None = None,
+    *,
+    yardstick: bool = False,
+) -> str:
+    """The shell command that reruns run ``index`` (or its yardstick twin) alone with
+    ``auvmpc run``: ``auvmpc run BASE --set ...``, or for generated cases, which have no
+    scenario file, ``auvmpc run --from-campaign OUT_DIR --index K`` (``out_dir`` needed)."""
+    if campaign.base_source is None:
+        if out_dir is None:
+            raise ConfigError("out_dir", None, "generated cases are rerun from the campaign folder")
+        words = ["auvmpc", "run", "--from-campaign", str(out_dir), "--index", str(index)]
+        return shlex.join([*words, "--yardstick"] if yardstick else words)
     words = ["auvmpc", "run", campaign.base_source]
-    for text in run_overrides(campaign, index):
+    for text in run_overrides(campaign, index, yardstick=yardstick):
         words += ["--set", text]
     return shlex.join(words)
 
 
 def scenario_for_run(
-    campaign_or_dir: Campaign | str | Path, index: int, overrides: Sequence[str] = ()
+    campaign_or_dir: Campaign | str | Path,
+    index: int,
+    overrides: Sequence[str] = (),
+    *,
+    yardstick: bool = False,
 ) -> ResolvedScenario:
     """Run ``index`` of a campaign (or of the campaign stored in a results folder),
-    resolved and ready for :func:`auvmpc.experiments.run.simulate`; ``overrides`` apply last."""
+    resolved and ready for :func:`auvmpc.experiments.run.simulate`; ``overrides`` apply last.
+    With ``yardstick``, the run's yardstick twin (:func:`plan_run`)."""
     from auvmpc.experiments.campaign.store import stored_campaign  # store imports this module
 
     campaign = (
@@ -241,7 +276,7 @@ def scenario_for_run(
     runs = campaign.spec.runs
     if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < runs:
         raise ConfigError("--index", index, f"need a run index in 0..{runs - 1} ({runs} runs)")
-    _, _, data = plan_run(campaign, index)
+    _, _, data = plan_run(campaign, index, yardstick=yardstick)
     for text in overrides:
         apply_override(data, text)
     return _resolve(campaign, data)
@@ -264,36 +299,56 @@ def validate_campaign(campaign: Campaign, runs: int | None = None) -> None:
         fixed part.
     """
     count = campaign.spec.runs if runs is None else runs
+    twins = (False, True) if campaign.spec.yardstick is not None else (False,)
     _check_fixed(campaign)
-    _check_plan(campaign, 0, None, "run 0")
+    for yardstick in twins:
+        _check_plan(campaign, 0, None, "run 0", yardstick)
     for path, distribution in campaign.spec.parameters.items():
         for label, value in distribution.extremes():
             _check_plan(campaign, 0, (path, value), f"at {label}")
     for index in range(1, count):
-        try:
-            _, _, data = plan_run(campaign, index)
-            validate_scenario(data)
-        except ConfigError as error:
-            raise _blame(campaign, error, None, f"run {index}") from None
+        for yardstick in twins:
+            where = f"run {index}{' yardstick' if yardstick else ''}"
+            try:
+                _, _, data = plan_run(campaign, index, yardstick=yardstick)
+                validate_scenario(data)
+            except ConfigError as error:
+                raise _blame(campaign, error, None, where, yardstick) from None
 
 
 def _check_plan(
-    campaign: Campaign, index: int, replaced: tuple[str, Any] | None, where: str
+    campaign: Campaign,
+    index: int,
+    replaced: tuple[str, Any] | None,
+    where: str,
+    yardstick: bool = False,
 ) -> None:
     try:
-        _, _, data = plan_run(campaign, index, dict([replaced]) if replaced else None)
+        _, _, data = plan_run(
+            campaign, index, dict([replaced]) if replaced else None, yardstick=yardstick
+        )
         _resolve(campaign, data)
     except ConfigError as error:
-        raise _blame(campaign, error, replaced, where) from None
+        if yardstick:
+            where += " yardstick"
+        raise _blame(campaign, error, replaced, where, yardstick) from None
 
 
 def _blame(
-    campaign: Campaign, error: ConfigError, replaced: tuple[str, Any] | None, where: str
+    campaign: Campaign,
+    error: ConfigError,
+    replaced: tuple[str, Any] | None,
+    where: str,
+    yardstick: bool = False,
 ) -> ConfigError:
     """Name the parameter an invalid scenario comes from: the one set to an extreme (the
-    others are at their valid run-0 values), else one whose path the error is about."""
-    if error.field.startswith("parameters."):
+    others are at their valid run-0 values), else a yardstick override or a parameter whose
+    path the error is about."""
+    if error.field.startswith(("parameters.", "yardstick.")):
         return ConfigError(error.field, error.value, f"{error.reason} ({where})")
+    for i, text in enumerate(campaign.spec.yardstick if yardstick else ()):
+        if _related(text.partition("=")[0], error.field):
+            return ConfigError(f"yardstick.{i}", text, f"{error} ({where})")
     suspects = [replaced[0]] if replaced else list(campaign.spec.parameters)
     for path in suspects:
         target = _split_length(path)[0]

@@ -6,6 +6,7 @@ Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import hashlib
 import itertools
@@ -66,7 +67,12 @@ MAX_WORKER_DEATHS = 2
 TIMING_METRICS = ("solve_ms_median", "solve_ms_p99", "solve_ms_max")
 
 
-NONDETERMINISTIC_COLUMNS = (*TIMING_METRICS, "wall_s", "worker_deaths")
+NONDETERMINISTIC_COLUMNS = (
+    *TIMING_METRICS,
+    *(f"yardstick_{name}" for name in TIMING_METRICS),  # campaigns with a yardstick
+    "wall_s",
+    "worker_deaths",
+)
 
 
 PERCENTILES = (5, 50, 95)
@@ -74,6 +80,13 @@ PERCENTILES = (5, 50, 95)
 
 # A "normal" without bounds is checked at mean +- this many standard deviations.
 NORMAL_CHECK_STDS = 3.0
+
+
+class CaseKind(StrEnum):
+    """Kinds of generated cases (:data:`auvmpc.experiments.survey_cases.CASE_KINDS`)."""
+
+    HARD_SURVEY = "hard-survey"
+    LOOPS = "loops"
 
 
 class ApplyMode(StrEnum):
@@ -306,14 +319,40 @@ Distribution = Annotated[
 DISTRIBUTION_TYPES = ("uniform", "log-uniform", "normal", "integers", "choice", "grid", "polar")
 
 
+class Cases(StrictModel):
+    """Generated base scenarios: run k's is ``survey_cases.make_case(kind, seed, k)``."""
+
+    kind: CaseKind = Field(
+        description="hard-survey (lawnmowers with 90-degree corners and discs) or loops "
+        "(circles and figure-eights), random vehicles in a current, with model error and noise"
+    )
+
+
 class CampaignSpec(StrictModel):
     """A campaign file as written (``docs/campaigns.md``)."""
 
     name: str = Field(description="identifier")
     description: str = Field(default="", description="one line for humans")
-    base: str = Field(description="built-in scenario name, or scenario file relative to this file")
+    base: str | None = Field(
+        default=None,
+        description="built-in scenario name, or scenario file relative to this file "
+        "(or give `cases`)",
+    )
+    cases: Cases | None = Field(
+        default=None, description="generated base scenarios, one per run, instead of `base`"
+    )
     overrides: tuple[str, ...] = Field(
         default=(), description="field=value applied to every run, as `auvmpc run --set`"
+    )
+    controller: str | None = Field(
+        default=None,
+        description="controller label of `auvmpc run --controller` (e.g. ltv-mpc, nmpc): its "
+        "overrides apply to the tested runs after `overrides`, never to the yardstick",
+    )
+    yardstick: tuple[str, ...] | None = Field(
+        default=None,
+        description="field=value overrides applied last to a second simulation of every run "
+        "(e.g. the converged OCP); its metrics are stored with a yardstick_ prefix",
     )
     runs: Annotated[int, Field(ge=1)] = Field(description="number of runs")
     seed: Annotated[int, Field(ge=0)] = Field(description="master seed of every run's draws")
@@ -324,14 +363,29 @@ class CampaignSpec(StrictModel):
         default=None, description="default success criterion of the report, e.g. 'x_m < 1'"
     )
 
-    @field_validator("overrides")
+    @field_validator("overrides", "yardstick")
     @classmethod
-    def _overrides(cls, overrides: tuple[str, ...]) -> tuple[str, ...]:
-        for i, text in enumerate(overrides):
+    def _overrides(cls, overrides: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        for i, text in enumerate(overrides or ()):
             path, separator, _ = text.partition("=")
             if not separator or not path:
                 raise FieldError(str(i), text, "expected field=value")
         return overrides
+
+    @field_validator("yardstick")
+    @classmethod
+    def _yardstick(cls, yardstick: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        if yardstick is not None and not yardstick:
+            raise FieldError("yardstick", [], "give at least one field=value, or leave it out")
+        return yardstick
+
+    @model_validator(mode="after")
+    def _one_base(self) -> CampaignSpec:
+        if self.base is not None and self.cases is not None:
+            raise FieldError("cases", self.cases.kind, "give base or cases, not both")
+        if self.base is None and self.cases is None:
+            raise FieldError("base", None, "give base (a scenario) or cases (generated ones)")
+        return self
 
     @field_validator("parameters")
     @classmethod
@@ -401,35 +455,61 @@ class Campaign:
         The file's contents, validated.
     source : str
         Built-in name or path as given.
-    base_source : str
-        The base scenario: built-in name or absolute path (what ``auvmpc run`` is given).
+    base_source : str or None
+        The base scenario: built-in name or absolute path (what ``auvmpc run`` is given);
+        None for generated cases (``spec.cases``), which have no file.
     base_data : dict
-        The base scenario file's mapping, as read (before any override).
+        The base scenario file's mapping, as read (before any override); empty for
+        generated cases (:meth:`base_for` makes each run's).
     base_dir : str
         Folder that relative paths inside the scenario resolve against.
     implicit_overrides : tuple of str
         ``field=value`` overrides added after ``spec.overrides`` so that every parameter
         path exists (e.g. ``controller.Q=[5, 5, 5, 1, 1, 1]`` when the base scenario leaves
         ``controller.Q`` at its default and a parameter samples ``controller.Q.0``).
+    controller_overrides : tuple of str
+        The overrides ``spec.controller`` stands for (``auvmpc run --controller``), applied
+        to the tested runs after ``spec.overrides``, never to the yardstick.
     """
 
     spec: CampaignSpec
     source: str
-    base_source: str
+    base_source: str | None
     base_data: dict[str, Any]
     base_dir: str
     implicit_overrides: tuple[str, ...] = ()
+    controller_overrides: tuple[str, ...] = ()
+
+    def fixed_overrides(self, yardstick: bool = False) -> tuple[str, ...]:
+        """Overrides of every run before its seed and parameters (the yardstick's leave out
+        the controller label's)."""
+        controller = () if yardstick else self.controller_overrides
+        return (*self.spec.overrides, *controller, *self.implicit_overrides)
+
+    def base_for(self, index: int) -> dict[str, Any]:
+        """Run ``index``'s base scenario mapping, a fresh copy: the base file's, or case
+        ``index`` of ``spec.cases`` (:func:`auvmpc.experiments.survey_cases.make_case`)."""
+        if self.spec.cases is None:
+            return copy.deepcopy(self.base_data)
+        from auvmpc.experiments.survey_cases import make_case
+
+        return make_case(self.spec.cases.kind.value, self.spec.seed, index)
 
     @property
-    def fixed_overrides(self) -> tuple[str, ...]:
-        return (*self.spec.overrides, *self.implicit_overrides)
+    def base_label(self) -> str:
+        """The base for humans: the scenario, or ``cases: <kind>``."""
+        if self.spec.cases is None:
+            return str(self.base_source)
+        return f"cases: {self.spec.cases.kind.value}"
 
     @functools.cached_property
     def hash(self) -> str:
-        """SHA-256 of everything that decides the runs (not name, description, runs, criterion)."""
-        identity = {
+        """SHA-256 of everything that decides the runs (not name, description, runs, criterion).
+
+        The keys of the newer options (cases, controller, yardstick) enter only when set, so
+        a campaign without them keeps the hash it always had."""
+        identity: dict[str, Any] = {
             "rules": SAMPLING_RULES,
-            "base": self.base_data,
             "overrides": list(self.spec.overrides),
             "seed": self.spec.seed,
             "parameters": {
@@ -437,6 +517,14 @@ class Campaign:
                 for path, distribution in self.spec.parameters.items()
             },
         }
+        if self.spec.cases is None:
+            identity["base"] = self.base_data
+        else:
+            identity["cases"] = self.spec.cases.model_dump(mode="json")
+        if self.controller_overrides:
+            identity["controller"] = list(self.controller_overrides)
+        if self.spec.yardstick is not None:
+            identity["yardstick"] = list(self.spec.yardstick)
         return hashlib.sha256(_canonical_json(identity).encode()).hexdigest()
 
     @functools.cached_property
@@ -451,7 +539,8 @@ class Campaign:
         return tuple(columns)
 
     def payload(self) -> str:
-        """Everything a worker needs, as one JSON string."""
+        """Everything a worker needs, as one JSON string (the controller label's overrides
+        expanded here, so that a worker need not import the API to expand them)."""
         return _canonical_json(
             {
                 "spec": self.spec.model_dump(mode="json"),
@@ -459,6 +548,7 @@ class Campaign:
                 "base_source": self.base_source,
                 "base_data": self.base_data,
                 "base_dir": self.base_dir,
+                "controller_overrides": list(self.controller_overrides),
             }
         )
 
@@ -468,11 +558,17 @@ def builtin_campaigns() -> dict[str, str]:
     return builtin_descriptions("campaigns")
 
 
-def load_campaign(source: str | Path) -> Campaign:
+def load_campaign(source: str | Path, controller: str | None = None) -> Campaign:
     """Read and validate a campaign: built-in name or YAML file path.
 
     Only the file's own schema and the base scenario are checked here;
     :func:`validate_campaign` checks the sampled scenarios.
+
+    Parameters
+    ----------
+    controller : str, optional
+        A controller label (``auvmpc campaign --controller``) replacing the file's
+        ``controller``: a campaign of its own (another hash).
 
     Raises
     ------
@@ -495,10 +591,30 @@ def load_campaign(source: str | Path) -> Campaign:
         text, folder = read_text_file(path, "campaign", "campaign file"), path.resolve().parent
     data = _read_yaml(text, "campaign", text_source)
     spec = _validate_spec(data)
-    base_source, base_data, base_dir = _read_base(spec.base, folder)
-    campaign = Campaign(spec, text_source, base_source, base_data, base_dir)
+    if controller is not None:
+        spec = spec.model_copy(update={"controller": controller})
+    if spec.base is not None:
+        base_source, base_data, base_dir = _read_base(spec.base, folder)
+    else:  # generated cases: no file; nothing relative inside them
+        base_source, base_data, base_dir = None, {}, str(folder or Path.cwd())
+    campaign = Campaign(
+        spec, text_source, base_source, base_data, base_dir,
+        controller_overrides=expand_controller(spec.controller),
+    )  # fmt: skip
     _check_fixed(campaign)
     return _with_implicit_overrides(campaign)
+
+
+def expand_controller(label: str | None) -> tuple[str, ...]:
+    """The overrides of a campaign's ``controller`` label (those of ``auvmpc run --controller``)."""
+    if label is None:
+        return ()
+    from auvmpc.api import controller_overrides
+
+    try:
+        return tuple(controller_overrides(label))
+    except ConfigError as error:
+        raise ConfigError("controller", error.value, error.reason) from None
 
 
 def _read_yaml(text: str, field: str, origin: str) -> dict[str, Any]:
@@ -559,7 +675,8 @@ def _with_implicit_overrides(campaign: Campaign) -> Campaign:
 
     ``apply_override`` creates missing mapping keys but cannot index a list the base
     scenario leaves at its default; writing the default list out first keeps every run
-    expressible as ``auvmpc run BASE --set ...``.
+    expressible as ``auvmpc run BASE --set ...``. Generated cases refuse them: a default
+    may depend on the case's vehicle, so no one list fits every run.
     """
     data = _fixed_data(campaign)
     defaults = _resolved_dict(data, campaign)
@@ -572,7 +689,15 @@ def _with_implicit_overrides(campaign: Campaign) -> Campaign:
                 default = _lookup(defaults, keys[: depth + 1])
                 needs_list = any(k.isdigit() for k in keys[depth + 1 :])
                 if needs_list and isinstance(default, list | dict):
-                    text = f"{'.'.join(keys[: depth + 1])}={_yaml_text(default)}"
+                    prefix = ".".join(keys[: depth + 1])
+                    if campaign.spec.cases is not None:
+                        raise ConfigError(
+                            f"parameters.{path}",
+                            path,
+                            f"generated cases leave {prefix} at its default, which may differ "
+                            "between cases; set the whole list in overrides",
+                        )
+                    text = f"{prefix}={_yaml_text(default)}"
                     apply_override(data, text)
                     implicit.append(text)
                 else:
@@ -583,24 +708,25 @@ def _with_implicit_overrides(campaign: Campaign) -> Campaign:
                 node = node[int(key)]
             else:
                 break
-    return Campaign(
-        campaign.spec,
-        campaign.source,
-        campaign.base_source,
-        campaign.base_data,
-        campaign.base_dir,
-        tuple(implicit),
-    )
+    return dataclasses.replace(campaign, implicit_overrides=tuple(implicit))
 
 
-def _fixed_data(campaign: Campaign, implicit: bool = False) -> dict[str, Any]:
-    """The base scenario with the file's overrides (and, if asked, the implicit ones)."""
-    data = copy.deepcopy(campaign.base_data)
+def _fixed_data(
+    campaign: Campaign, implicit: bool = False, index: int = 0, yardstick: bool = False
+) -> dict[str, Any]:
+    """Run ``index``'s base scenario with the file's overrides and the controller label's
+    (not for the yardstick), and, if asked, the implicit ones."""
+    data = campaign.base_for(index)
     for i, text in enumerate(campaign.spec.overrides):
         try:
             apply_override(data, text)
         except ConfigError as error:
             raise ConfigError(f"overrides.{i}", text, str(error)) from None
+    for text in () if yardstick else campaign.controller_overrides:
+        try:
+            apply_override(data, text)
+        except ConfigError as error:
+            raise ConfigError("controller", campaign.spec.controller, str(error)) from None
     if implicit:
         for text in campaign.implicit_overrides:
             apply_override(data, text)
@@ -608,7 +734,7 @@ def _fixed_data(campaign: Campaign, implicit: bool = False) -> dict[str, Any]:
 
 
 def _check_fixed(campaign: Campaign) -> None:
-    """The base scenario with the fixed overrides must be valid on its own."""
+    """The base scenario (case 0 of generated ones) with the fixed overrides must be valid."""
     data = _fixed_data(campaign)
     try:
         _resolve(campaign, data)
@@ -616,6 +742,13 @@ def _check_fixed(campaign: Campaign) -> None:
         for i, text in enumerate(campaign.spec.overrides):
             if _related(text.partition("=")[0], error.field):
                 raise ConfigError(f"overrides.{i}", text, str(error)) from None
+        for text in campaign.controller_overrides:
+            if _related(text.partition("=")[0], error.field):
+                raise ConfigError("controller", campaign.spec.controller, str(error)) from None
+        if campaign.spec.cases is not None:
+            raise ConfigError(
+                "cases", campaign.spec.cases.kind.value, f"invalid scenario (case 0): {error}"
+            ) from None
         raise ConfigError("base", campaign.spec.base, f"invalid scenario: {error}") from None
 
 

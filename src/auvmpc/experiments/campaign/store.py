@@ -27,6 +27,7 @@ from auvmpc.experiments.campaign.spec import (
     CampaignSpec,
     _canonical_json,
     _with_implicit_overrides,
+    expand_controller,
 )
 
 _SCHEMA = """
@@ -133,7 +134,7 @@ class _Store:
                     campaign.spec.name,
                     json.dumps(campaign.spec.model_dump(mode="json")),
                     campaign.source,
-                    campaign.base_source,
+                    campaign.base_source or "",  # none for generated cases
                     _canonical_json(campaign.base_data),
                     campaign.base_dir,
                     json.dumps(list(campaign.parameter_columns)),
@@ -303,14 +304,16 @@ def stored_campaign(out_dir: Path) -> Campaign:
         ).fetchone()
     if row is None:
         raise ConfigError("DIR", str(out_dir), "no campaign stored in results.sqlite")
-    spec, source, base_source, base_data, base_dir = row
+    spec_text, source, base_source, base_data, base_dir = row
+    spec = CampaignSpec.model_validate(json.loads(spec_text))
     return _with_implicit_overrides(
         Campaign(
-            CampaignSpec.model_validate(json.loads(spec)),
+            spec,
             source,
-            base_source,
+            None if spec.cases is not None else base_source,
             json.loads(base_data),
             base_dir,
+            controller_overrides=expand_controller(spec.controller),
         )
     )
 
