@@ -115,8 +115,7 @@ def test_without_a_feedback_the_shell_keeps_following_the_plan():
     controller = FailsAfterTwo()
     controller.reset(np.zeros(6), np.zeros(1))
     results = [
-        controller.compute(Observation(k, 0.5 * k, np.zeros(6), np.zeros((2, 6))))
-        for k in range(6)
+        controller.compute(Observation(k, 0.5 * k, np.zeros(6), np.zeros((2, 6)))) for k in range(6)
     ]
     assert [r.status for r in results] == ["ok"] * 2 + ["fallback"] * 4
     assert [float(r.thrust[0]) for r in results] == [1.0, 1.0, 2.0, 3.0, 3.0, 3.0]
