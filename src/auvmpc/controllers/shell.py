@@ -61,7 +61,7 @@ INFO_KEYS = (
     "dist_Y_hat",  # zero without an estimator
     "dist_N_hat",
     "recovery",  # 1 if the shell's stabilising feedback was applied
-    "spinning",  # 1 while the shell judges the vehicle to spin (recovery.spin_limit)
+    "spinning",  # 1 when the shell judged the vehicle to spin (spin_limit) at this sample
 )
 _YAW_RATE = HORIZONTAL.index("r")
 
@@ -71,7 +71,7 @@ _YAW_RATE = HORIZONTAL.index("r")
 PLAN_FALLBACK_STEPS = 2
 # A spin is a yaw rate the sampled controller cannot see: more heading per sample than this
 # (rad; 1.5 rad/s at 0.5 s; on 50 hard-survey cases the real-time NMPC stayed below 1.0 rad/s
-# but where it spun, ltv-mpc's spins reached 2-7 rad/s, docs/recovery.md) ...
+# except on the two it spun on, ltv-mpc's spins reached 2-7 rad/s, docs/recovery.md) ...
 SPIN_ANGLE_PER_SAMPLE_RAD = 0.75
 # ... and more than this times the fastest reference yaw rate in the preview (a tight turn
 # is not a spin) ...
