@@ -466,11 +466,11 @@ def _alive(pid: int) -> bool:
 MISSING_CSV = {"type": "csv", "path": "missing.csv"}
 
 
-def dies_on_run_5(payload: str, index: int) -> dict:
+def dies_on_run_5(payload: str, index: int, twin: dict | None) -> dict:
     """A run that kills its worker process every time (as a segfaulting solver would)."""
     if index == 5:
         os._exit(3)
-    return campaign.execute_run(payload, index)
+    return campaign.execute_run(payload, index, twin)
 
 
 @pytest.mark.slow

@@ -1,12 +1,14 @@
 """Campaigns of generated cases against a yardstick (issue 24): `cases` instead of `base`,
-the yardstick twin of every run stored beside it, `--controller`, the presets, and the
-report's paired section. Short runs (12 s, transient 4 s) keep the file under a minute."""
+the yardstick twin of every run stored beside it, `--controller`, `--yardstick-from`, the
+presets, and the report's paired section. Short runs (12 s, transient 4 s) keep the file
+under a minute."""
 
 from __future__ import annotations
 
 import json
 import math
 from pathlib import Path
+from unittest import mock
 
 import pandas as pd
 import pytest
@@ -22,6 +24,7 @@ from auvmpc.experiments.campaign import (
     scenario_for_run,
     validate_campaign,
 )
+from auvmpc.experiments.campaign import __main__ as campaign_main
 from auvmpc.experiments.survey_cases import CASE_KINDS, YARDSTICK, make_case
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
 from tests.test_campaign import write_campaign
@@ -266,3 +269,86 @@ def test_the_report_pairs_controller_and_yardstick_and_draws_the_worst(finished)
         assert f"]({worst['figures'][who]})" in text
     assert f"auvmpc run --from-campaign {out} --index {worst['index']} --yardstick" in text
     assert math.isfinite(rows["solve time p99, worst run (ms)"]["yardstick"])
+
+
+# ------------------------------------------------------------------ --yardstick-from
+
+TWIN_SIMULATED = "a yardstick twin was simulated"
+
+
+def execute_without_twins(payload: str, index: int, twin: dict | None) -> dict:
+    """``execute_run`` in a worker where simulating a yardstick twin fails the run."""
+    simulated = RuntimeError(TWIN_SIMULATED)
+    with mock.patch.object(campaign.paired, "_simulate_twin", side_effect=simulated):
+        return campaign.execute_run(payload, index, twin)
+
+
+def test_another_controller_copies_the_twins_the_folder_has_and_simulates_the_rest(
+    finished, tmp_path, monkeypatch
+):
+    first, expected = finished  # 2 runs of the scenario's own controller
+    path = write_campaign(tmp_path, {**CASES, "runs": 3, "controller": "ltv-mpc"})
+    monkeypatch.setattr(campaign.execute, "execute_run", execute_without_twins)
+    out = tmp_path / "ltv"
+    summary = run_campaign(path, out, workers=1, yardstick_from=first)
+    frame = load_results(out).set_index("index")
+    # Run 2 is not in the first folder: its twin was simulated (here made to fail the run).
+    assert (summary.ok, summary.failed) == (2, 1)
+    assert frame.loc[2, "error"] == f"RuntimeError: {TWIN_SIMULATED}"
+    twins = [name for name in expected if name.startswith("yardstick_")]
+    assert len(twins) > 20 and "yardstick_solve_ms_p99" in twins  # timings copied too
+    pd.testing.assert_frame_equal(
+        frame.loc[[0, 1], twins], expected.set_index("index")[twins], check_exact=True
+    )
+    for k in (0, 1):
+        row = frame.loc[k]
+        bar = max(0.1, 1.2 * row["yardstick_rms_position_error_after_transient_m"])
+        assert row["rms_over_bar"] == row["rms_position_error_after_transient_m"] / bar
+        assert row["rms_position_error_m"] != expected.loc[k, "rms_position_error_m"]
+    source = {"folder": str(first.resolve()), "runs": [0, 1]}
+    assert campaign.stored_sessions(out)[-1]["yardstick_from"] == source
+    report = campaign.campaign_report(out, write=False, figures=False)
+    assert report.summary["paired"]["copied_from"] == {source["folder"]: 2}
+    assert f"copied from `{source['folder']}` (`--yardstick-from`)" in report.markdown
+    # Not part of the campaign's identity: the folder resumes without the option.
+    assert run_campaign(path, out, workers=1).new == 0
+
+
+OTHER = "not this campaign with another controller: "
+
+
+@pytest.mark.parametrize(
+    ("here", "there", "reason"),
+    [
+        ({}, {"seed": 4}, f"{OTHER}seed 4 there, 3 here"),
+        ({}, {"yardstick": None}, f"{OTHER}no yardstick there"),
+        ({}, {"overrides": ["duration=10"]}, f"{OTHER}different overrides"),
+        ({"yardstick": None}, {}, "this campaign has no yardstick"),
+    ],
+)
+def test_a_yardstick_folder_of_another_campaign_is_refused_in_one_line(
+    tmp_path, here, there, reason
+):
+    def campaign_of(changes: dict, name: str) -> campaign.Campaign:
+        data = {key: value for key, value in {**CASES, **changes}.items() if value is not None}
+        return load_campaign(write_campaign(tmp_path, data, name))
+
+    folder = tmp_path / "there"
+    folder.mkdir()
+    campaign.store._Store(folder, campaign_of(there, "there.yaml")).close()  # as a run leaves it
+    tested = campaign_of({**here, "controller": "ltv-mpc"}, "here.yaml")
+    with pytest.raises(ConfigError, match=rf"^--yardstick-from: {reason} \(got ") as caught:
+        run_campaign(tested, tmp_path / "out", workers=1, yardstick_from=folder)
+    assert "\n" not in str(caught.value)
+    assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_the_cli_and_the_module_refuse_a_folder_without_results_with_exit_2(
+    cases_file, tmp_path, monkeypatch, capsys
+):
+    options = ["--out", str(tmp_path / "out"), "--yardstick-from", str(tmp_path)]
+    message = "--yardstick-from: no campaign results here (results.sqlite missing)"
+    code, _, err = run_cli(monkeypatch, capsys, "campaign", str(cases_file), *options)
+    assert (code, err.strip()) == (2, f"error: {message} (got '{tmp_path}')")
+    assert campaign_main.main([str(cases_file), *options]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {message} (got '{tmp_path}')"

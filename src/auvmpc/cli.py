@@ -362,6 +362,14 @@ def campaign(
             "the tested runs, not the yardstick: another campaign, so another --out",
         ),
     ] = None,
+    yardstick_from: Annotated[
+        Path | None,
+        typer.Option(
+            "--yardstick-from",
+            help="folder of this campaign with another --controller (finished or partial): "
+            "copy its yardstick twins instead of simulating them again",
+        ),
+    ] = None,
 ) -> None:
     """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
     from auvmpc.experiments.campaign import campaign_report as make_report
@@ -393,6 +401,7 @@ def campaign(
             scheduler=scheduler,
             on_progress=advance,
             overwrite=overwrite,
+            yardstick_from=yardstick_from,
         )
     console.print(
         f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "

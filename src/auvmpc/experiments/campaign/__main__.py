@@ -1,5 +1,5 @@
 """``python -m auvmpc.experiments.campaign FILE --out DIR [--workers N] [--runs N]
-[--scheduler ADDR] [--controller LABEL]``:
+[--scheduler ADDR] [--controller LABEL] [--yardstick-from DIR]``:
 a minimal entry point without the CLI's dependencies (the kill-and-resume tests use it)."""
 
 from __future__ import annotations
@@ -32,6 +32,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--controller", default=None, help="controller label of the tested runs (not the yardstick)"
     )
+    parser.add_argument(
+        "--yardstick-from",
+        type=Path,
+        default=None,
+        help="folder of this campaign with another controller: copy its yardstick twins",
+    )
     args = parser.parse_args(argv)
     previous = interrupts.install()
     try:
@@ -41,6 +47,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             workers=args.workers,
             runs=args.runs,
             scheduler=args.scheduler,
+            yardstick_from=args.yardstick_from,
         )
     except ConfigError as error:
         print(f"error: {error}", file=sys.stderr)

@@ -27,7 +27,7 @@ from auvmpc.errors import ConfigError
 if TYPE_CHECKING:
     pass
 
-from auvmpc.experiments.campaign.paired import paired_columns
+from auvmpc.experiments.campaign.paired import paired_columns, reusable_twins
 from auvmpc.experiments.campaign.sampling import (
     plan_run,
     sample_run,
@@ -63,7 +63,7 @@ def _campaign_from_payload(payload: str) -> Campaign:
     return _with_implicit_overrides(campaign)
 
 
-def execute_run(payload: str, index: int) -> dict[str, Any]:
+def execute_run(payload: str, index: int, twin: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Simulate run ``index`` of the campaign in ``payload`` (:meth:`Campaign.payload`).
 
     An exception inside the run is the run's result (status ``failed``, one-line
@@ -71,7 +71,9 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
     makes this function raise.
 
     With a yardstick, the run is simulated twice (:func:`paired.paired_columns`): its
-    metrics gain the yardstick's, prefixed ``yardstick_``, and the paired columns.
+    metrics gain the yardstick's, prefixed ``yardstick_``, and the paired columns. ``twin``,
+    the yardstick twin's columns read from another folder (``--yardstick-from``), is used
+    instead of simulating the twin.
 
     Returns
     -------
@@ -92,7 +94,7 @@ def execute_run(payload: str, index: int) -> dict[str, Any]:
         result = simulate(_resolve(campaign, data))
         metrics = result.metrics
         if campaign.spec.yardstick is not None:
-            metrics = {**metrics, **paired_columns(campaign, index, result)}
+            metrics = {**metrics, **paired_columns(campaign, index, result, twin)}
         status = "ok"
     except Exception as exc:  # the run's own failure is a result, recorded once
         status, error, trace = "failed", _one_line(exc), traceback.format_exc()
@@ -164,6 +166,7 @@ def run_campaign(
     scheduler: str | None = None,
     on_progress: Callable[[int, int], None] | None = None,
     overwrite: bool = False,
+    yardstick_from: str | Path | None = None,
 ) -> CampaignSummary:
     """Run (or resume) a campaign into ``out_dir``.
 
@@ -187,12 +190,18 @@ def run_campaign(
     overwrite : bool
         Discard an earlier campaign folder at ``out_dir`` and start over (only one that
         auvmpc wrote, :mod:`auvmpc.experiments.outputs`). Without it such a folder is resumed.
+    yardstick_from : path, optional
+        A folder (finished or partial) of this campaign with another tested controller: run
+        k's yardstick twin is copied from it where it finished there, instead of simulated
+        (:func:`paired.reusable_twins`). Not part of the campaign's identity: the copied twin
+        is the one a simulation would give. The session records the folder and the runs.
 
     Raises
     ------
     ConfigError
         Bad campaign (before any run starts), ``out_dir`` holding another campaign or in
-        use by another process, bad ``workers``/``runs``, unreachable scheduler.
+        use by another process, bad ``workers``/``runs``, unreachable scheduler,
+        ``yardstick_from`` holding another campaign.
     """
     started = time.perf_counter()
     campaign = source if isinstance(source, Campaign) else load_campaign(source)
@@ -211,9 +220,11 @@ def run_campaign(
         )
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ConfigError("--workers", workers, "need a whole number >= 1")
+    twins = {} if yardstick_from is None else reusable_twins(campaign, yardstick_from)
     validate_campaign(campaign, total)
     out = Path(out_dir)
     new = 0
+    copied: list[int] = []  # runs whose stored twin came from yardstick_from
     stopwatch = Stopwatch()
     prepare_campaign_folder(out, overwrite=overwrite)
     with _exclusive(out):
@@ -228,14 +239,16 @@ def run_campaign(
             def record(result: Mapping[str, Any]) -> None:
                 nonlocal done, new
                 store.record(result)
+                if result["status"] == "ok" and result["index"] in twins:
+                    copied.append(result["index"])
                 done, new = done + 1, new + 1
                 if on_progress is not None:
                     on_progress(done, total)
 
             if todo and scheduler is not None:
-                _execute_dask(campaign, todo, scheduler, record)
+                _execute_dask(campaign, todo, twins, scheduler, record)
             elif todo:
-                _execute_local(campaign, todo, workers, store, record)
+                _execute_local(campaign, todo, twins, workers, store, record)
             counts = dict(
                 store.connection.execute(
                     'SELECT status, COUNT(*) FROM runs WHERE "index" < ? GROUP BY status', (total,)
@@ -243,7 +256,11 @@ def run_campaign(
             )
         finally:
             with contextlib.suppress(Exception):  # also after an interrupt: who ran what
-                store.record_session(stopwatch.record(("osqp", "daqp", "proxsuite")), new)
+                provenance = stopwatch.record(("osqp", "daqp", "proxsuite"))
+                if yardstick_from is not None:
+                    folder = str(Path(yardstick_from).resolve())
+                    provenance["yardstick_from"] = {"folder": folder, "runs": sorted(copied)}
+                store.record_session(provenance, new)
             store.close()
     return CampaignSummary(
         out, total, counts.get("ok", 0), counts.get("failed", 0), new, time.perf_counter() - started
@@ -253,11 +270,13 @@ def run_campaign(
 def _execute_local(
     campaign: Campaign,
     todo: Sequence[int],
+    twins: Mapping[int, Mapping[str, Any]],
     workers: int,
     store: _Store,
     record: Callable[[Mapping[str, Any]], None],
 ) -> None:
-    """Run ``todo`` on a process pool, at most ``workers`` runs in flight.
+    """Run ``todo`` on a process pool, at most ``workers`` runs in flight (``twins``: the
+    yardstick twins to copy, by run index).
 
     A worker process that dies breaks the pool (``BrokenProcessPool``) and fails every run
     in flight; each of them gets a death counted in the results file, the pool is
@@ -265,6 +284,7 @@ def _execute_local(
     counted ``MAX_WORKER_DEATHS`` deaths is recorded as failed.
     """
     payload = campaign.payload()
+    arguments = {index: (payload, index, twins.get(index)) for index in todo}  # of execute_run
     deaths = store.deaths()
     queue = deque(k for k in todo if deaths.get(k, 0) == 0)
     alone = deque(k for k in todo if deaths.get(k, 0) > 0)  # suspects from an earlier break
@@ -286,11 +306,11 @@ def _execute_local(
                 if alone:
                     if not in_flight:
                         index = alone.popleft()
-                        in_flight[pool.submit(execute_run, payload, index)] = index
+                        in_flight[pool.submit(execute_run, *arguments[index])] = index
                 else:
                     while queue and len(in_flight) < workers:
                         index = queue.popleft()
-                        in_flight[pool.submit(execute_run, payload, index)] = index
+                        in_flight[pool.submit(execute_run, *arguments[index])] = index
                 if not in_flight:
                     break
                 finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
@@ -317,7 +337,7 @@ def _execute_local(
                 elif not alone:  # refill before writing, so no worker waits on the disk
                     while queue and len(in_flight) < workers:
                         index = queue.popleft()
-                        in_flight[pool.submit(execute_run, payload, index)] = index
+                        in_flight[pool.submit(execute_run, *arguments[index])] = index
                 for result in results:
                     record(result)
                 if victims:
@@ -390,6 +410,7 @@ def _died(campaign: Campaign, index: int) -> dict[str, Any]:
 def _execute_dask(
     campaign: Campaign,
     todo: Sequence[int],
+    twins: Mapping[int, Mapping[str, Any]],
     scheduler: str,
     record: Callable[[Mapping[str, Any]], None],
 ) -> None:
@@ -414,8 +435,8 @@ def _execute_dask(
     futures: dict[Any, int] = {}
     try:
         for index in todo:
-            key = f"{prefix}-{index}"
-            futures[client.submit(execute_run, payload, index, key=key, pure=False)] = index
+            key, twin = f"{prefix}-{index}", twins.get(index)
+            futures[client.submit(execute_run, payload, index, twin, key=key, pure=False)] = index
         for future in as_completed(futures, loop=client.loop):  # no default client
             index = futures.pop(future)
             if future.status == "error":

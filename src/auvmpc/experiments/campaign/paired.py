@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import sqlite3
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -16,8 +17,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from auvmpc import __version__
+from auvmpc.errors import ConfigError
 from auvmpc.experiments.campaign.sampling import plan_run, reproduce_command, scenario_for_run
 from auvmpc.experiments.campaign.spec import Campaign, _resolve
+from auvmpc.experiments.campaign.store import (
+    stored_campaign,
+    stored_metrics,
+    stored_sessions,
+    stored_version,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -32,6 +41,7 @@ __all__ = [
     "RMS_BAR_FLOOR_M",
     "YARDSTICK_PREFIX",
     "paired_columns",
+    "reusable_twins",
     "rms_over_bar",
 ]
 
@@ -58,32 +68,121 @@ def _lost(metrics: Mapping[str, Any]) -> int | None:
     return None if verdict is None else int(verdict == "lost")
 
 
-def paired_columns(campaign: Campaign, index: int, result: RunResult) -> dict[str, Any]:
+def paired_columns(
+    campaign: Campaign,
+    index: int,
+    result: RunResult,
+    twin: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """The columns a campaign with a yardstick adds to run ``index``'s metrics, given the
     finished tested run ``result``: ``lost``, ``warnings`` (count) and ``warnings_text``
-    (JSON list) of the tested run; then the yardstick twin simulated here, its metrics
-    prefixed ``yardstick_`` (with its ``lost`` and ``warnings`` count), or, if it failed,
-    only ``yardstick_error`` (one line); and ``rms_over_bar``."""
-    from auvmpc.experiments.run import simulate
+    (JSON list) of the tested run; then the yardstick twin's metrics prefixed
+    ``yardstick_`` (with its ``lost`` and ``warnings`` count), or, if it failed, only
+    ``yardstick_error`` (one line); and ``rms_over_bar``.
 
+    The twin is simulated here, unless ``twin`` gives its columns already (unprefixed, as
+    :func:`reusable_twins` reads them from another campaign folder)."""
     columns: dict[str, Any] = {
         "lost": _lost(result.metrics),
         "warnings": len(result.warnings),
         "warnings_text": json.dumps(list(result.warnings)),
     }
-    twin: dict[str, Any] = {}
-    try:
-        _, _, data = plan_run(campaign, index, yardstick=True)
-        finished = simulate(_resolve(campaign, data))
-        twin = {**finished.metrics, "lost": _lost(finished.metrics)}
-        twin["warnings"] = len(finished.warnings)
-    except Exception as exc:  # the yardstick's failure is data; the tested run still counts
-        from auvmpc.experiments.campaign.execute import _one_line
-
-        twin = {"error": _one_line(exc)}
+    if twin is None:
+        twin = _simulate_twin(campaign, index)
     columns.update({f"{YARDSTICK_PREFIX}{name}": value for name, value in twin.items()})
     columns["rms_over_bar"] = rms_over_bar(result.metrics.get(RMS_METRIC), twin.get(RMS_METRIC))
     return columns
+
+
+def _simulate_twin(campaign: Campaign, index: int) -> dict[str, Any]:
+    """Run ``index``'s yardstick twin: its metrics, ``lost`` and ``warnings`` count, or only
+    ``error`` (one line) if it failed."""
+    from auvmpc.experiments.run import simulate
+
+    try:
+        _, _, data = plan_run(campaign, index, yardstick=True)
+        finished = simulate(_resolve(campaign, data))
+    except Exception as exc:  # the yardstick's failure is data; the tested run still counts
+        from auvmpc.experiments.campaign.execute import _one_line
+
+        return {"error": _one_line(exc)}
+    return {**finished.metrics, "lost": _lost(finished.metrics), "warnings": len(finished.warnings)}
+
+
+def reusable_twins(campaign: Campaign, folder: str | Path) -> dict[int, dict[str, Any]]:
+    """The yardstick twins stored in campaign folder ``folder`` (``--yardstick-from``), run
+    index -> its columns without the ``yardstick_`` prefix, for :func:`paired_columns`.
+
+    ``folder`` must hold this campaign except for the tested controller (the same
+    :func:`_twin_identity`), so its twin of run k is the one this campaign would simulate:
+    same scenario, same seed, same code. Only twins that finished are returned (a failed
+    one is simulated again: its failure may have been the environment's); a run the folder
+    lacks, or whose tested run failed there (no twin stored), is not in the result either.
+
+    Raises
+    ------
+    ConfigError
+        ``--yardstick-from``: this campaign has no yardstick, ``folder`` holds no campaign
+        results, or another campaign (naming what differs).
+    """
+    path = Path(folder)
+    if campaign.spec.yardstick is None:
+        raise ConfigError("--yardstick-from", str(path), "this campaign has no yardstick")
+    try:
+        source = stored_campaign(path)
+        differences = _differences(
+            _twin_identity(source, stored_version(path)), _twin_identity(campaign, __version__)
+        )
+        stored = stored_metrics(path)
+    except ConfigError as error:
+        raise ConfigError("--yardstick-from", error.value, error.reason) from None
+    except sqlite3.DatabaseError as error:
+        raise ConfigError("--yardstick-from", str(path), f"unreadable results: {error}") from None
+    if differences:
+        raise ConfigError(
+            "--yardstick-from",
+            str(path),
+            "not this campaign with another controller: " + "; ".join(differences),
+        )
+    twins: dict[int, dict[str, Any]] = {}
+    for index, metrics in stored.items():
+        twin = {
+            name.removeprefix(YARDSTICK_PREFIX): value
+            for name, value in metrics.items()
+            if name.startswith(YARDSTICK_PREFIX)
+        }
+        if twin and "error" not in twin:
+            twins[index] = twin
+    return twins
+
+
+def _twin_identity(campaign: Campaign, version: str) -> dict[str, Any]:
+    """What decides a campaign's yardstick twins: its identity (:meth:`Campaign.identity`)
+    without the controller label, the implicit overrides (which the twins get too) and the
+    auvmpc version that simulates them."""
+    identity = {key: value for key, value in campaign.identity().items() if key != "controller"}
+    return {
+        **identity,
+        "implicit overrides": list(campaign.implicit_overrides),
+        "auvmpc version": version,
+    }
+
+
+def _differences(there: Mapping[str, Any], here: Mapping[str, Any]) -> list[str]:
+    """What differs between two identities, for one line: a plain value with both values."""
+    differences = []
+    for key in sorted(there.keys() | here.keys()):
+        if key not in there:
+            differences.append(f"no {key} there")
+        elif key not in here:
+            differences.append(f"no {key} here")
+        elif there[key] == here[key]:
+            continue
+        elif isinstance(there[key], int | float | str) and isinstance(here[key], int | float | str):
+            differences.append(f"{key} {there[key]} there, {here[key]} here")
+        else:
+            differences.append(f"different {key}")
+    return differences
 
 
 # ----------------------------------------------------------------------------- the report
@@ -146,7 +245,8 @@ def _finished_pairs(frame: pd.DataFrame) -> pd.DataFrame:
 def paired_summary(frame: pd.DataFrame, campaign: Campaign, out_dir: Path) -> dict[str, Any]:
     """The paired section's numbers, over the runs where both the controller and the
     yardstick finished: the table (:data:`PAIRED_ROWS`), the runs whose yardstick is lost
-    (where the bar does not apply, contacts still count), and the yardstick failures."""
+    (where the bar does not apply, contacts still count), the yardstick failures, and the
+    folders twins were copied from (``--yardstick-from``: folder -> runs)."""
     both = _finished_pairs(frame)
     table = [
         {
@@ -184,7 +284,18 @@ def paired_summary(frame: pd.DataFrame, campaign: Campaign, out_dir: Path) -> di
             for _, row in ok.iterrows()
             if isinstance(row.get(f"{YARDSTICK_PREFIX}error"), str)
         ],
+        "copied_from": _copied_twins(out_dir),
     }
+
+
+def _copied_twins(out_dir: Path) -> dict[str, int]:
+    """Folder -> how many runs' twins the sessions of ``out_dir`` copied from it."""
+    counts: dict[str, int] = {}
+    for session in stored_sessions(out_dir):
+        if "yardstick_from" in session:  # sessions without the option have no such key
+            folder, runs = session["yardstick_from"]["folder"], session["yardstick_from"]["runs"]
+            counts[folder] = counts.get(folder, 0) + len(runs)
+    return counts
 
 
 def worst_cases(frame: pd.DataFrame, count: int) -> list[int]:

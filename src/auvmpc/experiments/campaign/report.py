@@ -575,6 +575,11 @@ def _paired_markdown(paired: Mapping[str, Any]) -> list[str]:
     ]
     for row in paired["table"]:
         lines.append(f"| {row['row']} | {_fmt(row['controller'])} | {_fmt(row['yardstick'])} |")
+    for folder, runs in paired["copied_from"].items():
+        lines += [
+            "",
+            f"Yardstick twins of {runs} runs copied from `{folder}` (`--yardstick-from`).",
+        ]
     lines += [
         "",
         f"Where the yardstick is not lost ({paired['judged_runs']} runs): controller lost in "

@@ -504,7 +504,11 @@ class Campaign:
 
     @functools.cached_property
     def hash(self) -> str:
-        """SHA-256 of everything that decides the runs (not name, description, runs, criterion).
+        """SHA-256 of :meth:`identity`."""
+        return hashlib.sha256(_canonical_json(self.identity()).encode()).hexdigest()
+
+    def identity(self) -> dict[str, Any]:
+        """Everything that decides the runs (not name, description, runs, criterion).
 
         The keys of the newer options (cases, controller, yardstick) enter only when set, so
         a campaign without them keeps the hash it always had."""
@@ -525,7 +529,7 @@ class Campaign:
             identity["controller"] = list(self.controller_overrides)
         if self.spec.yardstick is not None:
             identity["yardstick"] = list(self.spec.yardstick)
-        return hashlib.sha256(_canonical_json(identity).encode()).hexdigest()
+        return identity
 
     @functools.cached_property
     def parameter_columns(self) -> tuple[str, ...]:

@@ -298,13 +298,9 @@ def stored_sessions(out_dir: str | Path) -> list[dict[str, Any]]:
 
 def stored_campaign(out_dir: Path) -> Campaign:
     """The campaign a results folder was written by (as stored, not as the file is now)."""
-    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
-        row = db.execute(
-            "SELECT spec, source, base_source, base_data, base_dir FROM campaign"
-        ).fetchone()
-    if row is None:
-        raise ConfigError("DIR", str(out_dir), "no campaign stored in results.sqlite")
-    spec_text, source, base_source, base_data, base_dir = row
+    spec_text, source, base_source, base_data, base_dir = _campaign_row(
+        out_dir, "spec, source, base_source, base_data, base_dir"
+    )
     spec = CampaignSpec.model_validate(json.loads(spec_text))
     return _with_implicit_overrides(
         Campaign(
@@ -316,6 +312,27 @@ def stored_campaign(out_dir: Path) -> Campaign:
             controller_overrides=expand_controller(spec.controller),
         )
     )
+
+
+def stored_version(out_dir: Path) -> str:
+    """The auvmpc version that created a results folder."""
+    return _campaign_row(out_dir, "auvmpc_version")[0]
+
+
+def stored_metrics(out_dir: Path) -> dict[int, dict[str, Any]]:
+    """Run index -> metrics, of the runs stored with status ``ok`` (floats exactly as the
+    runs computed them: the JSON is parsed by Python)."""
+    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
+        rows = db.execute('SELECT "index", metrics FROM runs WHERE status = ?', ("ok",)).fetchall()
+    return {index: json.loads(text) for index, text in rows}
+
+
+def _campaign_row(out_dir: Path, columns: str) -> tuple[Any, ...]:
+    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
+        row = db.execute(f"SELECT {columns} FROM campaign").fetchone()
+    if row is None:
+        raise ConfigError("DIR", str(out_dir), "no campaign stored in results.sqlite")
+    return row
 
 
 def _results_path(out_dir: Path) -> Path:
