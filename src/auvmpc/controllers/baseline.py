@@ -161,6 +161,7 @@ class BaselineController(ShelledController):
         sample_time: float,
         gains: BaselineConfig,
         check_actuation: bool = True,
+        settling_yaw: bool = False,
     ) -> None:
         if not (math.isfinite(sample_time) and sample_time > 0):
             raise ValueError(f"sample_time must be finite and > 0, got {sample_time!r}")
@@ -174,6 +175,7 @@ class BaselineController(ShelledController):
         self.sample_time = float(sample_time)
         self.limits = horizontal_limits(model)
         self.gains = gains
+        self._settling_yaw = settling_yaw  # the shell's recovery: _settled_yaw_accel
         n = model.n_thrusters
         self._kp = np.array([gains.along_kp, gains.cross_kp])
         self._kd = np.array([gains.along_kd, gains.cross_kd])
@@ -305,6 +307,8 @@ class BaselineController(ShelledController):
             psi_d = psi_r - math.atan(error_path[1] / g.los_lookahead_m)
         heading_error = _wrap(psi - psi_d)
         yaw_accel = yaw_accel_r - g.heading_kp * heading_error - g.heading_kd * (r - r_r)
+        if self._settling_yaw:
+            yaw_accel = self._settled_yaw_accel(r, r_r, heading_error, yaw_accel)
 
         # Feedback linearisation: p'' = R(psi) (nu' + r [-v, u]) gives the body accelerations.
         nu_dot = _rotation(psi).T @ accel_world - r * np.array([-v, u])
@@ -331,6 +335,26 @@ class BaselineController(ShelledController):
         # where the loop is linear a large error must not pile up integral in a few samples.
         integrated = np.array([cap * error_path[0], cap * error_path[1], heading_error])
         return tau, np.array([error_path[0], error_path[1], heading_error]), integrated
+
+    def _settled_yaw_accel(
+        self, r: float, r_r: float, heading_error: float, inertial: float
+    ) -> float:
+        """The yaw term for a yaw that settles within the sample: where the yaw damping's
+        time constant at ``r`` is below a third of the sample, the moment that holds the
+        wanted rate ``r_r - (K_P / K_D) e_psi`` against the damping in steady state (as the
+        term the caller turns into a moment), else ``inertial``, the law's own.
+
+        On a light, strongly damped yaw (the hard survey's 0.38 kg m2 vehicle: 0.02 s) the
+        inertial law's moment, held for 0.5 s, overshoots the wanted rate by several rad/s
+        each sample and keeps the vehicle spinning."""
+        p, g = self.model, self.gains
+        slope = abs(p.Nr + 2.0 * p.Nrr * abs(r))  # N m s: the damping's, linearised at r
+        if slope * self.sample_time < 3.0 * p.Iz:
+            return inertial
+        wanted = r_r - g.heading_kp / g.heading_kd * heading_error
+        damping = p.Nr * wanted + p.Nrr * abs(wanted) * wanted  # what holds it, with sign
+        reference_damping = p.Nr * r_r + p.Nrr * abs(r_r) * r_r  # the caller subtracts it
+        return (reference_damping - damping) / p.Iz
 
     def _saturate(self, tau_des: np.ndarray) -> tuple[np.ndarray, bool]:
         """Allocate, fit inside the force limits keeping direction, then clip to the rate box.

@@ -31,8 +31,10 @@ __all__ = [
     "THRUST_MOVE_COST",
     "ThrustPenalty",
     "default_sample_time",
+    "default_sqp_iterations",
     "default_thrust_weights",
     "stable_model_substeps",
+    "velocity_change_time",
 ]
 
 Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
@@ -283,6 +285,13 @@ class ControllerConfig(StrictModel):
             update["model_substeps"] = stable_model_substeps(model, sample_time)
         if self.R is None:
             update["R"] = default_thrust_weights(model)
+        if (
+            self.type is ControllerType.NMPC
+            and "linearisation_iterations" not in self.model_fields_set
+        ):
+            iterations = default_sqp_iterations(model, sample_time)
+            if iterations != self.linearisation_iterations:
+                update["linearisation_iterations"] = iterations
         observer = self.observer.for_vehicle(model)
         if observer is not self.observer:
             update["observer"] = observer
@@ -325,6 +334,14 @@ class ControllerConfig(StrictModel):
                 "why": f"{THRUST_MOVE_COST:g} / h^2, h half the thrust range "
                 f"({(model.thrust_max - model.thrust_min) / 2.0:.4g} N): moving a thruster by h "
                 "costs the same on any vehicle",
+            }
+        if self.type is ControllerType.NMPC and "linearisation_iterations" not in given:
+            change = velocity_change_time(model)
+            chosen["linearisation_iterations"] = {
+                "value": filled.linearisation_iterations,
+                "why": f"its full thrust changes its speed by {AGILITY_SPEED_M_PER_S:g} m/s in "
+                f"{change:.3g} s; a sample over {RTI_AGILE_SAMPLES:g} times that takes 2 SQP "
+                "steps (one oscillated near discs on such vehicles, docs/recovery.md)",
             }
         if "prediction_horizon" not in given:
             chosen["prediction_horizon"] = {
@@ -384,6 +401,33 @@ def default_sample_time(model: VehicleParams) -> float:
         return DEFAULT_SAMPLE_TIME_S
     longest = TURN_UP_SAMPLES * turn_up_time(model)
     return next((te for te in SAMPLE_TIME_GRID_S if te <= longest), SAMPLE_TIME_GRID_S[-1])
+
+
+# The speed change that measures how agile a vehicle is (m/s): the hard survey's fastest.
+AGILITY_SPEED_M_PER_S = 0.5
+# Samples of that speed change above which one real-time iteration per sample is not enough.
+# Measured on the hard survey at 0.5 s (docs/recovery.md): two vehicles that change their
+# speed by 0.5 m/s in 0.015 s and 0.056 s (33 and 9 of them per sample) oscillated at full
+# thrust beside a disc and touched it with one SQP step, and matched the converged OCP with
+# two; the presets take 0.08-0.56 s (jmse2210 2.4, bluerov2-heavy 6.5 per sample).
+RTI_AGILE_SAMPLES = 8.0
+
+
+def velocity_change_time(model: VehicleParams) -> float:
+    """How long the full thrust authority takes to change the surge or the sway speed (the
+    quicker of the two) by AGILITY_SPEED_M_PER_S, drag aside (s): m v / F."""
+    times = [
+        mass / force if force > 0 else math.inf  # an axis without thrust: not agile on it
+        for mass, force in zip((model.m11, model.m22), model.thrust_authority[:2], strict=True)
+    ]
+    return AGILITY_SPEED_M_PER_S * min(times)
+
+
+def default_sqp_iterations(model: VehicleParams, sample_time: float) -> int:
+    """The real-time nmpc's SQP steps per sample when the scenario gives none: 2 on a vehicle
+    whose speed changes by AGILITY_SPEED_M_PER_S in less than 1/RTI_AGILE_SAMPLES of a
+    sample, else 1."""
+    return 2 if sample_time > RTI_AGILE_SAMPLES * velocity_change_time(model) else 1
 
 
 # The cost of moving one thruster by half its range in one sample, in units of the stage cost

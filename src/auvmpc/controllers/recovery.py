@@ -38,7 +38,9 @@ class StabilisingFeedback:
 
     def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
         gains = BaselineConfig(along_ki=0.0, cross_ki=0.0, heading_ki=0.0)
-        self._law = BaselineController(model, sample_time, gains, check_actuation=False)
+        self._law = BaselineController(
+            model, sample_time, gains, check_actuation=False, settling_yaw=True
+        )
         self._keep_out_extra = keep_out_extra  # vehicle radius + margin, m
         self._hold: np.ndarray | None = None  # (2,) world position held, m
 
