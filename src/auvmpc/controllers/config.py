@@ -111,7 +111,7 @@ class ControllerConfig(StrictModel):
     type: ControllerType = Field(
         default=ControllerType.NMPC,
         description="which controller (default: the real-time nmpc, the one that measured best "
-        "on the hard-survey sweep, docs/robustness-sweeps.md)",
+        "on the hard-survey sweep, docs/recovery.md)",
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
@@ -346,7 +346,8 @@ class ControllerConfig(StrictModel):
         if "prediction_horizon" not in given:
             chosen["prediction_horizon"] = {
                 "value": filled.prediction_horizon,
-                "why": f"the default 30 samples ({30 * filled.sample_time:g} s ahead)",
+                "why": f"the default {filled.prediction_horizon} samples "
+                f"({filled.prediction_horizon * filled.sample_time:g} s ahead)",
             }
         observer = self.observer
         if observer.initial_disturbance_std is None or observer.disturbance_rate_std is None:

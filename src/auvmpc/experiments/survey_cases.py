@@ -14,7 +14,7 @@ random mission in a current, with model error, sensor noise and obstacles on its
 
 Each case is judged against the same scenario solved with the optimal control problem to
 convergence (the ``nmpc`` controller with ``nmpc_mode: full``): see
-:func:`yardstick_overrides` and docs/robustness-sweeps.md.
+:func:`yardstick_overrides` and docs/recovery.md.
 """
 
 from __future__ import annotations
