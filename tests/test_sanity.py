@@ -261,9 +261,30 @@ def test_a_linearised_controller_too_slow_for_the_yaw_is_warned_in_one_line(cont
     resolved = load_scenario("paper-ideal", [LIGHT_YAW, f"controller.type={controller}"])
     turn_up = turn_up_time(resolved.model)
     assert 0.5 > LINEARISED_TURN_UP_SAMPLES * turn_up  # the case the rule is for
-    warnings = [w for w in preflight(resolved) if w.startswith("controller.sample_time")]
+    warnings = [w for w in preflight(resolved) if "linearises" in w]
     assert len(warnings) == 1 and "\n" not in warnings[0]
     assert f"{turn_up:.3g} s" in warnings[0] and controller in warnings[0]
-    # the default controller predicts on the exact model: nothing to warn of
+    # the default controller predicts on the exact model: only the spin within a sample
     nmpc = load_scenario("paper-ideal", [LIGHT_YAW, "controller.type=nmpc"])
-    assert not [w for w in preflight(nmpc) if w.startswith("controller.sample_time")]
+    assert [w for w in preflight(nmpc) if "linearises" in w] == []
+
+
+def test_a_sample_time_that_lets_the_yaw_spin_within_it_is_warned_with_the_default():
+    from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD, default_sample_time
+    from auvmpc.models.vehicle import top_yaw_rate
+
+    # paper-ideal pins 0.5 s; the light vehicle's 127 N m spins it up to 15.8 rad/s
+    pinned = load_scenario("paper-ideal", [LIGHT_YAW, "controller.type=nmpc"])
+    turn = 0.5 * top_yaw_rate(pinned.model)
+    assert turn > HEADING_PER_SAMPLE_RAD
+    warnings = [w for w in preflight(pinned) if "in one sample" in w]
+    assert len(warnings) == 1 and "\n" not in warnings[0]
+    assert f"{turn:.3g} rad" in warnings[0]
+    assert f"omit it for {default_sample_time(pinned.model):g} s" in warnings[0]
+    # omitted, the chosen sample keeps the turn within half a turn: nothing to warn of
+    chosen = load_scenario("paper-ideal", [LIGHT_YAW, "controller.sample_time=null"])
+    assert chosen.scenario.controller.sample_time == default_sample_time(chosen.model)
+    assert not [w for w in preflight(chosen) if "in one sample" in w]
+    # the paper's own vehicle at its own 0.5 s turns 1.2 rad: the paper runs are not warned
+    paper = load_scenario("paper-ideal")
+    assert not [w for w in preflight(paper) if "in one sample" in w]

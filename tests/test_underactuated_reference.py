@@ -11,12 +11,15 @@ import pytest
 
 from auvmpc.controllers.config import (
     DEFAULT_SAMPLE_TIME_S,
+    HEADING_PER_SAMPLE_RAD,
+    SAMPLE_TIME_GRID_S,
     TURN_UP_SAMPLES,
     ControllerConfig,
     default_sample_time,
 )
 from auvmpc.estimation import ObserverConfig
 from auvmpc.experiments.run import simulate
+from auvmpc.models.random_vehicles import random_vehicle
 from auvmpc.models.vehicle import (
     body_from_world,
     dynamics,
@@ -146,8 +149,22 @@ def test_sample_time_resolves_an_underactuated_turn(preset):
     if model.underactuated:
         assert te <= TURN_UP_SAMPLES * turn_up_time(model)
         assert te < DEFAULT_SAMPLE_TIME_S
-    else:
+    else:  # every fully actuated preset turns under half a turn per 0.5 s at full moment
         assert te == DEFAULT_SAMPLE_TIME_S
+    assert te * top_yaw_rate(model) <= HEADING_PER_SAMPLE_RAD
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_sample_time_keeps_a_full_yaw_moment_within_half_a_turn(seed):
+    # random plausible vehicles (their top yaw rate does not depend on the yaw inertia the
+    # hard survey cuts): the sample is the grid's longest the rule allows, at most 0.5 s
+    vehicle = random_vehicle(np.random.default_rng(seed), name="random")
+    spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(vehicle)
+    te = default_sample_time(vehicle)
+    assert te <= DEFAULT_SAMPLE_TIME_S
+    longer = [grid for grid in SAMPLE_TIME_GRID_S if grid > te]
+    if te < SAMPLE_TIME_GRID_S[0] and not vehicle.underactuated:
+        assert te <= spin < min(longer)  # the grid's longest within the rule
 
 
 def test_turn_up_time_is_inertia_times_top_rate_over_moment(videoray):

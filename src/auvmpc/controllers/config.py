@@ -13,7 +13,13 @@ from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates, turn_up_time
+from auvmpc.models.vehicle import (
+    RK4_STABLE_STEP,
+    VehicleParams,
+    damping_rates,
+    top_yaw_rate,
+    turn_up_time,
+)
 from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
 
@@ -25,6 +31,7 @@ __all__ = [
     "DepthControllerConfig",
     "DepthObserverConfig",
     "DEFAULT_SAMPLE_TIME_S",
+    "HEADING_PER_SAMPLE_RAD",
     "DisturbanceBound",
     "NmpcMode",
     "QpStructure",
@@ -115,8 +122,9 @@ class ControllerConfig(StrictModel):
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
-        description="Te (s); omitted: 0.5, or shorter for an underactuated vehicle whose "
-        "turn is faster than that (default_sample_time, docs/tuning.md)",
+        description="Te (s); omitted: 0.5, or shorter where the largest yaw moment turns the "
+        "vehicle over half a turn in 0.5 s or an underactuated vehicle's turn is faster than "
+        "that (default_sample_time, docs/tuning.md)",
     )
     prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
     control_horizon: Annotated[int, Field(ge=1)] | None = Field(
@@ -312,13 +320,18 @@ class ControllerConfig(StrictModel):
             }
         if self.sample_time is None:
             turn_up = turn_up_time(model)
+            spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(model)
             why = (
-                f"underactuated: at most {TURN_UP_SAMPLES:g} x its yaw turn-up time "
-                f"{turn_up:.3g} s, on the grid {list(SAMPLE_TIME_GRID_S)}"
-                if model.underactuated
-                else "fully actuated: the paper's 0.5 s (it pushes sideways without turning; "
-                f"yaw turn-up time {turn_up:.3g} s, a spin is the safety shell's to stop)"
+                f"at most the paper's {DEFAULT_SAMPLE_TIME_S:g} s and the {spin:.3g} s its "
+                f"largest yaw moment takes to turn it by {HEADING_PER_SAMPLE_RAD:.3g} rad at "
+                f"its top yaw rate {top_yaw_rate(model):.3g} rad/s"
             )
+            if model.underactuated:
+                why += (
+                    f", and underactuated: at most {TURN_UP_SAMPLES:g} x its yaw turn-up time "
+                    f"{turn_up:.3g} s"
+                )
+            why += f"; rounded down to the grid {list(SAMPLE_TIME_GRID_S)}"
             chosen["sample_time"] = {"value": filled.sample_time, "why": why}
         if self.model_substeps is None:
             rates = damping_rates(model, _STABILITY_SPEED, _STABILITY_SPEED, _STABILITY_YAW_RATE)
@@ -377,19 +390,27 @@ class ControllerConfig(StrictModel):
         return tuple(range(self.control_horizon or self.prediction_horizon))
 
 
-# The sample time when none is given: the paper's, for every fully actuated vehicle.
+# The sample time when none is given: the paper's, for every vehicle it suits.
 DEFAULT_SAMPLE_TIME_S = 0.5
 # Sample times a derived one is rounded down to: each divides whole seconds, so scenario
 # durations in seconds stay whole numbers of samples.
 SAMPLE_TIME_GRID_S = (0.5, 0.25, 0.2, 0.1, 0.05)
 # Samples per turn-up time (turn_up_time) that an underactuated vehicle's sample may span.
 TURN_UP_SAMPLES = 3.0
+# The most heading (rad) the largest yaw moment may turn in one sample at the top yaw rate:
+# half a turn. Beyond it a held thrust can spin the vehicle round within the sample and the
+# one linearisation per sample says little about where the heading ends. Measured on the
+# hard survey at 0.5 s (docs/recovery.md): the two vehicles the default nmpc lost there turn
+# 7.5 and 3.9 rad per sample at full moment; at 0.2 and 0.25 s both tracked as well as the
+# converged OCP (0.18 and 0.10 m). Every preset stays below it (BlueROV2 Heavy 2.4 rad).
+HEADING_PER_SAMPLE_RAD = math.pi
 
 
 def default_sample_time(model: VehicleParams) -> float:
-    """Te when the scenario gives none: DEFAULT_SAMPLE_TIME_S, but for an underactuated
-    vehicle no more than TURN_UP_SAMPLES of its turn-up time (vehicle.turn_up_time), on
-    SAMPLE_TIME_GRID_S.
+    """Te when the scenario gives none: DEFAULT_SAMPLE_TIME_S, but no longer than the
+    largest yaw moment takes to turn the vehicle by HEADING_PER_SAMPLE_RAD at its top yaw
+    rate, and for an underactuated vehicle no more than TURN_UP_SAMPLES of its turn-up time
+    (vehicle.turn_up_time); rounded down to SAMPLE_TIME_GRID_S.
 
     An underactuated vehicle moves sideways only by turning, so its heading loop is inside
     its position loop and the sample has to resolve the turn. Measured with
@@ -397,10 +418,12 @@ def default_sample_time(model: VehicleParams) -> float:
     disturbed run to a two-sample yaw oscillation at 0.5 s, and tracked all of them within
     0.21 m at 0.25 s and 0.2 s. A fully actuated vehicle pushes sideways directly; the
     BlueROV2 (also 0.08 s) meets every floor at 0.5 s and at 0.2 s paid 2.5 times the steps.
+    What a fully actuated vehicle's sample must still resolve is how far a held yaw moment
+    can spin it (HEADING_PER_SAMPLE_RAD).
     """
-    if not model.underactuated:
-        return DEFAULT_SAMPLE_TIME_S
-    longest = TURN_UP_SAMPLES * turn_up_time(model)
+    longest = min(DEFAULT_SAMPLE_TIME_S, HEADING_PER_SAMPLE_RAD / top_yaw_rate(model))
+    if model.underactuated:
+        longest = min(longest, TURN_UP_SAMPLES * turn_up_time(model))
     return next((te for te in SAMPLE_TIME_GRID_S if te <= longest), SAMPLE_TIME_GRID_S[-1])
 
 

@@ -16,7 +16,9 @@ with their reasons, are in ``docs/sanity-checks.md``:
 - a reference whose thrust needs change faster than ``thrust_rate_limit`` allows within
   one sample: warning (a minimum-norm allocation estimate; the vehicle lags there).
 - a reference whose depth changes in a horizontal-plane scenario: warning (the 3-DOF
-  plant follows its horizontal path only).
+  plant follows its horizontal path only);
+- a sample time over which the largest yaw moment can turn the vehicle by over half a turn
+  (any controller), or over 8 yaw turn-up times (ltv-mpc, mpc): warning (it may spin).
 
 The thrust the reference needs is the 3-DOF model solved for the force (inverse
 dynamics, :mod:`auvmpc.models.vehicle`) along the reference at the controller's samples, for
@@ -31,9 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD, default_sample_time
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams, turn_up_time
+from auvmpc.models.vehicle import VehicleParams, top_yaw_rate, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
     ResolvedScenario,
@@ -167,20 +170,34 @@ _LINEARISED = ("mpc", "ltv-mpc")
 
 
 def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
-    """A linearised controller whose sample is long against the vehicle's yaw response."""
+    """A sample long against the vehicle's yaw response: one over which the largest yaw
+    moment can spin it past HEADING_PER_SAMPLE_RAD (any controller; the default sample time
+    keeps below it), and for a linearised controller one over its turn-up time."""
     config = resolved.scenario.controller
-    if str(config.type) not in _LINEARISED:
-        return []
-    turn_up = turn_up_time(resolved.model)
-    if config.sample_time <= LINEARISED_TURN_UP_SAMPLES * turn_up:
-        return []
-    return [
-        f"controller.sample_time: {config.sample_time:g} s is more than "
-        f"{LINEARISED_TURN_UP_SAMPLES:g} x {resolved.model.name}'s yaw turn-up time "
-        f"{turn_up:.3g} s (Iz r_top / M_max): {config.type} linearises once per sample and "
-        f"may spin on it; use nmpc (the default) or a sample time <= "
-        f"{LINEARISED_TURN_UP_SAMPLES * turn_up:.3g} s"
-    ]
+    model = resolved.model
+    warnings = []
+    spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(model)
+    if config.sample_time > spin:
+        warnings.append(
+            f"controller.sample_time: {config.sample_time:g} s lets {model.name}'s largest yaw "
+            f"moment turn it by {config.sample_time * top_yaw_rate(model):.3g} rad in one "
+            f"sample (over {HEADING_PER_SAMPLE_RAD:.3g}; top yaw rate "
+            f"{top_yaw_rate(model):.3g} rad/s): a held thrust can spin it within the sample; "
+            f"omit it for {default_sample_time(model):g} s, or use <= {spin:.3g} s"
+        )
+    turn_up = turn_up_time(model)
+    if (
+        str(config.type) in _LINEARISED
+        and config.sample_time > LINEARISED_TURN_UP_SAMPLES * turn_up
+    ):
+        warnings.append(
+            f"controller.sample_time: {config.sample_time:g} s is more than "
+            f"{LINEARISED_TURN_UP_SAMPLES:g} x {model.name}'s yaw turn-up time "
+            f"{turn_up:.3g} s (Iz r_top / M_max): {config.type} linearises once per sample and "
+            f"may spin on it; use nmpc (the default) or a sample time <= "
+            f"{LINEARISED_TURN_UP_SAMPLES * turn_up:.3g} s"
+        )
+    return warnings
 
 
 def _check_start(scenario: Scenario) -> list[str]:
