@@ -300,6 +300,7 @@ def test_waypoints_square_geometry() -> None:
         assert np.min(gap) >= closest - EXACT_TOL  # never closer than the arc allows
         assert np.hypot(*(ref.state(mid_t)[:2] - corner)) == pytest.approx(closest, abs=EXACT_TOL)
     assert set(np.round(np.unique(s[moving, 5]), 12)) == {0.0, round(speed / radius, 12)}
+    assert ref.corners == 2
 
 
 def test_waypoints_hold_at_both_ends() -> None:
@@ -334,6 +335,7 @@ def test_waypoints_collinear_and_two_points() -> None:
     s = straight.states(np.linspace(0.0, 19.9, 200))
     np.testing.assert_array_equal(s[:, 5], 0.0)
     np.testing.assert_allclose(s[:, 1:3], 0.0, atol=EXACT_TOL)
+    assert straight.corners == 0  # the middle waypoint is passed, not turned at
     pair = WaypointPath(WaypointsConfig(points=((1.0, 1.0), (1.0, -3.0)), speed=2.0))
     assert pair.end_time == pytest.approx(2.0)
     np.testing.assert_allclose(pair.state(1.0), [1.0, -1.0, -math.pi / 2, 2.0, 0.0, 0.0])
@@ -571,6 +573,7 @@ def test_lawnmower_changes_depth_in_the_turns_only() -> None:
     depth = ref.depths(t)
     assert np.all(depth[straight, 1] == 0.0)
     assert depth[0, 0] == 1.0 and depth[-1, 0] == 2.0
+    assert ref.corners == 2  # one half-circle turn: two quarter-circle corners
 
 
 def test_waypoints_3d_reach_each_depth_at_each_waypoint() -> None:

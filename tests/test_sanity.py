@@ -126,7 +126,9 @@ def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
         "paper-ideal",
         ["reference={type: waypoints, points: [[0, 0], [20, 0], [20, 20]], speed: 1.0}"],
     )
-    (warning,) = preflight(resolved)
+    # paper-ideal flies the paper's mpc: the corner is also said of it (tested below)
+    (corner, warning) = preflight(resolved)
+    assert corner.startswith("controller.type: mpc on a path with 1 corner:")
     assert warning.startswith("vehicle.thrust_rate_limit: the reference's thrust needs change")
     assert "thrust_rate_limit x sample_time = 2.5 N" in warning
 
@@ -135,11 +137,12 @@ def test_a_depth_the_planar_plant_cannot_follow_is_a_warning():
     """A 3-D path in a horizontal-plane scenario: the run tracks its horizontal path and says
     that the depth is not followed, where the depth changes; a constant depth is no news."""
     lawnmower = "reference={type: lawnmower, leg_length: 10, spacing: 4, legs: 2, speed: 0.5"
-    changing = load_scenario("paper-ideal", ["duration=40", f"{lawnmower}, depths_m: [1, 3]}}"])
+    nmpc = ["duration=40", "controller.type=nmpc"]  # not the corner warning of paper's mpc
+    changing = load_scenario("paper-ideal", [*nmpc, f"{lawnmower}, depths_m: [1, 3]}}"])
     (warning,) = preflight(changing)
     assert warning.startswith("reference: its depth changes (1 to 3 m)")
     assert "kind: six-dof" in warning
-    constant = load_scenario("paper-ideal", ["duration=40", f"{lawnmower}, depths_m: [2]}}"])
+    constant = load_scenario("paper-ideal", [*nmpc, f"{lawnmower}, depths_m: [2]}}"])
     assert preflight(constant) == []
     assert preflight(load_scenario("bluerov2-helix")) == []  # 6-DOF: the depth is tracked
 
@@ -288,3 +291,19 @@ def test_a_sample_time_that_lets_the_yaw_spin_within_it_is_warned_with_the_defau
     # the paper's own vehicle at its own 0.5 s turns 1.2 rad: the paper runs are not warned
     paper = load_scenario("paper-ideal")
     assert not [w for w in preflight(paper) if "in one sample" in w]
+
+
+WAYPOINTS = "reference={type: waypoints, points: [[0, 0], [12, 0], [12, 4], [0, 4]], speed: 0.3}"
+
+
+@pytest.mark.parametrize("controller", ["ltv-mpc", "mpc"])
+def test_a_linearised_controller_on_a_path_with_corners_is_warned_in_one_line(controller):
+    resolved = load_scenario("paper-ideal", [WAYPOINTS, f"controller.type={controller}"])
+    warnings = [w for w in preflight(resolved) if "corners" in w]
+    assert len(warnings) == 1 and "\n" not in warnings[0]
+    assert warnings[0].startswith(f"controller.type: {controller} on a path with 2 corners")
+    # the default follows corners; a linearised controller on the paper's oval is not warned
+    nmpc = load_scenario("paper-ideal", [WAYPOINTS, "controller.type=nmpc"])
+    assert not [w for w in preflight(nmpc) if "corners" in w]
+    oval = load_scenario("paper-ideal", [f"controller.type={controller}"])
+    assert not [w for w in preflight(oval) if "corners" in w]

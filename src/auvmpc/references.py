@@ -396,6 +396,11 @@ class Reference(ABC):
         """Times (s) at which the reference's derivatives may jump (joints, start and end)."""
         return np.empty(0)
 
+    @property
+    def corners(self) -> int:
+        """How many corners the path turns (arcs joining straight legs of a polyline)."""
+        return 0
+
     #: The depth reference of a 3-D path, None for a planar one (see :meth:`depths`).
     depth_profile: DepthProfile | None = None
 
@@ -688,6 +693,11 @@ class WaypointPath(Reference):
     def breakpoints(self) -> np.ndarray:
         return np.append(self._piece_t0, self._end)
 
+    @property
+    def corners(self) -> int:
+        # a collinear waypoint has an arc of zero length: the path goes straight on there
+        return int(np.sum(self.corner_times[:, 1] > self.corner_times[:, 0]))
+
     def _states(self, t: np.ndarray) -> np.ndarray:
         speed = self.config.speed
         tc = np.clip(t, 0.0, self._end)
@@ -836,6 +846,10 @@ class _AlongWaypoints(Reference):
     @property
     def breakpoints(self) -> np.ndarray:
         return self._path.breakpoints
+
+    @property
+    def corners(self) -> int:
+        return self._path.corners
 
     def _states(self, t: np.ndarray) -> np.ndarray:
         return self._path._states(t)
