@@ -97,9 +97,46 @@ def test_a_solver_failing_at_a_corner_is_covered_by_the_plan_then_the_feedback(m
     assert error[run.log.t >= FAILURE_WINDOW_S[1] + 5.0].max() < BACK_ON_PATH_M
 
 
+# The depth step of paper-depth-calm is at 10 s; the depth MPC fails from just before it
+# until 15 s after it, so the whole step is the depth feedback's.
+DEPTH_FAILURE_WINDOW_S = (9.0, 25.0)
+# The feedback's bandwidth (0.5 rad/s, critically damped) leaves (1 + 7.5) e^-7.5 = 0.5 % of
+# the 0.2 m step after 15 s; 0.01 m (5 %) allows for the unknown buoyancy's estimate.
+DEPTH_RECOVERED_M = 0.01
+
+
+def test_a_failing_depth_mpc_is_recovered_by_the_depth_feedback(monkeypatch):
+    """The depth MPC fails over the whole depth step: the shell follows the last plan for
+    PLAN_FALLBACK_STEPS samples, then its depth feedback makes the step, inside the limits."""
+    from auvmpc.controllers.depth_mpc import DepthMpc
+
+    propose = DepthMpc.propose
+
+    def failing(self, observation, previous):
+        proposal = propose(self, observation, previous)
+        if DEPTH_FAILURE_WINDOW_S[0] <= observation.t < DEPTH_FAILURE_WINDOW_S[1]:
+            proposal.plan = None
+        return proposal
+
+    monkeypatch.setattr(DepthMpc, "propose", failing)
+    run = auvmpc.simulate(auvmpc.load_scenario("paper-depth-calm"))
+    log = run.log
+    status = np.array(log.status[: log.steps])
+    t = log.t[: log.steps]
+    window = (t >= DEPTH_FAILURE_WINDOW_S[0]) & (t < DEPTH_FAILURE_WINDOW_S[1])
+    failed = status[window]
+    assert list(failed[:PLAN_FALLBACK_STEPS]) == [ControlStatus.FALLBACK] * PLAN_FALLBACK_STEPS
+    assert set(failed[PLAN_FALLBACK_STEPS:]) == {ControlStatus.RECOVERY}
+    assert run.metrics["thrust_limit_violations"] == 0
+    assert run.metrics["thrust_rate_violations"] == 0
+    end = int(np.argmax(t >= DEPTH_FAILURE_WINDOW_S[1])) - 1  # the last sample of the window
+    assert abs(log.state[end, 0] - log.reference[end, 0]) < DEPTH_RECOVERED_M
+    assert run.metrics["max_z_m"] < 0.0  # never surfaced on the way
+
+
 def test_without_a_feedback_the_shell_keeps_following_the_plan():
-    """A controller without a recovery feedback (the baseline, the depth MPC): after a
-    failure the shell applies the last plan's moves in turn, then holds the last command."""
+    """A controller without a recovery feedback (the baseline): after a failure the shell
+    applies the last plan's moves in turn, then holds the last command."""
     from auvmpc.controllers.base import ActuatorLimits, Observation
     from auvmpc.controllers.shell import Proposal, ShelledController
 

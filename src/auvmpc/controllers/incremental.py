@@ -134,6 +134,7 @@ class IncrementalMpc(ShelledController):
             max_slack=solution.max_slack,
             predicted_states=solution.states,
             disturbance=disturbance,
+            estimated_state=state,
             details=solution.details,
         )
 

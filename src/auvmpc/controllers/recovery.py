@@ -12,18 +12,27 @@ the inertia. Never blind plan-following for long, never zero thrust.
 
 The shell also applies it while the vehicle spins (``shell.spin_limit``), then starts the
 optimiser again cold (docs/recovery.md).
+
+The depth MPC's recovery is :class:`DepthFeedback`: a critically damped PD on depth through
+the nominal heave model (its damping, net buoyancy and the estimated force cancelled), on
+the depth MPC's own estimate of depth and heave rate.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.baseline import BaselineConfig, BaselineController
-from auvmpc.models.layout import HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.vehicle import HeaveParams, VehicleParams
 
-__all__ = ["StabilisingFeedback"]
+if TYPE_CHECKING:
+    from auvmpc.controllers.shell import Proposal
+
+__all__ = ["DepthFeedback", "StabilisingFeedback"]
 
 _POSITION, _HEADING = HORIZONTAL.position, HORIZONTAL.heading
 
@@ -35,6 +44,8 @@ class StabilisingFeedback:
     straight way there crosses an obstacle's keep-out disc (the feedback knows no
     obstacles): then it holds station where that was first found, at the reference's
     heading, until the optimiser is back or the way is clear."""
+
+    watches_yaw = True  # the shell judges spins by the yaw rate of [x y psi u v r]
 
     def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
         gains = BaselineConfig(along_ki=0.0, cross_ki=0.0, heading_ki=0.0)
@@ -49,9 +60,10 @@ class StabilisingFeedback:
         self._hold = None
 
     def command(
-        self, observation: Observation, previous: np.ndarray, disturbance: np.ndarray | None
+        self, observation: Observation, previous: np.ndarray, proposal: Proposal
     ) -> np.ndarray:
         """Thrust for the coming sample, inside the hard limits around ``previous``."""
+        disturbance = proposal.disturbance
         state = np.asarray(observation.state, dtype=float)
         target = observation.reference[:2]
         if self._blocked(state[_POSITION], target[0, _POSITION], observation):
@@ -82,3 +94,47 @@ class StabilisingFeedback:
             if gap < obstacle.radius + self._keep_out_extra:
                 return True
         return False
+
+
+# The depth feedback's bandwidth: at most this many rad/s, and at most this share of the
+# sample rate (rad/s per 1/Te) so that the sampled PD stays well damped. 0.5 rad/s settles a
+# depth error in about 10 s, the depth MPC's own pace in the tank (docs/recovery.md).
+DEPTH_BANDWIDTH_RAD_PER_S = 0.5
+DEPTH_BANDWIDTH_PER_SAMPLE_RATE = 0.2
+_Z, _W = DEPTH.index("z"), DEPTH.index("w")
+
+
+class DepthFeedback:
+    """The shell's recovery law for the depth MPC (module docstring): the heave force
+    m (wn^2 (z_ref - z) + 2 wn (w_ref - w)) with the nominal damping, net buoyancy and the
+    estimated force cancelled, shared equally by the vertical thrusters."""
+
+    watches_yaw = False  # heave has no yaw to spin
+
+    def __init__(self, heave: HeaveParams, sample_time: float) -> None:
+        self._heave = heave
+        self._bandwidth = min(
+            DEPTH_BANDWIDTH_RAD_PER_S, DEPTH_BANDWIDTH_PER_SAMPLE_RATE / sample_time
+        )
+
+    def release(self) -> None:
+        """Nothing held between recoveries."""
+
+    def command(
+        self, observation: Observation, previous: np.ndarray, proposal: Proposal
+    ) -> np.ndarray:
+        """Thrust for the coming sample (the shell projects it into the hard limits)."""
+        heave = self._heave
+        if proposal.estimated_state is not None:
+            z, w = proposal.estimated_state[[_Z, _W]]
+        else:  # no estimate this sample: the measured depth, at rest
+            z, w = float(observation.state[_Z]), 0.0
+        disturbance = (
+            0.0 if proposal.disturbance is None else float(np.ravel(proposal.disturbance)[0])
+        )
+        target = observation.reference[0]
+        wn = self._bandwidth
+        acceleration = wn**2 * (target[_Z] - z) + 2.0 * wn * (target[_W] - w)
+        drag = heave.Zw * w + heave.Zww * abs(w) * w
+        force = heave.m_heave * acceleration - drag - heave.net_buoyancy_N - disturbance
+        return np.full(len(previous), force / len(previous))

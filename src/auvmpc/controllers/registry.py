@@ -11,7 +11,7 @@ from auvmpc.controllers.config import (
     ControllerType,
     DepthControllerConfig,
 )
-from auvmpc.controllers.recovery import StabilisingFeedback
+from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.models.vehicle import VehicleParams
 
@@ -28,7 +28,7 @@ REGISTRY: dict[str, tuple[str, str]] = {
 }
 
 # The optimising horizontal controllers, whose shell recovers with the stabilising feedback
-# (the baseline is that feedback; the depth MPC's recovery is its previous plan).
+# (the baseline is that feedback); the depth MPC's shell recovers with the depth feedback.
 RECOVERED_TYPES = (
     ControllerType.MPC,
     ControllerType.LTV_MPC,
@@ -56,4 +56,6 @@ def build_controller(
         controller.recovery = StabilisingFeedback(
             model, controller.sample_time, config.vehicle_radius + config.obstacle_margin
         )
+    elif config.type == DEPTH_MPC:
+        controller.recovery = DepthFeedback(controller.heave, controller.sample_time)
     return controller

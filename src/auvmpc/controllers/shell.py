@@ -7,7 +7,8 @@ A back end (the paper's MPC, LTV-MPC, NMPC, the do-mpc yardstick, the depth MPC)
   replaced by the previous plan's next move (FALLBACK) for at most
   :data:`PLAN_FALLBACK_STEPS` samples in a row; after that, without a plan, and
   whenever the vehicle spins, by a stabilising feedback (RECOVERY, controllers/recovery.py)
-  where the controller has one (the horizontal MPCs), and the back end starts again cold;
+  where the controller has one (the horizontal MPCs and the depth MPC), and the back end
+  starts again cold;
 * whatever is applied is projected into the hard thrust and thrust-rate box, so no back end
   can command thrust outside the limits;
 * the status says what happened (OK, RELAXED when a soft constraint's slack is active,
@@ -34,7 +35,7 @@ from auvmpc.controllers.base import (
 from auvmpc.models.layout import HORIZONTAL
 
 if TYPE_CHECKING:
-    from auvmpc.controllers.recovery import StabilisingFeedback
+    from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 
 __all__ = [
     "INFO_KEYS",
@@ -96,6 +97,7 @@ class Proposal:
     max_slack: float = 0.0
     predicted_states: np.ndarray | None = None
     disturbance: np.ndarray | None = None  # (3,) world force and moment used, if any
+    estimated_state: np.ndarray | None = None  # the state the back end estimated, if any
     limited: bool = False  # the back end itself cut its demand to fit the limits
     details: dict[str, float] = field(default_factory=dict)  # back-end-specific, in ``info``
 
@@ -111,7 +113,7 @@ class ShelledController(Controller):
     solver_time_limit_ms: float | None = None
     # What the shell applies when no optimiser is in control (set by the registry for the
     # horizontal MPCs); None: the previous plan's moves, then the last command held.
-    recovery: StabilisingFeedback | None = None
+    recovery: StabilisingFeedback | DepthFeedback | None = None
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> ShelledController:
@@ -167,14 +169,14 @@ class ShelledController(Controller):
                 spinning or self._plan is None or self._unsolved > PLAN_FALLBACK_STEPS
             )
             if recovered:
-                wanted = self.recovery.command(observation, previous, proposal.disturbance)
+                wanted = self.recovery.command(observation, previous, proposal)
                 self._plan = None
                 self.forget_plan()
             else:
                 wanted, self._plan = next_planned_move(self._plan, previous)
         command, _ = self.limits.project(wanted, previous, self.sample_time)
         self._previous = command
-        if self.recovery is not None:  # a horizontal controller: states are [x y psi u v r]
+        if self._watches_yaw:  # a horizontal controller: states are [x y psi u v r]
             states = None if fell_back else proposal.predicted_states
             self._predicted_yaw_rate = (
                 float(states[1, _YAW_RATE]) if states is not None and len(states) > 1 else None
@@ -212,11 +214,15 @@ class ShelledController(Controller):
             },
         )
 
+    @property
+    def _watches_yaw(self) -> bool:
+        return self.recovery is not None and self.recovery.watches_yaw
+
     def _spin(self, observation: Observation) -> bool:
         """Whether the vehicle spins at this sample: faster than :func:`spin_limit`, and not
         as the last applied plan predicted; only where there is a feedback to stop it. No
         hysteresis: the optimiser gets each calm sample back."""
-        if self.recovery is None:
+        if not self._watches_yaw:
             return False
         yaw_rate = float(observation.state[_YAW_RATE])
         limit = spin_limit(observation, self.sample_time)
