@@ -161,3 +161,14 @@ def test_a_duration_between_samples_is_rounded_up_with_a_note():
     assert resolved.scenario.duration == 100.5
     notes = [w for w in preflight(resolved) if w.startswith("duration:")]
     assert len(notes) == 1 and "100.2" in notes[0] and "100.5" in notes[0]
+
+
+def test_a_depth_duration_between_samples_is_rounded_up_with_a_note():
+    """The same in the tank: 40.05 s at 0.1 s samples lasts 40.1 s, and the run says so."""
+    from auvmpc.scenario.sanity import preflight
+
+    resolved = load_scenario("paper-depth-calm", ["duration=40.05"])
+    assert resolved.scenario.duration == pytest.approx(40.1, abs=1e-12)
+    (note,) = preflight(resolved)
+    assert note.startswith("duration: 40.05 s") and "40.1 s (401 samples)" in note
+    assert preflight(load_scenario("paper-depth-calm")) == []  # its 40 s is whole

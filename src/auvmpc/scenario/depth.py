@@ -79,9 +79,6 @@ class DepthScenario(StrictModel):
             raise FieldError(f"initial_state.{z}", self.initial_state[z], "outside the water")
         if self.reference.step_time_s >= self.duration:
             raise FieldError("reference.step_time_s", self.reference.step_time_s, "after the end")
-        steps = self.duration / self.controller.sample_time
-        if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-            raise FieldError("duration", self.duration, "not a whole number of samples")
         waves = self.waves
         if waves is not None:
             if waves.height_m >= self.tank.depth_m:

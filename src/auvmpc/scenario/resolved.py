@@ -210,3 +210,9 @@ class ResolvedDepthScenario:
             self.heave_plant = resolve_heave(self.model, scenario.plant.scale)
         except FieldError as error:
             raise ConfigError(error.field, error.value, error.reason) from None
+        # What was decided for the user that they should hear of (run.json ``warnings``).
+        self.notes: list[str] = []
+        duration, note = whole_samples(scenario.duration, scenario.controller.sample_time)
+        if note is not None:
+            self.notes.append(note)
+            self.scenario = scenario.model_copy(update={"duration": duration})

@@ -3,7 +3,7 @@
 Each finding is an error (:class:`~auvmpc.errors.ConfigError`: one line, exit 2, nothing
 run) when the run could not mean anything, and a warning (printed, stored in run.json
 ``warnings``) when the run is possible but probably not what was meant. The decisions,
-with their reasons, are in ``docs/sanity-checks.md``:
+with their reasons, are in ``docs/safety.md`` (Physical sanity checks):
 
 - sizes beyond the available memory: error (the run could only crash);
 - start inside an obstacle's keep-out disc (radius + ``vehicle_radius``): warning (the
@@ -152,7 +152,7 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
     """All checks of the module docstring; returns the warnings, raises the errors."""
     check_memory(resolved)
     if isinstance(resolved, ResolvedDepthScenario):
-        return []
+        return list(resolved.notes)
     return (
         resolved.notes
         + _check_start(resolved.scenario)
