@@ -67,27 +67,39 @@ def _within_limits(run, vehicle) -> None:
     assert steps.max() <= vehicle["thrust_rate_limit"] * run.log.sample_time + LIMIT_TOLERANCE_N
 
 
+def _fail_within(monkeypatch, controller_class, window_s: tuple[float, float]) -> None:
+    """Every proposal of ``controller_class`` over ``window_s`` (s) comes without a plan."""
+    propose = controller_class.propose
+
+    def failing(self, observation, previous):
+        proposal = propose(self, observation, previous)
+        if window_s[0] <= observation.t < window_s[1]:
+            proposal.plan = None
+        return proposal
+
+    monkeypatch.setattr(controller_class, "propose", failing)
+
+
+def _plan_then_feedback(run, window_s: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Over the failure window the shell applied the last plan for PLAN_FALLBACK_STEPS
+    samples, then its feedback; returns the run's statuses and the window's mask."""
+    status = np.array(run.log.status[: run.log.steps])
+    t = run.log.t[: run.log.steps]
+    window = (t >= window_s[0]) & (t < window_s[1])
+    failed = status[window]
+    assert list(failed[:PLAN_FALLBACK_STEPS]) == [ControlStatus.FALLBACK] * PLAN_FALLBACK_STEPS
+    assert set(failed[PLAN_FALLBACK_STEPS:]) == {ControlStatus.RECOVERY}
+    return status, window
+
+
 def test_a_solver_failing_at_a_corner_is_covered_by_the_plan_then_the_feedback(monkeypatch):
     """Every solve fails for 6 s at the corner: the shell follows the last plan for
     PLAN_FALLBACK_STEPS samples, then applies its feedback (RECOVERY), inside the limits; once
     the solver works again the optimiser takes over at once and the vehicle is back on the
     path."""
-    propose = NonlinearMpc.propose
-
-    def failing(self, observation, previous):
-        proposal = propose(self, observation, previous)
-        if FAILURE_WINDOW_S[0] <= observation.t < FAILURE_WINDOW_S[1]:
-            proposal.plan = None
-        return proposal
-
-    monkeypatch.setattr(NonlinearMpc, "propose", failing)
+    _fail_within(monkeypatch, NonlinearMpc, FAILURE_WINDOW_S)
     run = auvmpc.simulate(_scenario())
-    status = np.array(run.log.status[: run.log.steps])
-    t = run.log.t[: run.log.steps]
-    window = (t >= FAILURE_WINDOW_S[0]) & (t < FAILURE_WINDOW_S[1])
-    failed = status[window]
-    assert list(failed[:PLAN_FALLBACK_STEPS]) == [ControlStatus.FALLBACK] * PLAN_FALLBACK_STEPS
-    assert set(failed[PLAN_FALLBACK_STEPS:]) == {ControlStatus.RECOVERY}
+    status, window = _plan_then_feedback(run, FAILURE_WINDOW_S)
     assert ControlStatus.FALLBACK not in status[~window] and "recovery" not in status[~window]
     _within_limits(run, LIGHT_VEHICLE)
     metrics = run.metrics
@@ -110,23 +122,10 @@ def test_a_failing_depth_mpc_is_recovered_by_the_depth_feedback(monkeypatch):
     PLAN_FALLBACK_STEPS samples, then its depth feedback makes the step, inside the limits."""
     from auvmpc.controllers.depth_mpc import DepthMpc
 
-    propose = DepthMpc.propose
-
-    def failing(self, observation, previous):
-        proposal = propose(self, observation, previous)
-        if DEPTH_FAILURE_WINDOW_S[0] <= observation.t < DEPTH_FAILURE_WINDOW_S[1]:
-            proposal.plan = None
-        return proposal
-
-    monkeypatch.setattr(DepthMpc, "propose", failing)
+    _fail_within(monkeypatch, DepthMpc, DEPTH_FAILURE_WINDOW_S)
     run = auvmpc.simulate(auvmpc.load_scenario("paper-depth-calm"))
-    log = run.log
-    status = np.array(log.status[: log.steps])
-    t = log.t[: log.steps]
-    window = (t >= DEPTH_FAILURE_WINDOW_S[0]) & (t < DEPTH_FAILURE_WINDOW_S[1])
-    failed = status[window]
-    assert list(failed[:PLAN_FALLBACK_STEPS]) == [ControlStatus.FALLBACK] * PLAN_FALLBACK_STEPS
-    assert set(failed[PLAN_FALLBACK_STEPS:]) == {ControlStatus.RECOVERY}
+    _plan_then_feedback(run, DEPTH_FAILURE_WINDOW_S)
+    log, t = run.log, run.log.t[: run.log.steps]
     assert run.metrics["thrust_limit_violations"] == 0
     assert run.metrics["thrust_rate_violations"] == 0
     end = int(np.argmax(t >= DEPTH_FAILURE_WINDOW_S[1])) - 1  # the last sample of the window
@@ -193,8 +192,6 @@ def _case_run(seed: int, index: int, *overrides: str):
     for override in overrides:
         apply_override(data, override)
     return auvmpc.simulate(ResolvedScenario(validate_scenario(data), Path.cwd()))
-
-
 
 
 @pytest.mark.slow
