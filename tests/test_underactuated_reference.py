@@ -233,3 +233,28 @@ def test_the_underactuated_preset_holds_a_circle_in_a_current(controller):
     assert metrics["rms_position_error_after_transient_m"] <= UNDERACTUATED_RMS_M
     assert metrics["verdict"] == "ok", metrics["verdict_reason"]
     assert metrics["thrust_limit_violations"] == metrics["thrust_rate_violations"] == 0
+
+
+def test_sqp_steps_follow_the_vehicle_not_its_sample():
+    """2 SQP steps where full thrust changes the speed by 0.5 m/s in under 1/8 of 0.5 s, also
+    where the yaw rule shortens the sample; every preset keeps one."""
+    from auvmpc.controllers.config import (
+        RTI_AGILE_SAMPLES,
+        default_sqp_iterations,
+        velocity_change_time,
+    )
+
+    for preset in preset_names():
+        assert ControllerConfig().for_vehicle(load_vehicle(preset)).linearisation_iterations == 1
+    agile = [
+        vehicle
+        for seed in range(40)
+        if velocity_change_time(vehicle := random_vehicle(np.random.default_rng(seed), name="r"))
+        < DEFAULT_SAMPLE_TIME_S / RTI_AGILE_SAMPLES
+    ]
+    assert agile  # the random vehicles include such ones
+    for vehicle in agile:
+        assert default_sqp_iterations(vehicle) == 2
+        for sample_time in (0.5, 0.25, 0.2):
+            filled = ControllerConfig(sample_time=sample_time).for_vehicle(vehicle)
+            assert filled.linearisation_iterations == 2

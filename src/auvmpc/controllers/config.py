@@ -297,7 +297,7 @@ class ControllerConfig(StrictModel):
             self.type is ControllerType.NMPC
             and "linearisation_iterations" not in self.model_fields_set
         ):
-            iterations = default_sqp_iterations(model, sample_time)
+            iterations = default_sqp_iterations(model)
             if iterations != self.linearisation_iterations:
                 update["linearisation_iterations"] = iterations
         observer = self.observer.for_vehicle(model)
@@ -353,8 +353,9 @@ class ControllerConfig(StrictModel):
             chosen["linearisation_iterations"] = {
                 "value": filled.linearisation_iterations,
                 "why": f"its full thrust changes its speed by {AGILITY_SPEED_M_PER_S:g} m/s in "
-                f"{change:.3g} s; a sample over {RTI_AGILE_SAMPLES:g} times that takes 2 SQP "
-                "steps (one oscillated near discs on such vehicles, docs/recovery.md)",
+                f"{change:.3g} s; where {DEFAULT_SAMPLE_TIME_S:g} s holds over "
+                f"{RTI_AGILE_SAMPLES:g} of that, 2 SQP steps per sample (one oscillated near "
+                "discs on such vehicles, docs/recovery.md)",
             }
         if "prediction_horizon" not in given:
             chosen["prediction_horizon"] = {
@@ -429,11 +430,15 @@ def default_sample_time(model: VehicleParams) -> float:
 
 # The speed change that measures how agile a vehicle is (m/s): the hard survey's fastest.
 AGILITY_SPEED_M_PER_S = 0.5
-# Samples of that speed change above which one real-time iteration per sample is not enough.
-# Measured on the hard survey at 0.5 s (docs/recovery.md): two vehicles that change their
-# speed by 0.5 m/s in 0.015 s and 0.056 s (33 and 9 of them per sample) oscillated at full
-# thrust beside a disc and touched it with one SQP step, and matched the converged OCP with
-# two; the presets take 0.08-0.56 s (jmse2210 2.4, bluerov2-heavy 6.5 per sample).
+# How many of that speed change a DEFAULT_SAMPLE_TIME_S sample may hold before one
+# real-time iteration per sample is not enough. Measured on the hard survey at 0.5 s
+# (docs/recovery.md): two vehicles that change their speed by 0.5 m/s in 0.015 s and 0.056 s
+# (33 and 9 of them per sample) oscillated at full thrust beside a disc and touched it with
+# one SQP step, and matched the converged OCP with two; the presets take 0.08-0.56 s
+# (jmse2210 2.4, bluerov2-heavy 6.5 per 0.5 s). Counted against 0.5 s even where the yaw
+# rule shortens the sample: one such vehicle (0.049 s) at its 0.25 s jumped to full opposite
+# yaw moment beside a disc and touched it (-0.31 m) with one step, and matched the converged
+# OCP with two (so did the 11 other vehicles whose count this changes).
 RTI_AGILE_SAMPLES = 8.0
 
 
@@ -447,11 +452,11 @@ def velocity_change_time(model: VehicleParams) -> float:
     return AGILITY_SPEED_M_PER_S * min(times)
 
 
-def default_sqp_iterations(model: VehicleParams, sample_time: float) -> int:
+def default_sqp_iterations(model: VehicleParams) -> int:
     """The real-time nmpc's SQP steps per sample when the scenario gives none: 2 on a vehicle
-    whose speed changes by AGILITY_SPEED_M_PER_S in less than 1/RTI_AGILE_SAMPLES of a
-    sample, else 1."""
-    return 2 if sample_time > RTI_AGILE_SAMPLES * velocity_change_time(model) else 1
+    whose speed changes by AGILITY_SPEED_M_PER_S in less than 1/RTI_AGILE_SAMPLES of
+    DEFAULT_SAMPLE_TIME_S (whatever its own sample), else 1."""
+    return 2 if DEFAULT_SAMPLE_TIME_S > RTI_AGILE_SAMPLES * velocity_change_time(model) else 1
 
 
 # The cost of moving one thruster by half its range in one sample, in units of the stage cost
