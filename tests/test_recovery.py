@@ -126,11 +126,14 @@ def test_a_failing_depth_mpc_is_recovered_by_the_depth_feedback(monkeypatch):
     run = auvmpc.simulate(auvmpc.load_scenario("paper-depth-calm"))
     _plan_then_feedback(run, DEPTH_FAILURE_WINDOW_S)
     log, t = run.log, run.log.t[: run.log.steps]
+    in_window = (t >= DEPTH_FAILURE_WINDOW_S[0]) & (t < DEPTH_FAILURE_WINDOW_S[1])
     assert run.metrics["thrust_limit_violations"] == 0
     assert run.metrics["thrust_rate_violations"] == 0
     end = int(np.argmax(t >= DEPTH_FAILURE_WINDOW_S[1])) - 1  # the last sample of the window
     assert abs(log.state[end, 0] - log.reference[end, 0]) < DEPTH_RECOVERED_M
-    assert run.metrics["max_z_m"] < 0.0  # never surfaced on the way
+    # critically damped: it never went deeper than the new depth by more than that either
+    final = log.reference[end, 0]
+    assert log.state[: log.steps][in_window, 0].min() > final - DEPTH_RECOVERED_M
 
 
 def test_without_a_feedback_the_shell_keeps_following_the_plan():
@@ -203,9 +206,10 @@ def _case_run(seed: int, index: int, *overrides: str):
 def test_formerly_lost_hard_survey_cases_hold_the_bar(seed, index):
     """The issue's bar on a few hard cases: not lost, at most 3 samples in a row without an
     optimiser, no contact, no limit violation, and (for the first) an RMS error after the
-    transient within max(0.1 m, 1.2 x) the converged OCP's on the same case. All three turn
-    6.4-8.4 rad per 0.5 s at full yaw moment, so they fly at the 0.25 s the sample-time rule
-    gives them ((2, 39) spun beside its disc at 0.5 s, longest streak 4)."""
+    transient within max(0.1 m, 1.2 x) the converged OCP's on the same case. At full yaw
+    moment all three turn 6.4-8.4 rad/s, half a turn in 0.37-0.49 s, so they fly at the
+    0.25 s the sample-time rule gives them ((2, 39) spun beside its disc at 0.5 s, longest
+    streak 4)."""
     metrics = _case_run(seed, index).metrics
     assert metrics["verdict"] != "lost", metrics["verdict_reason"]
     assert metrics["longest_fallback_streak"] <= 3

@@ -336,6 +336,8 @@ def test_waypoints_collinear_and_two_points() -> None:
     np.testing.assert_array_equal(s[:, 5], 0.0)
     np.testing.assert_allclose(s[:, 1:3], 0.0, atol=EXACT_TOL)
     assert straight.corners == 0  # the middle waypoint is passed, not turned at
+    bend = WaypointPath(WaypointsConfig(points=((0.0, 0.0), (5.0, 0.0), (10.0, 1.0))))
+    assert bend.corners == 0  # an 11-degree bend is no corner (CORNER_TURN_DEG)
     pair = WaypointPath(WaypointsConfig(points=((1.0, 1.0), (1.0, -3.0)), speed=2.0))
     assert pair.end_time == pytest.approx(2.0)
     np.testing.assert_allclose(pair.state(1.0), [1.0, -1.0, -math.pi / 2, 2.0, 0.0, 0.0])

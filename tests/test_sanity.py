@@ -274,23 +274,48 @@ def test_a_linearised_controller_too_slow_for_the_yaw_is_warned_in_one_line(cont
 
 def test_a_sample_time_that_lets_the_yaw_spin_within_it_is_warned_with_the_default():
     from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD, default_sample_time
-    from auvmpc.models.vehicle import top_yaw_rate
+    from auvmpc.models.vehicle import heading_turn_time
 
-    # paper-ideal pins 0.5 s; the light vehicle's 127 N m spins it up to 15.8 rad/s
+    # paper-ideal pins 0.5 s; the light vehicle's 127 N m spins it up to 15.8 rad/s, so it
+    # turns half a turn in 0.198 s
     pinned = load_scenario("paper-ideal", [LIGHT_YAW, "controller.type=nmpc"])
-    turn = 0.5 * top_yaw_rate(pinned.model)
-    assert turn > HEADING_PER_SAMPLE_RAD
-    warnings = [w for w in preflight(pinned) if "in one sample" in w]
+    spin = heading_turn_time(pinned.model, HEADING_PER_SAMPLE_RAD)
+    assert spin < 0.5
+    warnings = [w for w in preflight(pinned) if "half a turn" in w]
     assert len(warnings) == 1 and "\n" not in warnings[0]
-    assert f"{turn:.3g} rad" in warnings[0]
+    assert f"longer than the {spin:.3g} s" in warnings[0]
     assert f"omit it for {default_sample_time(pinned.model):g} s" in warnings[0]
     # omitted, the chosen sample keeps the turn within half a turn: nothing to warn of
     chosen = load_scenario("paper-ideal", [LIGHT_YAW, "controller.sample_time=null"])
-    assert chosen.scenario.controller.sample_time == default_sample_time(chosen.model)
-    assert not [w for w in preflight(chosen) if "in one sample" in w]
+    assert chosen.scenario.controller.sample_time == default_sample_time(chosen.model) <= spin
+    assert not [w for w in preflight(chosen) if "half a turn" in w]
     # the paper's own vehicle at its own 0.5 s turns 1.2 rad: the paper runs are not warned
     paper = load_scenario("paper-ideal")
-    assert not [w for w in preflight(paper) if "in one sample" in w]
+    assert not [w for w in preflight(paper) if "half a turn" in w]
+
+
+def test_the_yaw_rule_on_vehicles_without_yaw_damping_or_yaw_moment():
+    """Without yaw damping there is no top rate: half a turn from rest takes
+    sqrt(2 pi Iz / M) (exact then); a vehicle without yaw moment cannot spin itself."""
+    from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD
+    from auvmpc.models.vehicle import heading_turn_time, load_vehicle
+
+    paper = load_vehicle("jmse2210")
+    undamped = paper.model_copy(update={"Nr": 0.0, "Nrr": 0.0})
+    moment = float(paper.thrust_authority[2])
+    assert heading_turn_time(undamped, HEADING_PER_SAMPLE_RAD) == pytest.approx(
+        math.sqrt(2.0 * math.pi * paper.Iz / moment), rel=ROUND_OFF_TOL
+    )
+    centred = [{"position": [0.0, 0.0], "angle_deg": a} for a in (0.0, 90.0)]
+    no_moment = load_scenario(
+        "paper-ideal",
+        ["controller.type=nmpc", "controller.R=null", "reference={type: line, speed: 0.2}",
+         f"vehicle={{name: centred, mass: 10, m11: 12, m22: 14, Iz_rb: 1, Iz_added: 0.5, "
+         f"Xu: -5, Xuu: -10, Yv: -5, Yvv: -10, Nr: -1, Nrr: -1, thrust_limits: [-20, 20], "
+         f"thrust_rate_limit: 100, thrusters: {centred}}}"],
+    )  # fmt: skip
+    assert heading_turn_time(no_moment.model, HEADING_PER_SAMPLE_RAD) == math.inf
+    assert not [w for w in preflight(no_moment) if w.startswith("controller.sample_time")]
 
 
 WAYPOINTS = "reference={type: waypoints, points: [[0, 0], [12, 0], [12, 4], [0, 4]], speed: 0.3}"

@@ -23,6 +23,7 @@ from auvmpc.models.random_vehicles import random_vehicle
 from auvmpc.models.vehicle import (
     body_from_world,
     dynamics,
+    heading_turn_time,
     load_vehicle,
     preset_names,
     top_yaw_rate,
@@ -154,17 +155,17 @@ def test_sample_time_resolves_an_underactuated_turn(preset):
     assert te * top_yaw_rate(model) <= HEADING_PER_SAMPLE_RAD
 
 
-@pytest.mark.parametrize("seed", range(40))
-def test_sample_time_keeps_a_full_yaw_moment_within_half_a_turn(seed):
+def test_sample_time_keeps_a_full_yaw_moment_within_half_a_turn():
     # random plausible vehicles (their top yaw rate does not depend on the yaw inertia the
     # hard survey cuts): the sample is the grid's longest the rule allows, at most 0.5 s
-    vehicle = random_vehicle(np.random.default_rng(seed), name="random")
-    spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(vehicle)
-    te = default_sample_time(vehicle)
-    assert te <= DEFAULT_SAMPLE_TIME_S
-    longer = [grid for grid in SAMPLE_TIME_GRID_S if grid > te]
-    if te < SAMPLE_TIME_GRID_S[0] and not vehicle.underactuated:
-        assert te <= spin < min(longer)  # the grid's longest within the rule
+    for seed in range(40):
+        vehicle = random_vehicle(np.random.default_rng(seed), name="random")
+        spin = heading_turn_time(vehicle, HEADING_PER_SAMPLE_RAD)
+        te = default_sample_time(vehicle)
+        assert te <= min(DEFAULT_SAMPLE_TIME_S, spin)  # within half a turn (the grid allows)
+        assert te * top_yaw_rate(vehicle) <= HEADING_PER_SAMPLE_RAD
+        longer = [grid for grid in SAMPLE_TIME_GRID_S if grid > te]
+        assert not longer or min(longer) > min(DEFAULT_SAMPLE_TIME_S, spin)  # the longest
 
 
 def test_turn_up_time_is_inertia_times_top_rate_over_moment(videoray):

@@ -79,7 +79,7 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
 
     # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
     # must get its own defaults): only the fields its file set.
-    given = getattr(scenario, "given", scenario.scenario)
+    given = scenario.given
     data = given.model_dump(mode="json", exclude_unset=True)
     for text in _override_strings(overrides):
         apply_override(data, text)

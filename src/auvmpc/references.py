@@ -47,6 +47,7 @@ from auvmpc.models.layout import DEPTH, HORIZONTAL
 
 __all__ = [
     "REFERENCE_TYPES",
+    "CORNER_TURN_DEG",
     "Circle",
     "CircleConfig",
     "CsvConfig",
@@ -105,6 +106,12 @@ _CSV_MIN_ROWS = 4
 
 Point = tuple[float, float]
 Point3 = tuple[float, float, float]
+
+
+# A bend of a polyline path counts as a corner from this turn on (deg): the hard survey's
+# 90-degree corners are what the linearised controllers were measured to lose on
+# (docs/recovery.md), a gentle bend is not.
+CORNER_TURN_DEG = 45.0
 
 
 class DepthChangeConfig(StrictModel):
@@ -398,7 +405,8 @@ class Reference(ABC):
 
     @property
     def corners(self) -> int:
-        """How many corners the path turns (arcs joining straight legs of a polyline)."""
+        """How many corners the path turns: arcs joining straight legs of a polyline that
+        turn by CORNER_TURN_DEG or more (a sampled path has none)."""
         return 0
 
     #: The depth reference of a 3-D path, None for a planar one (see :meth:`depths`).
@@ -684,6 +692,8 @@ class WaypointPath(Reference):
         #: (m-2, 2) start and end time (s) of the arc at each interior waypoint (equal where
         #: the legs are collinear and the path passes the waypoint itself).
         self.corner_times = np.array(corner_times, dtype=float).reshape(-1, 2)
+        #: (m-2,) signed turn (rad) at each interior waypoint, 0 where the legs are collinear.
+        self.corner_turns = turns
 
     @property
     def end_time(self) -> float | None:
@@ -695,8 +705,7 @@ class WaypointPath(Reference):
 
     @property
     def corners(self) -> int:
-        # a collinear waypoint has an arc of zero length: the path goes straight on there
-        return int(np.sum(self.corner_times[:, 1] > self.corner_times[:, 0]))
+        return int(np.sum(np.abs(self.corner_turns) >= math.radians(CORNER_TURN_DEG)))
 
     def _states(self, t: np.ndarray) -> np.ndarray:
         speed = self.config.speed

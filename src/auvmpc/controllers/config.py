@@ -17,6 +17,7 @@ from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
     damping_rates,
+    heading_turn_time,
     top_yaw_rate,
     turn_up_time,
 )
@@ -320,11 +321,11 @@ class ControllerConfig(StrictModel):
             }
         if self.sample_time is None:
             turn_up = turn_up_time(model)
-            spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(model)
+            spin = heading_turn_time(model, HEADING_PER_SAMPLE_RAD)
             why = (
                 f"at most the paper's {DEFAULT_SAMPLE_TIME_S:g} s and the {spin:.3g} s its "
-                f"largest yaw moment takes to turn it by {HEADING_PER_SAMPLE_RAD:.3g} rad at "
-                f"its top yaw rate {top_yaw_rate(model):.3g} rad/s"
+                f"largest yaw moment needs to turn it by half a turn (top yaw rate "
+                f"{top_yaw_rate(model):.3g} rad/s)"
             )
             if model.underactuated:
                 why += (
@@ -422,7 +423,7 @@ def default_sample_time(model: VehicleParams) -> float:
     What a fully actuated vehicle's sample must still resolve is how far a held yaw moment
     can spin it (HEADING_PER_SAMPLE_RAD).
     """
-    longest = min(DEFAULT_SAMPLE_TIME_S, HEADING_PER_SAMPLE_RAD / top_yaw_rate(model))
+    longest = min(DEFAULT_SAMPLE_TIME_S, heading_turn_time(model, HEADING_PER_SAMPLE_RAD))
     if model.underactuated:
         longest = min(longest, TURN_UP_SAMPLES * turn_up_time(model))
     return next((te for te in SAMPLE_TIME_GRID_S if te <= longest), SAMPLE_TIME_GRID_S[-1])

@@ -96,7 +96,8 @@ class Proposal:
     iterations: int = 0
     max_slack: float = 0.0
     predicted_states: np.ndarray | None = None
-    disturbance: np.ndarray | None = None  # (3,) world force and moment used, if any
+    disturbance: np.ndarray | None = None  # the force estimate used, if any: (3,) horizontal
+    # world X, Y, N; (1,) the depth MPC's heave force
     estimated_state: np.ndarray | None = None  # the state the back end estimated, if any
     limited: bool = False  # the back end itself cut its demand to fit the limits
     details: dict[str, float] = field(default_factory=dict)  # back-end-specific, in ``info``
@@ -112,7 +113,8 @@ class ShelledController(Controller):
     limits: ActuatorLimits
     solver_time_limit_ms: float | None = None
     # What the shell applies when no optimiser is in control (set by the registry for the
-    # horizontal MPCs); None: the previous plan's moves, then the last command held.
+    # horizontal MPCs and the depth MPC); None: the previous plan's moves, then the last
+    # command held.
     recovery: StabilisingFeedback | DepthFeedback | None = None
 
     @classmethod
@@ -220,7 +222,8 @@ class ShelledController(Controller):
 
     def _spin(self, observation: Observation) -> bool:
         """Whether the vehicle spins at this sample: faster than :func:`spin_limit`, and not
-        as the last applied plan predicted; only where there is a feedback to stop it. No
+        as the last applied plan predicted; only where there is a feedback that watches the
+        yaw (a horizontal one) to stop it. No
         hysteresis: the optimiser gets each calm sample back."""
         if not self._watches_yaw:
             return False

@@ -50,6 +50,7 @@ __all__ = [
     "scaled",
     "steady_speed",
     "top_yaw_rate",
+    "heading_turn_time",
     "turn_up_time",
 ]
 
@@ -322,11 +323,26 @@ def top_yaw_rate(params: VehicleParams) -> float:
     return steady_speed(params.Nr, params.Nrr, float(params.thrust_authority[2]))
 
 
+def heading_turn_time(params: VehicleParams, angle_rad: float) -> float:
+    """The least time the largest yaw moment needs to turn the vehicle by ``angle_rad`` (s):
+    angle / r_top at its top yaw rate; without yaw damping (no top rate) from rest,
+    sqrt(2 angle Iz / M_max); infinite for a vehicle that makes no yaw moment."""
+    moment = float(params.thrust_authority[2])
+    if moment <= 0.0:
+        return math.inf
+    rate = top_yaw_rate(params)
+    if math.isinf(rate):
+        return math.sqrt(2.0 * angle_rad * params.Iz / moment)
+    return angle_rad / rate
+
+
 def turn_up_time(params: VehicleParams) -> float:
     """How long the largest yaw moment takes to spin the vehicle up to its top yaw rate
     from rest, damping aside (s): Iz r_top / M_max. The fastest thing an underactuated
-    vehicle steers with (0.08 s for the VideoRay and the BlueROV2, 0.27 s for jmse2210)."""
-    return params.Iz * top_yaw_rate(params) / float(params.thrust_authority[2])
+    vehicle steers with (0.08 s for the VideoRay and the BlueROV2, 0.27 s for jmse2210);
+    infinite for a vehicle that makes no yaw moment."""
+    moment = float(params.thrust_authority[2])
+    return params.Iz * top_yaw_rate(params) / moment if moment > 0.0 else math.inf
 
 
 # How closely a six_dof thruster must reproduce its 3-DOF allocation column (N per N, N m

@@ -32,6 +32,7 @@ __all__ = [
     "SixDofScenario",
     "SixDofSensingConfig",
     "check_one_sample_time",
+    "rounded_to_samples",
     "whole_samples",
 ]
 
@@ -103,6 +104,15 @@ def whole_samples(duration: float, sample_time: float) -> tuple[float, str | Non
         f"duration: {duration:g} s is not a whole number of samples of {sample_time:g} s "
         f"(controller.sample_time); the run lasts {rounded:g} s ({math.ceil(steps)} samples)"
     )
+
+
+def rounded_to_samples(scenario):
+    """``scenario`` (any kind with ``duration`` and ``controller.sample_time``) with its
+    duration rounded up to whole samples, and the notes saying so (none if it was whole)."""
+    duration, note = whole_samples(scenario.duration, scenario.controller.sample_time)
+    if note is None:
+        return scenario, []
+    return scenario.model_copy(update={"duration": duration}), [note]
 
 
 class SixDofDisturbanceConfig(StrictModel):

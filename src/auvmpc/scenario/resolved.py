@@ -26,7 +26,7 @@ from auvmpc.scenario.model import (
     Scenario,
     SixDofScenario,
     check_one_sample_time,
-    whole_samples,
+    rounded_to_samples,
 )
 
 __all__ = [
@@ -88,11 +88,8 @@ class ResolvedScenario:
             }
         )
         # What was decided for the user that they should hear of (run.json ``warnings``).
-        self.notes: list[str] = []
-        duration, note = whole_samples(scenario.duration, scenario.controller.sample_time)
-        if note is not None:
-            self.notes.append(note)
-            self.scenario = scenario = scenario.model_copy(update={"duration": duration})
+        self.scenario, self.notes = rounded_to_samples(scenario)
+        scenario = self.scenario
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:
@@ -210,9 +207,6 @@ class ResolvedDepthScenario:
             self.heave_plant = resolve_heave(self.model, scenario.plant.scale)
         except FieldError as error:
             raise ConfigError(error.field, error.value, error.reason) from None
+        self.given = scenario  # as written: what overrides apply to
         # What was decided for the user that they should hear of (run.json ``warnings``).
-        self.notes: list[str] = []
-        duration, note = whole_samples(scenario.duration, scenario.controller.sample_time)
-        if note is not None:
-            self.notes.append(note)
-            self.scenario = scenario.model_copy(update={"duration": duration})
+        self.scenario, self.notes = rounded_to_samples(scenario)

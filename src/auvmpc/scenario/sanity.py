@@ -19,7 +19,8 @@ with their reasons, are in ``docs/safety.md`` (Physical sanity checks):
   plant follows its horizontal path only);
 - a sample time over which the largest yaw moment can turn the vehicle by over half a turn
   (any controller), or over 8 yaw turn-up times (ltv-mpc, mpc): warning (it may spin);
-- ltv-mpc or mpc on a path with corners: warning (measured on the hard survey).
+- ltv-mpc or mpc on a path with corners (turns of 45 degrees or more): warning (measured
+  on the hard survey).
 
 The thrust the reference needs is the 3-DOF model solved for the force (inverse
 dynamics, :mod:`auvmpc.models.vehicle`) along the reference at the controller's samples, for
@@ -37,7 +38,7 @@ import numpy as np
 from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD, default_sample_time
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams, top_yaw_rate, turn_up_time
+from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
     ResolvedScenario,
@@ -172,17 +173,17 @@ _LINEARISED = ("mpc", "ltv-mpc")
 
 def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
     """A sample long against the vehicle's yaw response: one over which the largest yaw
-    moment can spin it past HEADING_PER_SAMPLE_RAD (any controller; the default sample time
-    keeps below it), and for a linearised controller one over its turn-up time."""
+    moment can turn it by more than HEADING_PER_SAMPLE_RAD (any controller; only a sample
+    time the scenario gives, the default keeping below it where the grid allows), and for a
+    linearised controller one over LINEARISED_TURN_UP_SAMPLES turn-up times."""
     config = resolved.scenario.controller
     model = resolved.model
     warnings = []
-    spin = HEADING_PER_SAMPLE_RAD / top_yaw_rate(model)
-    if config.sample_time > spin:
+    spin = heading_turn_time(model, HEADING_PER_SAMPLE_RAD)
+    if resolved.given.controller.sample_time is not None and config.sample_time > spin:
         warnings.append(
-            f"controller.sample_time: {config.sample_time:g} s lets {model.name}'s largest yaw "
-            f"moment turn it by {config.sample_time * top_yaw_rate(model):.3g} rad in one "
-            f"sample (over {HEADING_PER_SAMPLE_RAD:.3g}; top yaw rate "
+            f"controller.sample_time: {config.sample_time:g} s is longer than the {spin:.3g} s "
+            f"{model.name}'s largest yaw moment needs to turn it by half a turn (top yaw rate "
             f"{top_yaw_rate(model):.3g} rad/s): a held thrust can spin it within the sample; "
             f"omit it for {default_sample_time(model):g} s, or use <= {spin:.3g} s"
         )
