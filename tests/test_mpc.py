@@ -81,7 +81,9 @@ LINE_REFERENCE = "reference={type: line, start: [0, 0], heading_deg: 0, speed: 0
 def _config(controller_type: str = "mpc", **fields) -> ControllerConfig:
     """The paper's controller and weights unless told otherwise (the tolerances here were
     measured with them); no disturbance estimator, so that the QP is built on the measured
-    state (the estimator is exercised in the limit tests)."""
+    state (the estimator is exercised in the limit tests). The paper's sample time too: a
+    vehicle with limits far away would get a shorter one from the yaw rule."""
+    fields.setdefault("sample_time", SAMPLE_TIME)
     fields.setdefault("offset_free", False)
     fields.setdefault("R", (0.01,))
     fields.setdefault("thrust_penalty", ThrustPenalty.ABSOLUTE)
