@@ -403,8 +403,9 @@ TURN_UP_SAMPLES = 3.0
 # half a turn. Beyond it a held thrust can spin the vehicle round within the sample and the
 # one linearisation per sample says little about where the heading ends. Measured on the
 # hard survey at 0.5 s (docs/recovery.md): the two vehicles the default nmpc lost there turn
-# 7.5 and 3.9 rad per sample at full moment; at 0.2 and 0.25 s both tracked as well as the
-# converged OCP (0.18 and 0.10 m). Every preset stays below it (BlueROV2 Heavy 2.4 rad).
+# 7.5 and 3.9 rad per sample at full moment; at the 0.2 and 0.25 s this gives them both
+# track as well as the converged OCP (0.18 and 0.11 m, the latter with the 2 SQP steps of
+# default_sqp_iterations). Every preset stays below it (BlueROV2 Heavy 2.4 rad).
 HEADING_PER_SAMPLE_RAD = math.pi
 
 

@@ -98,7 +98,7 @@ class StabilisingFeedback:
 
 # The depth feedback's bandwidth: at most this many rad/s, and at most this share of the
 # sample rate (rad/s per 1/Te) so that the sampled PD stays well damped. 0.5 rad/s settles a
-# depth error in about 10 s, the depth MPC's own pace in the tank (docs/recovery.md).
+# depth error to 5 % in about 10 s: a recovery, not a tracker (tests/test_recovery.py).
 DEPTH_BANDWIDTH_RAD_PER_S = 0.5
 DEPTH_BANDWIDTH_PER_SAMPLE_RATE = 0.2
 _Z, _W = DEPTH.index("z"), DEPTH.index("w")
