@@ -332,3 +332,21 @@ def test_a_linearised_controller_on_a_path_with_corners_is_warned_in_one_line(co
     assert not [w for w in preflight(nmpc) if "corners" in w]
     oval = load_scenario("paper-ideal", [f"controller.type={controller}"])
     assert not [w for w in preflight(oval) if "corners" in w]
+
+
+def test_fewer_sqp_steps_than_an_agile_vehicle_needs_are_warned():
+    """The light vehicle's 424 N changes its 26-34 kg speed by 0.5 m/s in 0.031 s: the rule
+    gives 2 SQP steps; asking for 1 is warned, the default and 2 are not."""
+    from auvmpc.controllers.config import default_sqp_iterations
+
+    base = [LIGHT_YAW, "controller.type=nmpc", "controller.sample_time=null"]
+    asked = load_scenario("paper-ideal", [*base, "controller.linearisation_iterations=1"])
+    assert default_sqp_iterations(asked.model) == 2
+    warnings = [w for w in preflight(asked) if w.startswith("controller.linearisation")]
+    assert len(warnings) == 1 and "\n" not in warnings[0] and "omit it for 2" in warnings[0]
+    for given in ([], ["controller.linearisation_iterations=2"]):
+        fine = load_scenario("paper-ideal", [*base, *given])
+        assert not [w for w in preflight(fine) if w.startswith("controller.linearisation")]
+    # the paper's vehicle needs one step: the paper runs are not warned
+    paper = load_scenario("paper-ideal", ["controller.type=nmpc"])
+    assert not [w for w in preflight(paper) if w.startswith("controller.linearisation")]

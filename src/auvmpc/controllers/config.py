@@ -25,6 +25,7 @@ from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.dense_qp import QpSolverName
 
 __all__ = [
+    "AGILITY_SPEED_M_PER_S",
     "CONTROLLER_PRESETS",
     "ControllerConfig",
     "ControllerType",

@@ -20,7 +20,9 @@ with their reasons, are in ``docs/safety.md`` (Physical sanity checks):
 - a sample time over which the largest yaw moment can turn the vehicle by over half a turn
   (any controller), or over 8 yaw turn-up times (ltv-mpc, mpc): warning (it may spin);
 - ltv-mpc or mpc on a path with corners (turns of 45 degrees or more): warning (measured
-  on the hard survey).
+  on the hard survey);
+- the real-time nmpc given fewer SQP steps per sample than the vehicle's surge and sway
+  agility call for: warning.
 
 The thrust the reference needs is the 3-DOF model solved for the force (inverse
 dynamics, :mod:`auvmpc.models.vehicle`) along the reference at the controller's samples, for
@@ -35,7 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from auvmpc.controllers.config import HEADING_PER_SAMPLE_RAD, default_sample_time
+from auvmpc.controllers.config import (
+    AGILITY_SPEED_M_PER_S,
+    HEADING_PER_SAMPLE_RAD,
+    ControllerType,
+    NmpcMode,
+    default_sample_time,
+    default_sqp_iterations,
+    velocity_change_time,
+)
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
@@ -158,6 +168,7 @@ def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
         resolved.notes
         + _check_start(resolved.scenario)
         + _check_sample_time(resolved)
+        + _check_sqp_steps(resolved)
         + _check_reference(resolved)
     )
 
@@ -206,6 +217,25 @@ def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
 # controller was lost on or fell short of the converged OCP's bar on, at this release
 # (docs/recovery.md, `auvmpc campaign hard-survey --controller ...`); the default missed 1.
 CORNERED_MISSES = {"ltv-mpc": "53 of 196", "mpc": "131 of 196"}
+
+
+def _check_sqp_steps(resolved: ResolvedScenario) -> list[str]:
+    """The real-time nmpc given fewer SQP steps per sample than the vehicle's surge and sway
+    agility call for (default_sqp_iterations): one step oscillated at full thrust beside a
+    disc on such hard-survey vehicles and touched it."""
+    config = resolved.scenario.controller
+    if config.type is not ControllerType.NMPC or config.nmpc_mode is not NmpcMode.REAL_TIME:
+        return []
+    wanted = default_sqp_iterations(resolved.model)
+    if config.linearisation_iterations >= wanted:
+        return []
+    change = velocity_change_time(resolved.model)
+    return [
+        f"controller.linearisation_iterations: {config.linearisation_iterations} SQP step "
+        f"per sample on {resolved.model.name}, whose full thrust changes its speed by "
+        f"{AGILITY_SPEED_M_PER_S:g} m/s in {change:.3g} s: one step oscillated beside discs "
+        f"on such vehicles (docs/recovery.md); omit it for {wanted}"
+    ]
 
 
 def _check_corners(corners: int, controller: str) -> list[str]:
