@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -161,6 +162,32 @@ def test_leaving_the_path_by_several_vehicle_lengths_is_lost(vehicle):
     metrics = metrics_of(log, vehicle)
     assert metrics["verdict"] == "lost"
     assert metrics["verdict_reason"].startswith("left the path")
+
+
+def test_a_vehicle_stopped_at_an_obstacle_while_the_reference_moves_on_is_called_blocked(jmse):
+    """From 60 s the vehicle stands still at an obstacle's keep-out edge (clearance 0.05 m,
+    within BLOCKED_BAND_M of a zero margin) while the reference goes on round the circle:
+    lost, and the reason says it was blocked for the time it stood there. The same stop far
+    from any obstacle is only lost (no blocked reason)."""
+    from auvmpc.sim.verdict import BLOCKED_S
+
+    log = circle_log(jmse)
+    stop = slice(int(60 / SAMPLE_TIME), int(80 / SAMPLE_TIME))  # 20 s, 1/6 of the circle
+    log.state[stop, :2] = log.state[stop.start, :2]
+    log.state[stop, 3:] = 0.0
+    log.clearance_m[:] = 5.0
+    log.clearance_m[stop] = 0.05
+    metrics = metrics_of(log, jmse)
+    assert metrics["verdict"] == "lost"
+    # the stop's ends are judged on the 5 s around them: blocked for all but about that
+    match = re.search(
+        r"blocked: stopped at an obstacle's keep-out edge for ([0-9.]+) s",
+        metrics["verdict_reason"],
+    )
+    assert match and BLOCKED_S <= float(match.group(1)) <= 20.0
+    log.clearance_m[:] = 5.0
+    clear = metrics_of(log, jmse)
+    assert clear["verdict"] == "lost" and "blocked" not in clear["verdict_reason"]
 
 
 def test_a_small_path_lowers_the_distance_that_counts_as_lost(jmse):

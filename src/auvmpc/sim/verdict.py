@@ -9,6 +9,8 @@ lost, if any of
       reference's size): it left the path;
     * its heading turned a full revolution or more relative to the reference's: it spun;
     * the controller fell back for ``LOST_FALLBACK_S`` seconds in a row: nobody was steering.
+    A run that left the path after standing at an obstacle's keep-out edge for ``BLOCKED_S``
+    seconds while the reference moved on says so too (blocked): it found no way past.
 
 degraded, if not lost and any of
     * a solver fallback, or an obstacle constraint relaxed;
@@ -47,6 +49,7 @@ SEA_WATER_DENSITY = 1025.0
 LOST_LENGTHS = 5.0
 LOST_EXTENT_FRACTION = 0.25
 LOST_FALLBACK_S = 10.0
+BLOCKED_S = 5.0
 DEGRADED_LENGTHS = 1.0
 DEGRADED_EXTENT_FRACTION = 0.1
 DEGRADED_HEADING_RAD = 0.5
@@ -103,6 +106,7 @@ class RunFacts:
     limit_violations: int
     rate_violations: int
     min_obstacle_clearance_m: float | None
+    blocked_s: float = 0.0  # longest stop at an obstacle's keep-out edge (metrics.blocked_time)
 
 
 def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
@@ -119,6 +123,11 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
         lost.append(
             f"left the path: {error:.3g} m off after the transient (limit {lost_distance:.3g} m)"
         )
+        if facts.blocked_s >= BLOCKED_S:
+            lost.append(
+                f"blocked: stopped at an obstacle's keep-out edge for {facts.blocked_s:.3g} s "
+                "while the reference moved on"
+            )
     elif error is not None and error > degraded_distance:
         degraded.append(
             f"position error {error:.3g} m after the transient (limit {degraded_distance:.3g} m)"
