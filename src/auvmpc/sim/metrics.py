@@ -48,7 +48,7 @@ _MIN_REFERENCE_SPEED_M_PER_S = 0.01
 # under this share of the reference's speed over BLOCKED_WINDOW_S (its speed through the
 # water can be high: a vehicle wedged between two discs pushes back and forth). Case 81 of
 # the hard survey sat at 0.13-0.20 m clearance (margin 0.16 m) within 0.1 m of one point
-# for 45 s, at 0.1-0.8 m/s through the water.
+# for about 40 s (33.5 s by this measure), at 0.1-0.8 m/s through the water.
 BLOCKED_BAND_M = 0.1
 BLOCKED_SPEED_FRACTION = 0.1
 BLOCKED_WINDOW_S = 5.0
