@@ -55,7 +55,7 @@ from auvmpc.controllers.base import Observation, horizontal_limits, project_to_l
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 
 __all__ = ["BaselineConfig", "BaselineController"]
 
@@ -322,7 +322,7 @@ class BaselineController(ShelledController):
             [
                 p.Xu * u_d + p.Xuu * abs(u_d) * u_d,
                 p.Yv * v_d + p.Yvv * abs(v_d) * v_d,
-                p.Nr * r_r + p.Nrr * abs(r_r) * r_r,
+                yaw_damping_moment(p, r_r),
             ]
         )
         coriolis = np.array([p.m22 * v * r, -p.m11 * u * r, (p.m11 - p.m22) * u * v])
@@ -352,9 +352,9 @@ class BaselineController(ShelledController):
         if slope * self.sample_time < 3.0 * p.Iz:
             return inertial
         wanted = r_r - g.heading_kp / g.heading_kd * heading_error
-        damping = p.Nr * wanted + p.Nrr * abs(wanted) * wanted  # what holds it, with sign
-        reference_damping = p.Nr * r_r + p.Nrr * abs(r_r) * r_r  # the caller subtracts it
-        return (reference_damping - damping) / p.Iz
+        # the moment that holds ``wanted``, as an acceleration past the reference's damping,
+        # which the caller subtracts
+        return (yaw_damping_moment(p, r_r) - yaw_damping_moment(p, wanted)) / p.Iz
 
     def _saturate(self, tau_des: np.ndarray) -> tuple[np.ndarray, bool]:
         """Allocate, fit inside the force limits keeping direction, then clip to the rate box.

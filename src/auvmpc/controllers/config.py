@@ -321,7 +321,6 @@ class ControllerConfig(StrictModel):
                 "ltv-mpc spun and was lost, at a few times less cost (docs/recovery.md)",
             }
         if self.sample_time is None:
-            turn_up = turn_up_time(model)
             spin = heading_turn_time(model, HEADING_PER_SAMPLE_RAD)
             why = (
                 f"at most the paper's {DEFAULT_SAMPLE_TIME_S:g} s and the {spin:.3g} s its "
@@ -331,7 +330,7 @@ class ControllerConfig(StrictModel):
             if model.underactuated:
                 why += (
                     f", and underactuated: at most {TURN_UP_SAMPLES:g} x its yaw turn-up time "
-                    f"{turn_up:.3g} s"
+                    f"{turn_up_time(model):.3g} s"
                 )
             why += f"; rounded down to the grid {list(SAMPLE_TIME_GRID_S)}"
             chosen["sample_time"] = {"value": filled.sample_time, "why": why}

@@ -26,6 +26,7 @@ import numpy as np
 
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.baseline import BaselineConfig, BaselineController
+from auvmpc.models.heave import heave_damping_force
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 
@@ -135,6 +136,6 @@ class DepthFeedback:
         target = observation.reference[0]
         wn = self._bandwidth
         acceleration = wn**2 * (target[_Z] - z) + 2.0 * wn * (target[_W] - w)
-        drag = heave.Zw * w + heave.Zww * abs(w) * w
+        drag = heave_damping_force(heave, w)
         force = heave.m_heave * acceleration - drag - heave.net_buoyancy_N - disturbance
         return np.full(len(previous), force / len(previous))

@@ -21,6 +21,7 @@ from auvmpc.models.layout import DEPTH
 from auvmpc.models.vehicle import HEAVE_MODEL_FIELDS, HeaveParams, VehicleParams
 
 __all__ = [
+    "heave_damping_force",
     "heave_dynamics",
     "heave_plant_step",
     "resolve_heave",
@@ -40,9 +41,15 @@ def heave_dynamics(state, thrust, heave: HeaveParams, disturbance=0.0):
         total, absolute = ca.sum1(thrust), ca.fabs
     else:
         total, absolute = float(np.sum(thrust)), abs
-    force = heave.Zw * w + heave.Zww * absolute(w) * w + total + heave.net_buoyancy_N + disturbance
+    force = heave_damping_force(heave, w, absolute) + total + heave.net_buoyancy_N + disturbance
     derivative = (w, force / heave.m_heave)
     return ca.vertcat(*derivative) if symbolic else np.array(derivative, dtype=float)
+
+
+def heave_damping_force(heave: HeaveParams, w, absolute=abs):
+    """The heave damping force at heave rate ``w`` (N, opposing it): Zw w + Zww |w| w.
+    ``absolute``: ``abs`` for numbers, ``ca.fabs`` for CasADi expressions."""
+    return heave.Zw * w + heave.Zww * absolute(w) * w
 
 
 def resolve_heave(vehicle: VehicleParams, scale: dict[str, float]) -> HeaveParams:

@@ -52,6 +52,7 @@ __all__ = [
     "top_yaw_rate",
     "heading_turn_time",
     "turn_up_time",
+    "yaw_damping_moment",
 ]
 
 STATE_NAMES = HORIZONTAL.names  # the state order of the equations above
@@ -323,6 +324,12 @@ def top_yaw_rate(params: VehicleParams) -> float:
     return steady_speed(params.Nr, params.Nrr, float(params.thrust_authority[2]))
 
 
+def yaw_damping_moment(params: VehicleParams, yaw_rate, absolute=abs):
+    """The yaw damping moment at ``yaw_rate`` (N m, opposing it): Nr r + Nrr |r| r.
+    ``absolute``: ``abs`` for numbers, ``ca.fabs`` for CasADi expressions."""
+    return params.Nr * yaw_rate + params.Nrr * absolute(yaw_rate) * yaw_rate
+
+
 def heading_turn_time(params: VehicleParams, angle_rad: float) -> float:
     """The least time the largest yaw moment needs to turn the vehicle by ``angle_rad`` (s):
     angle / r_top at its top yaw rate; without yaw damping (no top rate) from rest,
@@ -437,7 +444,7 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, curren
         r,
         u_dot,
         v_dot,
-        (p.Nr * r + p.Nrr * absolute(r) * r + (p.m11 - p.m22) * u_r * v_r + tau_r) / p.Iz,
+        (yaw_damping_moment(p, r, absolute) + (p.m11 - p.m22) * u_r * v_r + tau_r) / p.Iz,
     )
     if symbolic:
         return ca.vertcat(*derivative)

@@ -88,8 +88,8 @@ class ResolvedScenario:
             }
         )
         # What was decided for the user that they should hear of (run.json ``warnings``).
-        self.scenario, self.notes = rounded_to_samples(scenario)
-        scenario = self.scenario
+        scenario, self.notes = rounded_to_samples(scenario)
+        self.scenario = scenario
         initial = scenario.initial_thrust
         if initial is not None:
             if len(initial) != n:
