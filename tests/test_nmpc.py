@@ -28,12 +28,19 @@ import pytest
 from auvmpc.controllers.base import ControlStatus, Observation, ObstacleState
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, ThrustPenalty
 from auvmpc.controllers.ltv import LtvMpc
-from auvmpc.controllers.nmpc import MAX_OBSTACLES, MultipleShootingProgram, NonlinearMpc
+from auvmpc.controllers.nmpc import (
+    MAX_OBSTACLES,
+    MultipleShootingProgram,
+    NonlinearMpc,
+    tracked_reference,
+)
 from auvmpc.experiments.run import RunResult, simulate
 from auvmpc.models.integrators import rk4
 from auvmpc.models.vehicle import body_from_world, dynamics, load_vehicle
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
 from auvmpc.scenario import load_scenario
+from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
+from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 from tests.conftest import random_limit_case
 
 SAMPLE_TIME = 0.5  # s, the paper's Te
@@ -52,9 +59,12 @@ ROUND_OFF = 1e-12
 # The obstacle rows use sqrt(d^2 + 1e-6): at d >= 0.1 m that is d + 5e-6 m at most.
 # Measured 4.6e-7 m.
 DISTANCE_SMOOTHING_TOL_M = 1e-5
-# Real-time iteration after 10 SQP steps on one sample vs IPOPT (tol 1e-8, unscaled):
-# measured 4.6e-8 N (every move free) and 1.6e-8 N (nc 3, increment penalty) on the first
-# thrust, 1.2e-9 m on the predicted states. 1e-6 leaves room for DAQP's tolerance.
+# Real-time iteration after RTI_SQP_STEPS SQP steps on one sample vs IPOPT (tol 1e-8,
+# unscaled): measured 4.5e-8 N (every move free) and 1.6e-8 N (nc 3, increment penalty) on the
+# first thrust with the default trust region and without, 1.2e-9 m on the predicted states.
+# 1e-6 leaves room for DAQP's tolerance. The trust region slows the steps: after 10 of them
+# 2.2e-5 N (free) and 9.7e-3 N (nc 3) off, after 20 4.7e-8 and 1.9e-5 N, after 30 as above.
+RTI_SQP_STEPS = 30
 RTI_VS_FULL_THRUST_TOL_N = 1e-6
 RTI_VS_FULL_STATE_TOL = 1e-6
 # Full solve vs LtvMpc (one linearisation along the steady trajectory, no trust region) at
@@ -202,24 +212,39 @@ def test_program_cost_is_linear_mpc_cost(penalty):
     [{}, {"control_horizon": 3, "thrust_penalty": ThrustPenalty.INCREMENT}],
     ids=["free", "nc3-increment"],
 )
-def test_real_time_iterations_converge_to_the_full_solve(fields):
-    """One sample, 10 SQP steps from the cold start: the real-time scheme's fixed point is
-    the NLP's optimum (a first move of 0.87 N here, not a trivial one)."""
+@pytest.mark.parametrize("trust", [0.0, None], ids=["no-trust-region", "default-trust-region"])
+def test_real_time_iterations_converge_to_the_full_solve(fields, trust):
+    """One sample, SQP steps from the cold start: the real-time scheme's fixed point is the
+    NLP's optimum (a first move of 0.87 N here, not a trivial one), also with the trust
+    region on the heading steps, which damps the steps but not the fixed point. Both QP forms:
+    sparse (every move free) and condensed (move blocking)."""
     model = load_vehicle("jmse2210")
     reference = _oval_preview(2.0)
     state = reference[0] + np.array([0.1, -0.05, 0.03, 0.0, 0.02, 0.0])
     previous = np.array([1.6, 1.5, 1.6, 1.7])
-    results = {}
-    for mode in MODES:
-        controller = NonlinearMpc(model, _config(mode, linearisation_iterations=10, **fields))
-        controller.reset(state, previous)
-        results[mode] = controller.compute(_observation(state, reference, 2.0))
-        assert results[mode].status is ControlStatus.OK
-    full, real_time = results[NmpcMode.FULL], results[NmpcMode.REAL_TIME]
+    full_mpc = NonlinearMpc(model, _config(NmpcMode.FULL, **fields))
+    full_mpc.reset(state, previous)
+    full = full_mpc.compute(_observation(state, reference, 2.0))
+    assert full.status is ControlStatus.OK
     assert np.abs(full.thrust - previous).max() > 0.3, "a case with a substantial first move"
-    np.testing.assert_allclose(real_time.thrust, full.thrust, rtol=0, atol=RTI_VS_FULL_THRUST_TOL_N)
+
+    config = _config(NmpcMode.REAL_TIME, trust_region_weight=trust, **fields)
+    real_time = NonlinearMpc(model, config)
+    program = real_time.program
+    assert program.config.trust_region_weight == (5.0 if trust is None else trust)
+    solver = (
+        SparseRealTimeIteration(program)
+        if "control_horizon" not in fields
+        else CondensedRealTimeIteration(program, program.config)
+    )
+    preview = tracked_reference(model, state, np.zeros(3), reference, SAMPLE_TIME)
+    sample = program.sample(state, previous, preview, np.zeros(3), ())
+    solution = solver.solve(program.reference_guess(sample), sample, RTI_SQP_STEPS, True)
     np.testing.assert_allclose(
-        real_time.predicted_states, full.predicted_states, rtol=0, atol=RTI_VS_FULL_STATE_TOL
+        program.plan(solution.iterate)[0], full.thrust, rtol=0, atol=RTI_VS_FULL_THRUST_TOL_N
+    )
+    np.testing.assert_allclose(
+        solution.iterate.states, full.predicted_states, rtol=0, atol=RTI_VS_FULL_STATE_TOL
     )
 
 

@@ -220,10 +220,12 @@ class ControllerConfig(StrictModel):
         description="linearise-and-solve passes per sample (ltv-mpc and nmpc real-time: SQP "
         "iterations; also refreshes the obstacle half-planes around the new plan)",
     )
-    trust_region_weight: NonNegative = Field(
-        default=10.0,
-        description="ltv-mpc: penalty on predicted heading and velocity deviations from the "
-        "trajectory the model is linearised on (keeps each step where the linearisation holds)",
+    trust_region_weight: NonNegative | None = Field(
+        default=None,
+        description="penalty on the predicted deviations from the trajectory the model is "
+        "linearised on, per rad^2 (heading) and (m/s)^2 (velocities): ltv-mpc on heading and "
+        "velocities, the real-time nmpc on heading (keeps each step where the linearisation "
+        "holds); omitted: 10 for ltv-mpc, 5 for nmpc",
     )
     offset_free: bool = Field(
         default=True,
@@ -295,6 +297,8 @@ class ControllerConfig(StrictModel):
             update["model_substeps"] = stable_model_substeps(model, sample_time)
         if self.R is None:
             update["R"] = default_thrust_weights(model)
+        if self._linearises_along_a_plan and self.trust_region_weight is None:
+            update["trust_region_weight"] = TRUST_REGION_WEIGHTS[self.type]
         if (
             self.type is ControllerType.NMPC
             and "linearisation_iterations" not in self.model_fields_set
@@ -306,6 +310,13 @@ class ControllerConfig(StrictModel):
         if observer is not self.observer:
             update["observer"] = observer
         return self.model_copy(update=update) if update else self
+
+    @property
+    def _linearises_along_a_plan(self) -> bool:
+        """ltv-mpc and the real-time nmpc: the controllers with a trust region."""
+        return self.type is ControllerType.LTV_MPC or (
+            self.type is ControllerType.NMPC and self.nmpc_mode is NmpcMode.REAL_TIME
+        )
 
     def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
         """What :meth:`for_vehicle` (and the schema's defaults) chose for ``model`` among the
@@ -357,6 +368,11 @@ class ControllerConfig(StrictModel):
                 f"{change:.3g} s; where {DEFAULT_SAMPLE_TIME_S:g} s holds over "
                 f"{RTI_AGILE_SAMPLES:g} of that, 2 SQP steps per sample (one oscillated near "
                 "discs on such vehicles, docs/recovery.md)",
+            }
+        if self._linearises_along_a_plan and self.trust_region_weight is None:
+            chosen["trust_region_weight"] = {
+                "value": filled.trust_region_weight,
+                "why": TRUST_REGION_WHY[self.type],
             }
         if "prediction_horizon" not in given:
             chosen["prediction_horizon"] = {
@@ -460,6 +476,24 @@ def default_sqp_iterations(model: VehicleParams) -> int:
     DEFAULT_SAMPLE_TIME_S (whatever its own sample), else 1."""
     return 2 if DEFAULT_SAMPLE_TIME_S > RTI_AGILE_SAMPLES * velocity_change_time(model) else 1
 
+
+# The trust region of the controllers that linearise along a trajectory (ltv-mpc, the
+# real-time nmpc): a penalty per rad^2 and (m/s)^2 on each step's deviation from it, in the
+# units of the stage weights Q (5 on heading by default). ltv-mpc weighs heading and
+# velocities (controllers/mpc.py); the real-time nmpc the heading alone (solvers/
+# sparse_rti.py, condensed_rti.py). Measured for nmpc (docs/recovery.md): on the hard survey
+# the runs with fallbacks fell from 7 to 2 and its one miss (spun beside a disc at a corner,
+# 1.03 x its bar) matched the converged OCP; on 102 cases from another seed every fallback
+# (29 steps) and both contacts (-0.19, -0.075 m) went. 10 lost a vehicle that 5 keeps; 5 on
+# the velocities as well left it 5 fallbacks in a row and made another touch its disc.
+TRUST_REGION_WEIGHTS = {ControllerType.LTV_MPC: 10.0, ControllerType.NMPC: 5.0}
+TRUST_REGION_WHY = {
+    ControllerType.LTV_MPC: "keeps each step where the linearisation along the previous plan "
+    "holds: leaving it costs 10 per rad^2 of heading and (m/s)^2 of velocity",
+    ControllerType.NMPC: "each real-time SQP step's heading change costs 5 per rad^2, as much "
+    "as a heading error under the default Q: a corner's turn is taken over several steps "
+    "instead of one linearised jump (docs/recovery.md)",
+}
 
 # The cost of moving one thruster by half its range in one sample, in units of the stage cost
 # (Q = 5 per m^2: as much as 0.14 m of position error for one sample). Measured with

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.ocp.tracking import ThrustPenalty
 from auvmpc.solvers.condensed_qp import soft_constrained_qp
 from auvmpc.solvers.dense_qp import make_qp_solver
@@ -26,6 +27,7 @@ __all__ = ["CondensedRealTimeIteration"]
 # Obstacle rows are kept for the predicted steps whose linearisation point is within this
 # distance of the inflated disc (m), as in LinearMpc; one SQP step cannot move the plan that far.
 OBSTACLE_RANGE_M = 5.0
+_HEADING = HORIZONTAL.index("psi")
 # Levenberg-Marquardt term on the thrust step of the condensed QP: at least the absolute
 # value (keeps H definite when R = 0, as in LinearMpc), else relative to H's largest diagonal
 # entry. Along a plan that spins the vehicle the sensitivities of late states grow without
@@ -56,6 +58,7 @@ class CondensedRealTimeIteration:
         for i, j in enumerate(program.held):
             self._selection[i, :, j * n : (j + 1) * n] = np.eye(n)
         ocp = program.ocp
+        self._trust = program.config.trust_region_weight or 0.0
         self._sqrt_weights = np.sqrt(ocp.stage_weights())  # rows n = 1..ny
         R = ocp.input_weight
         # D: the block difference U_j - U_{j-1} (U_{-1} = 0), the rate rows' matrix.
@@ -131,8 +134,13 @@ class CondensedRealTimeIteration:
         H = np.zeros((nz, nz))
         f = np.zeros(nz)
         H[:n_thrust, :n_thrust] = 2.0 * weighted.T @ weighted + self._thrust_hessian
-        H[:n_thrust, :n_thrust] += _regularisation(H[:n_thrust, :n_thrust]) * np.eye(n_thrust)
         f[:n_thrust] = 2.0 * weighted.T @ error + self._thrust_gradient(iterate, sample)
+        # The trust region on the heading steps dpsi_i, i = 1..ny-1, as in the sparse QP
+        # (solvers/sparse_rti.py): trust |f_i + G_i dU|^2 on the heading rows.
+        heading_step = sensitivity[1:ny, _HEADING]  # (ny - 1, nc n)
+        H[:n_thrust, :n_thrust] += 2.0 * self._trust * heading_step.T @ heading_step
+        f[:n_thrust] += 2.0 * self._trust * heading_step.T @ free[1:ny, _HEADING]
+        H[:n_thrust, :n_thrust] += _regularisation(H[:n_thrust, :n_thrust]) * np.eye(n_thrust)
         thrust = iterate.thrust.ravel()
         lower_thrust = np.tile(program.ocp.input_lower, nc)
         upper_thrust = np.tile(program.ocp.input_upper, nc)

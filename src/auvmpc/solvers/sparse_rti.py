@@ -28,7 +28,8 @@ The QP of one Gauss-Newton SQP step around an iterate (X, F), in deltas, stage k
     obstacles    n . (p(X_{k+1}) + dX_{k+1}[:2] - c_o) + s_k >= reach_o,  written at stage k
                  through the linearised dynamics (n: the unit normal from the obstacle)
     cost         the program's cost (Gauss-Newton: its Hessian is exact and constant) plus
-                 rho s_k + s_k^2, and a tiny Levenberg-Marquardt term on w.
+                 rho s_k + s_k^2, a tiny Levenberg-Marquardt term on w, and the trust
+                 region's on the heading steps dpsi_k, k = 1..N-1 (trust_region_weight)
 
 The stage data are two CasADi functions (:class:`StageQp`). By default they are compiled to
 C together with a small HPIPM driver, so that one SQP step (linearisation, QP, solve) is one
@@ -44,6 +45,7 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 from auvmpc.solvers.compiled_qp_step import compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, hpipm_solver, slack_scale
@@ -66,6 +68,7 @@ _STEP_REGULARISATION = 1e-9
 # and a far row would only perturb the interior point's solution (by ~1e-7 N).
 _OBSTACLE_RANGE_M = 5.0
 _SOLVED, _NOT_FINITE, _EVALUATION_FAILED = 0, -1, -2
+_HEADING = HORIZONTAL.index("psi")
 
 
 class SparseRealTimeIteration:
@@ -211,6 +214,9 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     change = F - P
     Q = ca.SX(nz, nz)
     Q[:NX, :NX] = ca.diag(2.0 * weight)
+    # The trust region on the heading (controllers/config.py, TRUST_REGION_WEIGHTS): a
+    # penalty on the step dX, not the iterate, so the fixed point is unchanged.
+    Q[_HEADING, _HEADING] += 2.0 * (program.config.trust_region_weight or 0.0)
     q = ca.vertcat(2.0 * weight * (X - reference), ca.SX.zeros(n))
     R = ca.SX(nv, nv)
     R[:n, :n] = ca.diag(2.0 * R_weight + _STEP_REGULARISATION)
