@@ -314,8 +314,9 @@ class ControllerConfig(StrictModel):
     @property
     def _linearises_along_a_plan(self) -> bool:
         """ltv-mpc and the real-time nmpc: the controllers with a trust region."""
-        return self.type is ControllerType.LTV_MPC or (
-            self.type is ControllerType.NMPC and self.nmpc_mode is NmpcMode.REAL_TIME
+        # ==, not is: a model_copy(update=...) keeps the plain string it was given
+        return self.type == ControllerType.LTV_MPC or (
+            self.type == ControllerType.NMPC and self.nmpc_mode == NmpcMode.REAL_TIME
         )
 
     def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
