@@ -21,6 +21,7 @@ _API = (
     "log_dataframe",
     "override",
     "save_run",
+    "session",
     "simulate",
 )
 

@@ -7,6 +7,7 @@
 >>> run.metrics["rms_position_error_m"]        # doctest: +SKIP
 >>> figures = auvmpc.figures(run)              # matplotlib Figures, keyed by name
 >>> auvmpc.save_run(run, "runs/obs")           # the same folder as `auvmpc run --out`
+>>> s = auvmpc.session(scenario)               # step it yourself: s.step(t, measured).u
 
 Everything here is also reachable from the command line; the names are kept stable
 (new keyword arguments may be added, none removed without a deprecation period).
@@ -26,7 +27,7 @@ from matplotlib.figure import Figure
 import auvmpc  # noqa: E402 -- the package names the public API once (re-exported lazily)
 from auvmpc.controllers.base import Controller
 from auvmpc.errors import ConfigError
-from auvmpc.experiments.run import DepthRunResult, RunResult, make_controller
+from auvmpc.experiments.run import DepthRunResult, RunResult, RunSession, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
 from auvmpc.sim.log import DepthLog, SimLog
 
@@ -125,6 +126,42 @@ def simulate(scenario: Scenario | str, on_step: Callable[[int, int], None] | Non
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
     return run(scenario, on_step)
+
+
+def session(scenario: Scenario | str | Path) -> RunSession:
+    """The scenario's controller, to step yourself sample by sample against your own
+    simulator, rig or vehicle; a name or path is loaded first.
+
+    >>> s = auvmpc.session("paper-obstacles")   # doctest: +SKIP
+    >>> s.state_names, s.input_names            # ('x', 'y', 'psi', 'u', 'v', 'r'), ('F1', ...)
+    >>> r = s.step(0.0, s.initial_state)        # r.u: the command, in input_names order
+    >>> s.close("runs/mine")                    # the run folder of what was stepped
+
+    ``step(t, measurement, detections=None, truth=None)``: ``measurement`` in
+    ``state_names`` order; ``detections`` the obstacles you perceive (default: the
+    scenario's, through its obstacle sensor if it has one); ``truth`` (sim.session.Truth)
+    the true state and external force if your simulator knows them, for the log and the
+    metrics. A failed solve never raises: the result's ``status`` says so and ``u`` is the
+    safety shell's command. ``auvmpc run`` is a loop over the same session with the
+    built-in plant (docs/session.md).
+
+    Raises
+    ------
+    auvmpc.errors.ConfigError
+        A depth or 6-DOF scenario (step-by-step sessions take horizontal ones so far), or a
+        bad name, file, field or value.
+    """
+    from auvmpc.scenario import ResolvedSixDofScenario
+
+    if isinstance(scenario, str | Path):
+        scenario = load_scenario(scenario)
+    if isinstance(scenario, ResolvedDepthScenario | ResolvedSixDofScenario):
+        kind = "depth" if isinstance(scenario, ResolvedDepthScenario) else "six-dof"
+        raise ConfigError(
+            "kind", kind, "step-by-step sessions take horizontal scenarios so far (run this one "
+            "with auvmpc.simulate or auvmpc run)",
+        )  # fmt: skip
+    return RunSession(scenario)
 
 
 def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:

@@ -35,15 +35,17 @@ from auvmpc.scenario import (
 )
 from auvmpc.scenario.depth import DepthScenario
 from auvmpc.sim.log import DepthLog, SimLog
-from auvmpc.sim.loop import closed_loop
+from auvmpc.sim.loop import closed_loop, run_session
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
-from auvmpc.sim.plant import HeavePlant
+from auvmpc.sim.plant import HeavePlant, HorizontalPlant
+from auvmpc.sim.session import Session
 from auvmpc.sim.six_dof_loop import SixDofLog
 
 __all__ = [
     "DepthRunResult",
     "RunFailed",
     "RunResult",
+    "RunSession",
     "SixDofRunResult",
     "atomic_write_text",
     "fill_run_folder",
@@ -188,38 +190,89 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
     # Child 2 (the obstacle sensor's) leaves children 0 and 1 as they were before it.
     disturbance_seed, sensor_seed, obstacle_seed = np.random.SeedSequence(scenario.seed).spawn(3)
     sample_time = scenario.controller.sample_time
-    initial_thrust = scenario.initial_thrust
     # One BLAS thread: a controller step works on small matrices, where a second thread only
     # adds hand-over latency (measured: p99 2 ms -> 16 ms for ltv-mpc at nc 30), and
     # campaigns run one process per core anyway.
-    controller = make_controller(scenario, resolved.model)
-    # getattr: a controller need not derive from base.Controller (a user's own, a test's fake).
-    warnings = [*warnings, *getattr(controller, "build_warnings", ())]
     with threadpool_limits(limits=1, user_api="blas"):
-        log = closed_loop(
+        session = RunSession(resolved, obstacle_seed, warnings, stopwatch)
+        plant = HorizontalPlant(
             resolved.plant,
-            controller,
-            make_reference(scenario.reference, resolved.base_dir),
-            duration=scenario.duration,
-            initial_state=scenario.initial_state,
-            disturbance=WorldDisturbance(
+            WorldDisturbance(
                 scenario.disturbance, sample_time, np.random.default_rng(disturbance_seed)
             ),
-            sensor=SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed)),
+            sample_time,
+            scenario.plant.max_step,
+        )
+        sensor = SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed))
+        run_session(session, plant, sensor, step)
+    _check_finite(session.log.state, scenario)
+    return session.result()
+
+
+class RunSession(Session):
+    """A horizontal scenario's controller, stepped sample by sample (``auvmpc.session``):
+    its names, timing and start, and :meth:`close`, which files what was stepped as a run.
+
+    The batch run (:func:`simulate`) steps the same session against the scenario's plant.
+    """
+
+    def __init__(
+        self,
+        resolved: ResolvedScenario,
+        obstacle_seed: np.random.SeedSequence | None = None,
+        warnings: list[str] | None = None,
+        stopwatch: Stopwatch | None = None,
+    ) -> None:
+        from auvmpc.scenario.sanity import preflight
+
+        self.resolved = resolved
+        scenario = resolved.scenario
+        self._stopwatch = stopwatch or Stopwatch()
+        if obstacle_seed is None:  # as simulate draws it: the scenario seed's child 2
+            obstacle_seed = np.random.SeedSequence(scenario.seed).spawn(3)[2]
+        warnings = preflight(resolved) if warnings is None else warnings
+        controller = make_controller(scenario, resolved.model)
+        # getattr: a controller need not derive from base.Controller (a user's own, a test's).
+        self.warnings = [*warnings, *getattr(controller, "build_warnings", ())]
+        sample_time = scenario.controller.sample_time
+        initial_thrust = scenario.initial_thrust
+        super().__init__(
+            controller,
+            make_reference(scenario.reference, resolved.base_dir),
+            SimLog.allocate(
+                int(round(scenario.duration / sample_time)), resolved.model.n_thrusters,
+                sample_time,
+            ),
+            initial_state=scenario.initial_state,
+            initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             obstacles=scenario.obstacles,
             perception=_perception(scenario, obstacle_seed),
             vehicle_radius=scenario.controller.vehicle_radius,
-            max_plant_step=scenario.plant.max_step,
-            initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
-            on_step=step,
+        )  # fmt: skip
+        self.duration = self.log.steps * sample_time
+        self.state_names = self.log.layout.names
+        self.input_names = tuple(f"F{i + 1}" for i in range(self.n_inputs))
+
+    def result(self) -> RunResult:
+        """What was stepped, as a finished run: its log, metrics, warnings and provenance."""
+        scenario = self.resolved.scenario
+        log = self.stepped_log
+        metrics = compute_metrics(
+            log, self.resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
         )
-    _check_finite(log.state, scenario)
-    metrics = compute_metrics(
-        log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
-    )
-    return RunResult(
-        resolved, log, metrics, provenance=stopwatch.record(libraries), warnings=warnings
-    )
+        libraries = _solver_libraries(scenario)
+        return RunResult(
+            self.resolved, log, metrics, provenance=self._stopwatch.record(libraries),
+            warnings=self.warnings,
+        )  # fmt: skip
+
+    def close(self, out_dir: str | Path | None = None, figures: bool = True) -> RunResult:
+        """The run of the samples stepped so far, written as a run folder into ``out_dir``
+        (as ``auvmpc run --out``; it must be new or empty) when given."""
+        result = self.result()
+        if out_dir is not None:
+            write_run(result, Path(out_dir), figures=figures)
+        return result
 
 
 def _simulate_depth(

@@ -1,0 +1,221 @@
+"""One run, a sample at a time: the controller's side of the closed loop.
+
+A :class:`Session` is the one place where an observation is built: the measured state, the
+reference's preview from the sample's time on, and the obstacles as the controller knows
+them (exactly, or as its obstacle sensor detects them). It calls the controller inside its
+safety shell and records the sample in the run's log. The batch loop (sim/loop.py) is a
+plain loop over it with the built-in plant, which hands it the truth as well; a user's own
+simulator, rig or vehicle steps it with its measurements (``auvmpc.session``,
+docs/session.md).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Protocol
+
+import numpy as np
+
+from auvmpc.controllers.base import (
+    Controller,
+    ControlResult,
+    ControlStatus,
+    Observation,
+    ObstacleState,
+)
+from auvmpc.environment.obstacle_sensor import ObstaclePerception
+from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
+from auvmpc.errors import ConfigError
+from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
+
+__all__ = ["Session", "StateReference", "StepResult", "Truth", "timed_command"]
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one sample gave: the command to hold until the next sample and how it came."""
+
+    k: int  # the sample's index, from 0
+    u: np.ndarray  # the command, in the session's ``input_names`` order (N)
+    status: ControlStatus  # ok, saturated, relaxed, fallback, recovery (docs/safety.md)
+    solve_ms: float  # wall time of the controller call
+    info: dict[str, float] = field(default_factory=dict)  # the controller's diagnostics
+
+
+@dataclass(frozen=True)
+class Truth:
+    """What a simulator knows beyond the measurement: the true state (in the log's layout)
+    and the external force on the vehicle at the sample (the log's ``disturbance_names``)."""
+
+    state: np.ndarray
+    external_force: np.ndarray
+
+
+class StateReference(Protocol):
+    """The reference in the plant's state layout, vectorised over time."""
+
+    def states(self, t: np.ndarray) -> np.ndarray: ...
+
+
+def timed_command(
+    controller: Controller, observation: Observation, size: int, who: str = "controller"
+) -> tuple[ControlResult, np.ndarray, float]:
+    """``(result, thrust, solve ms)`` of one controller call; an invalid command (wrong size
+    or not finite) raises RuntimeError naming ``who`` and the sample."""
+    started = time.perf_counter()
+    result = controller.compute(observation)
+    solve_ms = 1e3 * (time.perf_counter() - started)
+    thrust = np.asarray(result.thrust, dtype=float)
+    if thrust.shape != (size,) or not np.all(np.isfinite(thrust)):
+        raise RuntimeError(f"{who} returned an invalid command at k={observation.k}: {thrust!r}")
+    return result, thrust, solve_ms
+
+
+class Session:
+    """The controller of one run, stepped sample by sample, and the run's log.
+
+    ``log`` is allocated for the run's samples (``log.steps`` commands); each :meth:`step`
+    fills its row, :meth:`finish` the final state row, and :attr:`stepped_log` is the part
+    filled so far. Without :class:`Truth` the log's state columns hold the measurement and
+    the vehicle-to-obstacle gap is the measured position's.
+    """
+
+    def __init__(
+        self,
+        controller: Controller,
+        reference: StateReference,
+        log: SimLog,
+        *,
+        initial_state: Sequence[float],
+        initial_thrust: np.ndarray | None = None,
+        obstacles: Sequence[ObstacleConfig] = (),
+        perception: ObstaclePerception | None = None,
+        vehicle_radius: float = 0.0,
+    ) -> None:
+        self.controller = controller
+        self.reference = reference
+        self.log = log
+        self.sample_time = controller.sample_time
+        self.obstacles = tuple(obstacles)
+        self.perception = perception
+        self.vehicle_radius = vehicle_radius
+        self.n_inputs = log.n_thrusters
+        self.k = 0  # samples stepped so far
+        self.finished = False
+        # Where the position sits in the state: obstacle gaps and detections need it.
+        self.position = log.layout.position if obstacles or perception is not None else None
+        previous = (
+            np.zeros(self.n_inputs) if initial_thrust is None else np.asarray(initial_thrust, float)
+        )
+        log.initial_thrust = previous.copy()
+        self.initial_state = np.asarray(initial_state, dtype=float).copy()
+        controller.reset(self.initial_state.copy(), previous.copy())
+        self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
+
+    def step(
+        self,
+        t: float,
+        measurement: np.ndarray,
+        detections: Sequence[ObstacleState] | None = None,
+        truth: Truth | None = None,
+    ) -> StepResult:
+        """One sample at time ``t`` (s): the command to hold until the next sample.
+
+        ``measurement`` is what the controller sees (the log's ``measured_size`` values);
+        ``detections`` the obstacles as the caller perceives them (default: the scenario's,
+        through its obstacle sensor if it has one, else exactly); ``truth`` what a simulator
+        knows beyond the measurement. A failed solve does not raise: the result's status says
+        so and ``u`` is the safety shell's command.
+        """
+        k = self.k
+        if self.finished or k >= self.log.steps:
+            raise ConfigError(
+                "step", k, f"the run has {self.log.steps} samples ({self._duration_text()})"
+            )
+        measured = self._record(k, t, measurement, truth)
+        observation = Observation(
+            k=k,
+            t=float(t),
+            state=measured,
+            reference=self._preview,
+            obstacles=self._detections(t, measured) if detections is None else tuple(detections),
+        )
+        log = self.log
+        result, thrust, log.solve_ms[k] = timed_command(self.controller, observation, self.n_inputs)
+        log.thrust[k] = thrust
+        log.status[k] = str(result.status)
+        log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
+        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
+        self.k = k + 1
+        return StepResult(k, thrust.copy(), result.status, float(log.solve_ms[k]), result.info)
+
+    def finish(self, t: float, measurement: np.ndarray, truth: Truth | None = None) -> None:
+        """The state after the last command (the log's final row, which has no command)."""
+        if self.finished:
+            raise ConfigError("finish", self.k, "the run is finished already")
+        self._record(self.k, t, measurement, truth)
+        self.finished = True
+
+    @property
+    def stepped_log(self) -> SimLog:
+        """The log of the samples stepped so far: all of it after :meth:`finish`; before it,
+        the last stepped sample's state is the final row (its command is not in the log)."""
+        rows = self.k + 1 if self.finished else self.k
+        if rows == self.log.steps + 1:
+            return self.log
+        if rows < 2:
+            raise ConfigError("step", self.k, "a run needs at least two samples stepped")
+        log, commands = self.log, rows - 1
+        return replace(
+            log,
+            t=log.t[:rows].copy(),
+            state=log.state[:rows].copy(),
+            reference=log.reference[:rows].copy(),
+            thrust=log.thrust[:commands].copy(),
+            solve_ms=log.solve_ms[:commands].copy(),
+            disturbance_estimate=log.disturbance_estimate[:commands].copy(),
+            status=log.status[:commands],
+            disturbance_world=log.disturbance_world[:rows].copy(),
+            clearance_m=log.clearance_m[:rows].copy(),
+            measured=log.measured[:rows].copy(),
+            backoff=log.backoff[:commands].copy(),
+        )
+
+    # -- one row of the log ------------------------------------------------------------
+    def _record(self, k: int, t: float, measurement, truth: Truth | None) -> np.ndarray:
+        """Row k's time, reference, measurement and state; the measurement as an array."""
+        log = self.log
+        measured = np.asarray(measurement, dtype=float)
+        if measured.shape != (log.measured_size,):
+            raise ConfigError(
+                "measurement", list(np.ravel(measured))[:12],
+                f"needs {log.measured_size} values ({', '.join(log.layout.names)})",
+            )  # fmt: skip
+        t = float(t)
+        # Its first row is the reference at t; the whole preview is the observation's.
+        self._preview = self.reference.states(t + self._preview_offsets)
+        log.t[k] = t
+        log.reference[k] = self._preview[0]
+        if truth is not None:
+            log.state[k] = truth.state
+            log.disturbance_world[k] = truth.external_force
+        else:
+            log.state[k] = measured
+        if self.position is not None:
+            log.clearance_m[k] = clearance(
+                log.state[k][self.position], t, self.obstacles, self.vehicle_radius
+            )
+        log.measured[k] = measured
+        return measured
+
+    def _detections(self, t: float, measured: np.ndarray) -> Sequence[ObstacleState]:
+        """The obstacles as the controller knows them at t: through the obstacle sensor
+        (from the measured position) where there is one, else the scenario's exactly."""
+        if self.perception is None:
+            return visible_obstacles(self.obstacles, t)
+        return self.perception.observe(t, measured[self.position])
+
+    def _duration_text(self) -> str:
+        return f"{self.log.steps * self.sample_time:g} s at {self.sample_time:g} s"
