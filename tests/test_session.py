@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 import auvmpc
-from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.controllers.base import ObstacleState
 from auvmpc.errors import ConfigError
-from auvmpc.sim.plant import HorizontalPlant
+from auvmpc.experiments.run import horizontal_plant
+from auvmpc.sim.log import SimLog
 from auvmpc.sim.session import Truth
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -27,32 +28,21 @@ OWN_PLANT_RMS_TOL_M = 1e-3
 
 
 def _stepped_with_the_project_plant(resolved):
-    """The batch run's loop written out by hand on the public session, with the plant and
-    sensor built from the scenario seed's children 0 and 1 as auvmpc run builds them."""
-    scenario = resolved.scenario
-    disturbance_seed, sensor_seed, _ = np.random.SeedSequence(scenario.seed).spawn(3)
+    """The batch run's loop written out by hand on the public session, against the plant and
+    sensor auvmpc run builds for the scenario."""
     session = auvmpc.session(resolved)
-    sample_time = session.sample_time
-    plant = HorizontalPlant(
-        resolved.plant,
-        WorldDisturbance(
-            scenario.disturbance, sample_time, np.random.default_rng(disturbance_seed)
-        ),
-        sample_time,
-        scenario.plant.max_step,
-    )
-    sensor = SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed))
+    plant, sensor = horizontal_plant(resolved)
     state = session.initial_state
-    steps = round(session.duration / sample_time)
-    position = slice(0, 2)
+    steps = round(session.duration / session.sample_time)
     for k in range(steps + 1):
-        t = k * sample_time
+        t = k * session.sample_time
         truth = Truth(state, plant.external_force(t, state))
         measured = sensor.measure(state, t)
         if k == steps:
             session.finish(t, measured, truth)
             break
-        perception = session.perception
+        # the obstacle sensor looks from where the vehicle truly is, as in auvmpc run
+        perception, position = session.perception, session.position
         detections = None if perception is None else perception.observe(t, state[position])
         result = session.step(t, measured, detections, truth)
         state = plant.step(state, result.u, t)
@@ -72,17 +62,20 @@ def test_stepping_the_session_with_the_project_plant_is_the_batch_run(name, over
     batch = auvmpc.simulate(resolved)
     stepped = _stepped_with_the_project_plant(resolved)
     assert stepped.log.steps == batch.log.steps > 0
-    for column in ("state", "reference", "thrust", "measured", "disturbance_world",
-                   "clearance_m", "disturbance_estimate"):  # fmt: skip
+    for column in ("t", "state", "reference", "thrust", "measured", "disturbance_world",
+                   "clearance_m", "disturbance_estimate", "backoff"):  # fmt: skip
         np.testing.assert_allclose(
             getattr(stepped.log, column), getattr(batch.log, column), rtol=0, atol=SAME_RUN_TOL,
             err_msg=column,
         )  # fmt: skip
     assert stepped.log.status == batch.log.status
-    timing = {key for key in batch.metrics if key.startswith("solve_ms")}
     for key, value in batch.metrics.items():
-        if key not in timing and isinstance(value, float):
+        if key.startswith("solve_ms"):
+            continue  # wall time
+        if isinstance(value, float):
             assert stepped.metrics[key] == pytest.approx(value, abs=SAME_RUN_TOL), key
+        else:
+            assert stepped.metrics[key] == value, key
 
 
 def test_a_plant_written_outside_auvmpc_tracks_as_the_batch_run(tmp_path):
@@ -127,14 +120,51 @@ def test_a_session_closed_early_files_what_was_stepped(tmp_path):
     assert (tmp_path / "run" / "run.json").is_file()
 
 
+def _stepped_twice(session):
+    session.step(0.0, session.initial_state)
+    session.step(0.5, session.initial_state)
+    return session
+
+
 @pytest.mark.parametrize(
     ("misuse", "field"),
     [
         (lambda s: s.step(0.0, np.zeros(4)), "measurement"),
+        (lambda s: s.step(0.0, np.full(6, np.nan)), "measurement"),
+        (lambda s: s.step(0.0, ["a"] * 6), "measurement"),
+        (lambda s: s.step(0.0, np.ones(6) * 1j), "measurement"),
+        (lambda s: s.step(float("nan"), s.initial_state), "t"),
+        (lambda s: s.step("soon", s.initial_state), "t"),
+        (lambda s: _stepped_twice(s).step(0.25, s.initial_state), "t"),
+        (
+            lambda s: s.step(0.0, s.initial_state, truth=Truth(np.zeros(5), np.zeros(3))),
+            "truth.state",
+        ),  # fmt: skip
+        (lambda s: s.step(0.0, s.initial_state, detections=[{"x": 1}]), "detections"),
+        (lambda s: s.step(0.0, s.initial_state, detections=3), "detections"),
         (lambda s: [s.step(0.5 * k, s.initial_state) for k in range(201)], "step"),
         (lambda s: s.close(), "step"),
+        (lambda s: _stepped_twice(s).close() and s.step(1.0, s.initial_state), "step"),
+        (lambda s: [_stepped_twice(s).close(), s.close()], "close"),
+        (lambda s: [s.finish(0.0, s.initial_state), s.finish(0.5, s.initial_state)], "finish"),
     ],
-    ids=["wrong-size", "past-the-end", "nothing-stepped"],
+    ids=[
+        "wrong-size",
+        "nan",
+        "text",
+        "complex",
+        "nan-time",
+        "text-time",
+        "time-backwards",
+        "truth-size",
+        "detections-not-obstacles",
+        "detections-not-a-sequence",
+        "past-the-end",
+        "nothing-stepped",
+        "step-after-close",
+        "close-twice",
+        "finish-twice",
+    ],  # fmt: skip
 )
 def test_misuse_is_one_line_naming_the_field(misuse, field):
     session = auvmpc.session(auvmpc.load_scenario("paper-ideal", {"duration": 100}))
@@ -144,7 +174,43 @@ def test_misuse_is_one_line_naming_the_field(misuse, field):
     assert "\n" not in str(error.value)
 
 
+def test_the_initial_state_handed_out_is_a_copy():
+    session = auvmpc.session("paper-ideal")
+    start = session.initial_state
+    start += 1.0
+    np.testing.assert_array_equal(
+        session.initial_state, auvmpc.load_scenario("paper-ideal").scenario.initial_state
+    )
+
+
+def test_detections_handed_over_are_what_the_controller_sees():
+    """An obstacle the caller reports on the path is avoided although the scenario has none."""
+    session = auvmpc.session(auvmpc.load_scenario("paper-ideal", {"duration": 20}))
+    state = session.initial_state
+    ahead = state[:2] + 2.0 * np.array([np.cos(state[2]), np.sin(state[2])])
+    disc = ObstacleState(center=ahead, velocity=np.zeros(2), radius=0.5)
+    free = auvmpc.session(auvmpc.load_scenario("paper-ideal", {"duration": 20}))
+    with_disc = session.step(0.0, state, detections=[disc])
+    without = free.step(0.0, state)
+    assert np.abs(with_disc.u - without.u).max() > 1e-3
+
+
+def test_every_log_field_is_cut_by_first():
+    """SimLog.first cuts the fields it lists; a field in neither list would stay full length."""
+    from dataclasses import fields
+
+    listed = set(SimLog.PER_SAMPLE) | set(SimLog.PER_COMMAND) | {"sample_time", "initial_thrust"}
+    assert {f.name for f in fields(SimLog)} == listed
+    log = SimLog.allocate(10, 4, 0.5)
+    cut = log.first(4)
+    assert all(len(getattr(cut, name)) == 4 for name in SimLog.PER_SAMPLE)
+    assert all(len(getattr(cut, name)) == 3 for name in SimLog.PER_COMMAND)
+
+
 def test_depth_and_six_dof_scenarios_are_refused_in_one_line():
     for name in ("paper-depth-calm", "paper-6dof"):
         with pytest.raises(ConfigError, match="horizontal scenarios"):
             auvmpc.session(name)
+    for not_a_scenario in (None, {"duration": 3}):
+        with pytest.raises(ConfigError, match="preset name, a path or a scenario"):
+            auvmpc.session(not_a_scenario)

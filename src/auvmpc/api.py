@@ -155,6 +155,11 @@ def session(scenario: Scenario | str | Path) -> RunSession:
 
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
+    if not isinstance(scenario, ResolvedScenario | ResolvedDepthScenario):
+        raise ConfigError(
+            "scenario", type(scenario).__name__, "must be a preset name, a path or a scenario "
+            "from auvmpc.load_scenario",
+        )  # fmt: skip
     if isinstance(scenario, ResolvedDepthScenario | ResolvedSixDofScenario):
         kind = "depth" if isinstance(scenario, ResolvedDepthScenario) else "six-dof"
         raise ConfigError(

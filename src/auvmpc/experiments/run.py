@@ -46,6 +46,7 @@ __all__ = [
     "RunFailed",
     "RunResult",
     "RunSession",
+    "horizontal_plant",
     "SixDofRunResult",
     "atomic_write_text",
     "fill_run_folder",
@@ -180,33 +181,40 @@ def _failures_named(scenario, reached: list[int]):
 
 
 def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
-
-    libraries = _solver_libraries(resolved.scenario)
-    if isinstance(resolved, ResolvedDepthScenario):
-        return _simulate_depth(resolved, step, stopwatch, warnings, libraries)
-    if isinstance(resolved, ResolvedSixDofScenario):
+    if isinstance(resolved, ResolvedDepthScenario | ResolvedSixDofScenario):
+        libraries = _solver_libraries(resolved.scenario)
+        if isinstance(resolved, ResolvedDepthScenario):
+            return _simulate_depth(resolved, step, stopwatch, warnings, libraries)
         return _simulate_six_dof(resolved, step, stopwatch, warnings, libraries)
-    scenario = resolved.scenario
-    # Child 2 (the obstacle sensor's) leaves children 0 and 1 as they were before it.
-    disturbance_seed, sensor_seed, obstacle_seed = np.random.SeedSequence(scenario.seed).spawn(3)
-    sample_time = scenario.controller.sample_time
     # One BLAS thread: a controller step works on small matrices, where a second thread only
     # adds hand-over latency (measured: p99 2 ms -> 16 ms for ltv-mpc at nc 30), and
     # campaigns run one process per core anyway.
     with threadpool_limits(limits=1, user_api="blas"):
-        session = RunSession(resolved, obstacle_seed, warnings, stopwatch)
-        plant = HorizontalPlant(
-            resolved.plant,
-            WorldDisturbance(
-                scenario.disturbance, sample_time, np.random.default_rng(disturbance_seed)
-            ),
-            sample_time,
-            scenario.plant.max_step,
-        )
-        sensor = SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed))
+        session = RunSession(resolved, warnings, stopwatch)
+        plant, sensor = horizontal_plant(resolved)
         run_session(session, plant, sensor, step)
-    _check_finite(session.log.state, scenario)
+    _check_finite(session.log.state, resolved.scenario)
     return session.result()
+
+
+def _horizontal_seeds(scenario: Scenario) -> list[np.random.SeedSequence]:
+    """The random streams of a horizontal run: children 0, 1 and 2 of the scenario seed are
+    the current's, the sensor's and the obstacle sensor's (2 came last, leaving 0 and 1 as
+    they were before it)."""
+    return np.random.SeedSequence(scenario.seed).spawn(3)
+
+
+def horizontal_plant(resolved: ResolvedScenario) -> tuple[HorizontalPlant, SensorNoise]:
+    """The simulated vehicle of a horizontal scenario in its current, and its sensor: what
+    ``auvmpc run`` steps a :class:`RunSession` against (tests step one by hand with them)."""
+    scenario = resolved.scenario
+    disturbance_seed, sensor_seed, _ = _horizontal_seeds(scenario)
+    sample_time = scenario.controller.sample_time
+    disturbance = WorldDisturbance(
+        scenario.disturbance, sample_time, np.random.default_rng(disturbance_seed)
+    )
+    plant = HorizontalPlant(resolved.plant, disturbance, sample_time, scenario.plant.max_step)
+    return plant, SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed))
 
 
 class RunSession(Session):
@@ -214,12 +222,12 @@ class RunSession(Session):
     its names, timing and start, and :meth:`close`, which files what was stepped as a run.
 
     The batch run (:func:`simulate`) steps the same session against the scenario's plant.
+    ``warnings``: the scenario's pre-run checks, when the caller has run them already.
     """
 
     def __init__(
         self,
         resolved: ResolvedScenario,
-        obstacle_seed: np.random.SeedSequence | None = None,
         warnings: list[str] | None = None,
         stopwatch: Stopwatch | None = None,
     ) -> None:
@@ -228,8 +236,6 @@ class RunSession(Session):
         self.resolved = resolved
         scenario = resolved.scenario
         self._stopwatch = stopwatch or Stopwatch()
-        if obstacle_seed is None:  # as simulate draws it: the scenario seed's child 2
-            obstacle_seed = np.random.SeedSequence(scenario.seed).spawn(3)[2]
         warnings = preflight(resolved) if warnings is None else warnings
         controller = make_controller(scenario, resolved.model)
         # getattr: a controller need not derive from base.Controller (a user's own, a test's).
@@ -246,12 +252,10 @@ class RunSession(Session):
             initial_state=scenario.initial_state,
             initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
             obstacles=scenario.obstacles,
-            perception=_perception(scenario, obstacle_seed),
+            perception=_perception(scenario, _horizontal_seeds(scenario)[2]),
             vehicle_radius=scenario.controller.vehicle_radius,
         )  # fmt: skip
         self.duration = self.log.steps * sample_time
-        self.state_names = self.log.layout.names
-        self.input_names = tuple(f"F{i + 1}" for i in range(self.n_inputs))
 
     def result(self) -> RunResult:
         """What was stepped, as a finished run: its log, metrics, warnings and provenance."""
@@ -266,12 +270,17 @@ class RunSession(Session):
             warnings=self.warnings,
         )  # fmt: skip
 
-    def close(self, out_dir: str | Path | None = None, figures: bool = True) -> RunResult:
+    def close(
+        self, out_dir: str | Path | None = None, figures: bool = True, *, overwrite: bool = False
+    ) -> RunResult:
         """The run of the samples stepped so far, written as a run folder into ``out_dir``
-        (as ``auvmpc run --out``; it must be new or empty) when given."""
+        when given (as ``auvmpc run --out``: new or empty, or with ``overwrite`` an earlier
+        run folder of auvmpc's). The session is closed then: nothing more may be stepped."""
+        self._check_open("close")
         result = self.result()
         if out_dir is not None:
-            write_run(result, Path(out_dir), figures=figures)
+            write_run(result, Path(out_dir), figures=figures, overwrite=overwrite)
+        self.closed = True
         return result
 
 

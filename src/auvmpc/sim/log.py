@@ -12,7 +12,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import ClassVar
 
@@ -61,6 +61,16 @@ class SimLog:
     measured: np.ndarray
     backoff: np.ndarray  # (N, 2) BACKOFF_NAMES over [t_k, t_k+1)
 
+    # The fields with a row per sample (N + 1) and those with a row per command (N); the
+    # others (sample_time, initial_thrust) are the run's. :meth:`first` cuts by these lists,
+    # so a new field goes in one of them (tests/test_session.py checks that every one is).
+    PER_SAMPLE: ClassVar[tuple[str, ...]] = (
+        "t", "state", "reference", "disturbance_world", "clearance_m", "measured",
+    )  # fmt: skip
+    PER_COMMAND: ClassVar[tuple[str, ...]] = (
+        "thrust", "solve_ms", "disturbance_estimate", "status", "backoff",
+    )  # fmt: skip
+
     @classmethod
     def allocate(cls, steps: int, n_thrusters: int, sample_time: float) -> SimLog:
         nx = cls.layout.size
@@ -84,14 +94,24 @@ class SimLog:
     def steps(self) -> int:
         return len(self.thrust)
 
+    def first(self, rows: int) -> SimLog:
+        """A copy of the log's first ``rows`` samples (and so ``rows - 1`` commands)."""
+        cut = {name: getattr(self, name)[:rows].copy() for name in self.PER_SAMPLE}
+        cut.update({name: getattr(self, name)[: rows - 1].copy() for name in self.PER_COMMAND})
+        return replace(self, **cut)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The commands' names: the thrust columns of log.csv."""
+        return tuple(f"F{i + 1}" for i in range(self.n_thrusters))
+
     @property
     def n_thrusters(self) -> int:
         return self.thrust.shape[1]
 
     def columns(self) -> list[str]:
-        thrusters = [f"F{i + 1}" for i in range(self.n_thrusters)]
         return [
-            "t", *STATE_NAMES, *REFERENCE_NAMES, *thrusters, "solve_ms", "status",
+            "t", *STATE_NAMES, *REFERENCE_NAMES, *self.input_names, "solve_ms", "status",
             *DISTURBANCE_NAMES, "clearance_m", *ESTIMATE_NAMES, *BACKOFF_NAMES,
         ]  # fmt: skip
 
@@ -181,10 +201,14 @@ class DepthLog(SimLog):
         """(N+1,) the waves' vertical force on the vehicle at t_k (N, up)."""
         return self.disturbance_world[:, 0]
 
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The vertical thrusters' names: the thrust columns of log.csv."""
+        return tuple(f"Fz{i + 1}" for i in range(self.n_thrusters))
+
     def columns(self) -> list[str]:
-        thrusters = [f"Fz{i + 1}" for i in range(self.n_thrusters)]
         return [
-            "t", *self.layout.names, "z_ref", *thrusters, "solve_ms", "status",
+            "t", *self.layout.names, "z_ref", *self.input_names, "solve_ms", "status",
             "z_measured", *self.disturbance_names,
         ]  # fmt: skip
 

@@ -94,7 +94,7 @@ def run_session(
     the command over the sample; the session's log gets the plant's truth as well."""
     if plant.sample_time != session.sample_time:
         raise ValueError(
-            f"closed_loop: the plant steps {plant.sample_time} s, the controller samples "
+            f"run_session: the plant steps {plant.sample_time} s, the controller samples "
             f"every {session.sample_time} s"
         )
     log = session.log

@@ -6,15 +6,17 @@ them (exactly, or as its obstacle sensor detects them). It calls the controller 
 safety shell and records the sample in the run's log. The batch loop (sim/loop.py) is a
 plain loop over it with the built-in plant, which hands it the truth as well; a user's own
 simulator, rig or vehicle steps it with its measurements (``auvmpc.session``,
-docs/session.md).
+docs/session.md). What a caller hands over is checked first: a bad value is one line
+naming it (ConfigError), never a traceback from deep inside a solver.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from typing import Protocol
+from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -102,17 +104,25 @@ class Session:
         self.perception = perception
         self.vehicle_radius = vehicle_radius
         self.n_inputs = log.n_thrusters
+        self.input_names = log.input_names
+        self.state_names = log.layout.names
         self.k = 0  # samples stepped so far
-        self.finished = False
+        self.finished = False  # the final state row is in
+        self.closed = False  # filed as a run: nothing more may be stepped
         # Where the position sits in the state: obstacle gaps and detections need it.
         self.position = log.layout.position if obstacles or perception is not None else None
         previous = (
             np.zeros(self.n_inputs) if initial_thrust is None else np.asarray(initial_thrust, float)
         )
         log.initial_thrust = previous.copy()
-        self.initial_state = np.asarray(initial_state, dtype=float).copy()
-        controller.reset(self.initial_state.copy(), previous.copy())
+        self._initial_state = np.asarray(initial_state, dtype=float).copy()
+        controller.reset(self._initial_state.copy(), previous.copy())
         self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
+
+    @property
+    def initial_state(self) -> np.ndarray:
+        """The scenario's start, in ``state_names`` order (a copy: yours to change)."""
+        return self._initial_state.copy()
 
     def step(
         self,
@@ -130,17 +140,22 @@ class Session:
         so and ``u`` is the safety shell's command.
         """
         k = self.k
+        self._check_open("step")
         if self.finished or k >= self.log.steps:
             raise ConfigError(
                 "step", k, f"the run has {self.log.steps} samples ({self._duration_text()})"
             )
+        if detections is not None:
+            detections = _checked_detections(detections)
         measured = self._record(k, t, measurement, truth)
         observation = Observation(
             k=k,
-            t=float(t),
+            t=self.log.t[k],
             state=measured,
             reference=self._preview,
-            obstacles=self._detections(t, measured) if detections is None else tuple(detections),
+            obstacles=self._detections(self.log.t[k], measured)
+            if detections is None
+            else detections,
         )
         log = self.log
         result, thrust, log.solve_ms[k] = timed_command(self.controller, observation, self.n_inputs)
@@ -153,6 +168,7 @@ class Session:
 
     def finish(self, t: float, measurement: np.ndarray, truth: Truth | None = None) -> None:
         """The state after the last command (the log's final row, which has no command)."""
+        self._check_open("finish")
         if self.finished:
             raise ConfigError("finish", self.k, "the run is finished already")
         self._record(self.k, t, measurement, truth)
@@ -163,44 +179,34 @@ class Session:
         """The log of the samples stepped so far: all of it after :meth:`finish`; before it,
         the last stepped sample's state is the final row (its command is not in the log)."""
         rows = self.k + 1 if self.finished else self.k
-        if rows == self.log.steps + 1:
-            return self.log
         if rows < 2:
             raise ConfigError("step", self.k, "a run needs at least two samples stepped")
-        log, commands = self.log, rows - 1
-        return replace(
-            log,
-            t=log.t[:rows].copy(),
-            state=log.state[:rows].copy(),
-            reference=log.reference[:rows].copy(),
-            thrust=log.thrust[:commands].copy(),
-            solve_ms=log.solve_ms[:commands].copy(),
-            disturbance_estimate=log.disturbance_estimate[:commands].copy(),
-            status=log.status[:commands],
-            disturbance_world=log.disturbance_world[:rows].copy(),
-            clearance_m=log.clearance_m[:rows].copy(),
-            measured=log.measured[:rows].copy(),
-            backoff=log.backoff[:commands].copy(),
-        )
+        return self.log if rows == self.log.steps + 1 else self.log.first(rows)
+
+    def _check_open(self, what: str) -> None:
+        if self.closed:
+            raise ConfigError(what, self.k, "the session is closed (its run is filed)")
 
     # -- one row of the log ------------------------------------------------------------
-    def _record(self, k: int, t: float, measurement, truth: Truth | None) -> np.ndarray:
-        """Row k's time, reference, measurement and state; the measurement as an array."""
+    def _record(self, k: int, t: Any, measurement: Any, truth: Truth | None) -> np.ndarray:
+        """Row k's time, reference, measurement and state, each checked; the measurement
+        as an array."""
         log = self.log
-        measured = np.asarray(measurement, dtype=float)
-        if measured.shape != (log.measured_size,):
-            raise ConfigError(
-                "measurement", list(np.ravel(measured))[:12],
-                f"needs {log.measured_size} values ({', '.join(log.layout.names)})",
+        t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
+        measured = _finite_vector("measurement", measurement, log.measured_size, log.layout.names)
+        if truth is not None:
+            state = _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names)
+            force = _finite_vector(
+                "truth.external_force", truth.external_force, len(log.disturbance_names),
+                log.disturbance_names,
             )  # fmt: skip
-        t = float(t)
         # Its first row is the reference at t; the whole preview is the observation's.
         self._preview = self.reference.states(t + self._preview_offsets)
         log.t[k] = t
         log.reference[k] = self._preview[0]
         if truth is not None:
-            log.state[k] = truth.state
-            log.disturbance_world[k] = truth.external_force
+            log.state[k] = state
+            log.disturbance_world[k] = force
         else:
             log.state[k] = measured
         if self.position is not None:
@@ -219,3 +225,48 @@ class Session:
 
     def _duration_text(self) -> str:
         return f"{self.log.steps * self.sample_time:g} s at {self.sample_time:g} s"
+
+
+def _finite_time(t: Any, previous: float | None) -> float:
+    """``t`` as a float: finite, and later than the previous sample's."""
+    try:
+        value = float(t)
+    except (TypeError, ValueError):
+        raise ConfigError("t", t, "must be a number of seconds") from None
+    if not math.isfinite(value):
+        raise ConfigError("t", t, "must be finite")
+    if previous is not None and value <= previous:
+        raise ConfigError("t", value, f"must be later than the previous sample's {previous:g} s")
+    return value
+
+
+def _finite_vector(name: str, values: Any, size: int, names: Sequence[str]) -> np.ndarray:
+    """``values`` as ``size`` finite real floats, or one line naming ``name``."""
+    try:
+        array = np.asarray(values)
+        if np.iscomplexobj(array):
+            raise TypeError
+        array = array.astype(float)
+    except (TypeError, ValueError):
+        raise ConfigError(name, values, "must be real numbers") from None
+    if array.shape != (size,):
+        raise ConfigError(
+            name, np.ravel(array)[:12].tolist(), f"needs {size} values ({', '.join(names)})"
+        )
+    if not np.all(np.isfinite(array)):
+        raise ConfigError(name, array.tolist(), "must be finite")
+    return array
+
+
+def _checked_detections(detections: Any) -> tuple[ObstacleState, ...]:
+    """The caller's obstacles as a tuple of ObstacleState, or one line saying what they are."""
+    try:
+        items = tuple(detections)
+    except TypeError:
+        raise ConfigError("detections", detections, "must be a sequence of ObstacleState") from None
+    for item in items:
+        if not isinstance(item, ObstacleState):
+            raise ConfigError(
+                "detections", type(item).__name__, "must hold ObstacleState (controllers.base)"
+            )
+    return items
