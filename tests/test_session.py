@@ -214,3 +214,17 @@ def test_depth_and_six_dof_scenarios_are_refused_in_one_line():
     for not_a_scenario in (None, {"duration": 3}):
         with pytest.raises(ConfigError, match="preset name, a path or a scenario"):
             auvmpc.session(not_a_scenario)
+
+
+def test_a_diverging_built_in_plant_is_a_failed_run_not_bad_input():
+    """auvmpc run steps its session with trusted values: a plant integration that blows up
+    (30 m/s on the BlueROV2 at 0.5 s plant steps) fails the run, naming the scenario, as it
+    did before the loop became a session; it is not reported as a bad measurement."""
+    from auvmpc.errors import RunFailed
+
+    scenario = auvmpc.load_scenario(
+        "bluerov2-figure-eight",
+        ["initial_state=[0, 0, 0, 30, 0, 0]", "plant.max_step=0.5", "duration=20"],
+    )
+    with pytest.raises(RunFailed, match="bluerov2-figure-eight with nmpc failed at"):
+        auvmpc.simulate(scenario)

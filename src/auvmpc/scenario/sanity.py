@@ -215,7 +215,7 @@ def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
 
 # Hard-survey cases (of those where the converged OCP is not lost) each linearised
 # controller was lost on or fell short of the converged OCP's bar on, at this release
-# (docs/recovery.md, `auvmpc campaign hard-survey --controller ...`); the default missed 1.
+# (docs/recovery.md, `auvmpc campaign hard-survey --controller ...`); the default missed none.
 CORNERED_MISSES = {"ltv-mpc": "53 of 196", "mpc": "131 of 196"}
 
 

@@ -130,6 +130,8 @@ class Session:
         measurement: np.ndarray,
         detections: Sequence[ObstacleState] | None = None,
         truth: Truth | None = None,
+        *,
+        trusted: bool = False,
     ) -> StepResult:
         """One sample at time ``t`` (s): the command to hold until the next sample.
 
@@ -137,7 +139,9 @@ class Session:
         ``detections`` the obstacles as the caller perceives them (default: the scenario's,
         through its obstacle sensor if it has one, else exactly); ``truth`` what a simulator
         knows beyond the measurement. A failed solve does not raise: the result's status says
-        so and ``u`` is the safety shell's command.
+        so and ``u`` is the safety shell's command. ``trusted``: the values come from
+        auvmpc's own plant and sensor (run_session) and are not checked; a plant that
+        diverges is the run's failure (experiments/run.py), not the caller's bad input.
         """
         k = self.k
         self._check_open("step")
@@ -145,19 +149,19 @@ class Session:
             raise ConfigError(
                 "step", k, f"the run has {self.log.steps} samples ({self._duration_text()})"
             )
-        if detections is not None:
-            detections = _checked_detections(detections)
-        measured = self._record(k, t, measurement, truth)
+        if not trusted:
+            t, measurement, truth = self._checked(k, t, measurement, truth)
+            if detections is not None:
+                detections = _checked_detections(detections)
+        self._record(k, t, measurement, truth)
+        log = self.log
         observation = Observation(
             k=k,
-            t=self.log.t[k],
-            state=measured,
+            t=log.t[k],
+            state=measurement,
             reference=self._preview,
-            obstacles=self._detections(self.log.t[k], measured)
-            if detections is None
-            else detections,
+            obstacles=self._detections(log.t[k], measurement) if detections is None else detections,
         )
-        log = self.log
         result, thrust, log.solve_ms[k] = timed_command(self.controller, observation, self.n_inputs)
         log.thrust[k] = thrust
         log.status[k] = str(result.status)
@@ -166,11 +170,21 @@ class Session:
         self.k = k + 1
         return StepResult(k, thrust.copy(), result.status, float(log.solve_ms[k]), result.info)
 
-    def finish(self, t: float, measurement: np.ndarray, truth: Truth | None = None) -> None:
-        """The state after the last command (the log's final row, which has no command)."""
+    def finish(
+        self,
+        t: float,
+        measurement: np.ndarray,
+        truth: Truth | None = None,
+        *,
+        trusted: bool = False,
+    ) -> None:
+        """The state after the last command (the log's final row, which has no command);
+        ``trusted`` as for :meth:`step`."""
         self._check_open("finish")
         if self.finished:
             raise ConfigError("finish", self.k, "the run is finished already")
+        if not trusted:
+            t, measurement, truth = self._checked(self.k, t, measurement, truth)
         self._record(self.k, t, measurement, truth)
         self.finished = True
 
@@ -188,25 +202,34 @@ class Session:
             raise ConfigError(what, self.k, "the session is closed (its run is filed)")
 
     # -- one row of the log ------------------------------------------------------------
-    def _record(self, k: int, t: Any, measurement: Any, truth: Truth | None) -> np.ndarray:
-        """Row k's time, reference, measurement and state, each checked; the measurement
-        as an array."""
+    def _checked(
+        self, k: int, t: Any, measurement: Any, truth: Truth | None
+    ) -> tuple[float, np.ndarray, Truth | None]:
+        """A caller's time, measurement and truth for row k, as checked floats, or one line
+        naming the first that is wrong."""
         log = self.log
         t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
         measured = _finite_vector("measurement", measurement, log.measured_size, log.layout.names)
         if truth is not None:
-            state = _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names)
-            force = _finite_vector(
-                "truth.external_force", truth.external_force, len(log.disturbance_names),
-                log.disturbance_names,
+            truth = Truth(
+                _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),
+                _finite_vector(
+                    "truth.external_force", truth.external_force, len(log.disturbance_names),
+                    log.disturbance_names,
+                ),
             )  # fmt: skip
+        return t, measured, truth
+
+    def _record(self, k: int, t: float, measured: np.ndarray, truth: Truth | None) -> None:
+        """Row k's time, reference preview, measurement and state (the truth's if given)."""
+        log = self.log
         # Its first row is the reference at t; the whole preview is the observation's.
         self._preview = self.reference.states(t + self._preview_offsets)
         log.t[k] = t
         log.reference[k] = self._preview[0]
         if truth is not None:
-            log.state[k] = state
-            log.disturbance_world[k] = force
+            log.state[k] = truth.state
+            log.disturbance_world[k] = truth.external_force
         else:
             log.state[k] = measured
         if self.position is not None:
@@ -214,7 +237,6 @@ class Session:
                 log.state[k][self.position], t, self.obstacles, self.vehicle_radius
             )
         log.measured[k] = measured
-        return measured
 
     def _detections(self, t: float, measured: np.ndarray) -> Sequence[ObstacleState]:
         """The obstacles as the controller knows them at t: through the obstacle sensor

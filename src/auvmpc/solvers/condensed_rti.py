@@ -137,9 +137,10 @@ class CondensedRealTimeIteration:
         f[:n_thrust] = 2.0 * weighted.T @ error + self._thrust_gradient(iterate, sample)
         # The trust region on the heading steps dpsi_i, i = 1..ny-1, as in the sparse QP
         # (solvers/sparse_rti.py): trust |f_i + G_i dU|^2 on the heading rows.
-        heading_step = sensitivity[1:ny, _HEADING]  # (ny - 1, nc n)
-        H[:n_thrust, :n_thrust] += 2.0 * self._trust * heading_step.T @ heading_step
-        f[:n_thrust] += 2.0 * self._trust * heading_step.T @ free[1:ny, _HEADING]
+        if self._trust:
+            heading_step = sensitivity[1:ny, _HEADING]  # (ny - 1, nc n)
+            H[:n_thrust, :n_thrust] += 2.0 * self._trust * heading_step.T @ heading_step
+            f[:n_thrust] += 2.0 * self._trust * heading_step.T @ free[1:ny, _HEADING]
         H[:n_thrust, :n_thrust] += _regularisation(H[:n_thrust, :n_thrust]) * np.eye(n_thrust)
         thrust = iterate.thrust.ravel()
         lower_thrust = np.tile(program.ocp.input_lower, nc)
