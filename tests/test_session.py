@@ -13,7 +13,7 @@ import pytest
 import auvmpc
 from auvmpc.controllers.base import ObstacleState
 from auvmpc.errors import ConfigError
-from auvmpc.experiments.run import horizontal_plant
+from auvmpc.experiments.run import run_plant
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.session import Truth
 
@@ -31,7 +31,7 @@ def _stepped_with_the_project_plant(resolved):
     """The batch run's loop written out by hand on the public session, against the plant and
     sensor auvmpc run builds for the scenario."""
     session = auvmpc.session(resolved)
-    plant, sensor = horizontal_plant(resolved)
+    plant, sensor = run_plant(resolved)
     state = session.initial_state
     steps = round(session.duration / session.sample_time)
     for k in range(steps + 1):
@@ -55,6 +55,8 @@ def _stepped_with_the_project_plant(resolved):
         ("paper-obstacles", {"duration": 30}),
         # current, noise, an obstacle sensor with trackers, the default controller
         ("encounter-pop-up", {"duration": 30}),
+        # 6-DOF: the horizontal controller and the depth MPC as one, in a water current
+        ("bluerov2-helix", {"duration": 20}),
     ],
 )
 def test_stepping_the_session_with_the_project_plant_is_the_batch_run(name, overrides):
@@ -69,8 +71,10 @@ def test_stepping_the_session_with_the_project_plant_is_the_batch_run(name, over
             err_msg=column,
         )  # fmt: skip
     assert stepped.log.status == batch.log.status
+    assert getattr(stepped.log, "depth_status", None) == getattr(batch.log, "depth_status", None)
+    assert stepped.log.to_csv_text().count("\n") == batch.log.to_csv_text().count("\n")
     for key, value in batch.metrics.items():
-        if key.startswith("solve_ms"):
+        if "solve_ms" in key:
             continue  # wall time
         if isinstance(value, float):
             assert stepped.metrics[key] == pytest.approx(value, abs=SAME_RUN_TOL), key
@@ -207,10 +211,9 @@ def test_every_log_field_is_cut_by_first():
     assert all(len(getattr(cut, name)) == 3 for name in SimLog.PER_COMMAND)
 
 
-def test_depth_and_six_dof_scenarios_are_refused_in_one_line():
-    for name in ("paper-depth-calm", "paper-6dof"):
-        with pytest.raises(ConfigError, match="horizontal scenarios"):
-            auvmpc.session(name)
+def test_depth_scenarios_and_non_scenarios_are_refused_in_one_line():
+    with pytest.raises(ConfigError, match="horizontal and 6-DOF scenarios"):
+        auvmpc.session("paper-depth-calm")
     for not_a_scenario in (None, {"duration": 3}):
         with pytest.raises(ConfigError, match="preset name, a path or a scenario"):
             auvmpc.session(not_a_scenario)

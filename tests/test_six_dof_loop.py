@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from auvmpc.controllers.channels import ThrustMapping
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import read_planar_run, redraw, simulate, write_run
 from auvmpc.models import six_dof
 from auvmpc.models.vehicle import VehicleParams, load_vehicle
 from auvmpc.scenario import ResolvedScenario, ResolvedSixDofScenario, load_scenario, planar_twin
-from auvmpc.sim.six_dof_loop import ThrustMapping
 from tests.conftest import (
     HELIX_RMS_TOL_M,
     REPLAY_ANGLE_TOL_RAD,
@@ -97,7 +97,7 @@ def test_run_folder_keeps_the_interface_and_adds_the_6dof_state(short_run):
 def test_same_seed_same_bits():
     first = simulate(load_scenario("paper-6dof", ("duration=10",))).log
     second = simulate(load_scenario("paper-6dof", ("duration=10",))).log
-    assert np.array_equal(first.full_state, second.full_state)
+    assert np.array_equal(first.state, second.state)
     assert np.array_equal(first.thrust, second.thrust)
 
 
@@ -153,7 +153,7 @@ def test_bluerov2_helix():
     assert metrics["verdict"] == "ok", metrics["verdict_reason"]
     assert metrics["thrust_limit_violations"] == metrics["thrust_rate_violations"] == 0
     # It went down the helix: one turn of 62.8 s is 1 m deeper.
-    assert result.log.full_state[-1, 2] > 3.0
+    assert result.log.state[-1, 2] > 3.0
 
 
 def test_thrust_mapping_splits_heave_by_least_squares_within_the_limits():
@@ -233,7 +233,7 @@ def test_python_api_overrides_and_draws_a_six_dof_run():
     assert isinstance(changed, ResolvedSixDofScenario)
     assert changed.scenario.initial_depth_m == 1.2
     run = auvmpc.simulate(changed)
-    assert run.log.full_state[0, 2] == 1.2
+    assert run.log.state[0, 2] == 1.2
     assert {"trajectory", "trajectory_3d", "depth_attitude"} <= set(auvmpc.figures(run))
 
 

@@ -138,21 +138,21 @@ def session(scenario: Scenario | str | Path) -> RunSession:
     >>> s.close("runs/mine")                    # the run folder of what was stepped
 
     ``step(t, measurement, detections=None, truth=None)``: ``measurement`` in
-    ``state_names`` order; ``detections`` the obstacles you perceive (default: the
-    scenario's, through its obstacle sensor if it has one); ``truth`` (sim.session.Truth)
-    the true state and external force if your simulator knows them, for the log and the
-    metrics. A failed solve never raises: the result's ``status`` says so and ``u`` is the
-    safety shell's command. ``auvmpc run`` is a loop over the same session with the
-    built-in plant (docs/session.md).
+    ``measurement_names`` order (a horizontal scenario's are its ``state_names``; a 6-DOF
+    one's the horizontal states, the depth and the depth rate); ``detections`` the obstacles
+    you perceive (default: the scenario's, through its obstacle sensor if it has one);
+    ``truth`` (sim.session.Truth) the true state and the environment (the log's
+    ``disturbance_names``) if your simulator knows them, for the log and the metrics. A
+    failed solve never raises: the result's ``status`` says so and ``u`` is the safety
+    shell's command. ``auvmpc run`` is a loop over the same session with the built-in plant
+    (docs/session.md).
 
     Raises
     ------
     auvmpc.errors.ConfigError
-        A depth or 6-DOF scenario (step-by-step sessions take horizontal ones so far), or a
-        bad name, file, field or value.
+        A depth scenario (step-by-step sessions take horizontal and 6-DOF ones so far), or
+        a bad name, file, field or value.
     """
-    from auvmpc.scenario import ResolvedSixDofScenario
-
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
     if not isinstance(scenario, ResolvedScenario | ResolvedDepthScenario):
@@ -160,11 +160,10 @@ def session(scenario: Scenario | str | Path) -> RunSession:
             "scenario", type(scenario).__name__, "must be a preset name, a path or a scenario "
             "from auvmpc.load_scenario",
         )  # fmt: skip
-    if isinstance(scenario, ResolvedDepthScenario | ResolvedSixDofScenario):
-        kind = "depth" if isinstance(scenario, ResolvedDepthScenario) else "six-dof"
+    if isinstance(scenario, ResolvedDepthScenario):
         raise ConfigError(
-            "kind", kind, "step-by-step sessions take horizontal scenarios so far (run this one "
-            "with auvmpc.simulate or auvmpc run)",
+            "kind", "depth", "step-by-step sessions take horizontal and 6-DOF scenarios so far "
+            "(run this one with auvmpc.simulate or auvmpc run)",
         )  # fmt: skip
     return RunSession(scenario)
 

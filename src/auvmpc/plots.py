@@ -533,13 +533,13 @@ def six_dof_figures(log, limits: VehicleParams, title: str = "") -> dict[str, Fi
 
     Parameters
     ----------
-    log : auvmpc.sim.six_dof_loop.SixDofLog
+    log : auvmpc.sim.log.SixDofLog
     limits : VehicleParams
         With a ``heave`` section: the vertical thrust limits drawn.
     """
     return {
         "trajectory_3d": figure_trajectory_3d(log, title),
-        "tracking_errors": figure_tracking_errors(log, title),
+        "tracking_errors": figure_tracking_errors(log.horizontal(), title),
         "depth_attitude": figure_depth_attitude(log, limits, title),
     }
 
@@ -552,7 +552,7 @@ def figure_trajectory_3d(log, title: str = "") -> Figure:
         *log.reference[:, _POSITION].T, log.depth_reference[:, 0],
         label="reference", **REFERENCE_STYLE,
     )  # fmt: skip
-    position = log.full_state[:, SIX_DOF.span("x", "z")]  # x north, y east, z down (m)
+    position = log.state[:, SIX_DOF.span("x", "z")]  # x north, y east, z down (m)
     ax.plot(*position.T, label="vehicle (true)", **ACTUAL_STYLE)
     ax.scatter(*position[0], color=ACTUAL_STYLE["color"], marker="o", label="start")
     ax.set_xlabel("x north (m)")
@@ -590,12 +590,12 @@ def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure
     figure, axes = _time_panels(4, title)
     depth_ax, roll_ax, pitch_ax, thrust_ax = axes
     depth_ax.plot(log.t, log.depth_reference[:, 0], label="reference", **REFERENCE_STYLE)
-    depth_ax.plot(log.t, log.full_state[:, SIX_DOF.index("z")], label="true", **ACTUAL_STYLE)
+    depth_ax.plot(log.t, log.depth, label="true", **ACTUAL_STYLE)
     depth_ax.invert_yaxis()
     depth_ax.set_ylabel("depth z (m, down)")
-    roll_ax.plot(log.t, np.degrees(log.full_state[:, SIX_DOF.index("phi")]), **ACTUAL_STYLE)
+    roll_ax.plot(log.t, np.degrees(log.state[:, SIX_DOF.index("phi")]), **ACTUAL_STYLE)
     roll_ax.set_ylabel("roll phi (deg)")
-    pitch_ax.plot(log.t, np.degrees(log.full_state[:, SIX_DOF.index("theta")]), **ACTUAL_STYLE)
+    pitch_ax.plot(log.t, np.degrees(log.state[:, SIX_DOF.index("theta")]), **ACTUAL_STYLE)
     pitch_ax.set_ylabel("pitch theta (deg)")
     n, steps = log.n_horizontal, log.steps
     for i in range(n, log.n_thrusters):

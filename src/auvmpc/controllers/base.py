@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -27,6 +28,7 @@ __all__ = [
     "feasible_thrust_box",
     "horizontal_limits",
     "project_to_limits",
+    "timed_command",
     "tracked_reference",
 ]
 
@@ -85,6 +87,20 @@ class Controller(ABC):
     @abstractmethod
     def compute(self, observation: Observation) -> ControlResult:
         """The thrust to apply over the next sample."""
+
+
+def timed_command(
+    controller: Controller, observation: Observation, size: int, who: str = "controller"
+) -> tuple[ControlResult, np.ndarray, float]:
+    """``(result, thrust, solve ms)`` of one controller call; an invalid command (wrong size
+    or not finite) raises RuntimeError naming ``who`` and the sample."""
+    started = time.perf_counter()
+    result = controller.compute(observation)
+    solve_ms = 1e3 * (time.perf_counter() - started)
+    thrust = np.asarray(result.thrust, dtype=float)
+    if thrust.shape != (size,) or not np.all(np.isfinite(thrust)):
+        raise RuntimeError(f"{who} returned an invalid command at k={observation.k}: {thrust!r}")
+    return result, thrust, solve_ms
 
 
 def align_heading(state: np.ndarray, reference: np.ndarray) -> np.ndarray:

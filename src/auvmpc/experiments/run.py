@@ -14,7 +14,9 @@ from threadpoolctl import threadpool_limits
 
 from auvmpc import __version__, interrupts
 from auvmpc.controllers.base import Controller
+from auvmpc.controllers.channels import HorizontalAndDepth, WithDepth
 from auvmpc.controllers.registry import build_controller
+from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.depth_sensor import PressureSensor
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
@@ -34,19 +36,17 @@ from auvmpc.scenario import (
     scenario_to_dict,
 )
 from auvmpc.scenario.depth import DepthScenario
-from auvmpc.sim.log import DepthLog, SimLog
-from auvmpc.sim.loop import closed_loop, run_session
+from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
+from auvmpc.sim.loop import Sensor, closed_loop, run_session
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
-from auvmpc.sim.plant import HeavePlant, HorizontalPlant
-from auvmpc.sim.session import Session
-from auvmpc.sim.six_dof_loop import SixDofLog
+from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
+from auvmpc.sim.session import Session, StateReference
 
 __all__ = [
     "DepthRunResult",
     "RunFailed",
     "RunResult",
     "RunSession",
-    "horizontal_plant",
     "SixDofRunResult",
     "atomic_write_text",
     "fill_run_folder",
@@ -54,6 +54,7 @@ __all__ = [
     "read_run",
     "read_planar_run",
     "redraw",
+    "run_plant",
     "simulate",
     "write_run",
 ]
@@ -181,45 +182,65 @@ def _failures_named(scenario, reached: list[int]):
 
 
 def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]):
-    if isinstance(resolved, ResolvedDepthScenario | ResolvedSixDofScenario):
+    if isinstance(resolved, ResolvedDepthScenario):
         libraries = _solver_libraries(resolved.scenario)
-        if isinstance(resolved, ResolvedDepthScenario):
-            return _simulate_depth(resolved, step, stopwatch, warnings, libraries)
-        return _simulate_six_dof(resolved, step, stopwatch, warnings, libraries)
+        return _simulate_depth(resolved, step, stopwatch, warnings, libraries)
     # One BLAS thread: a controller step works on small matrices, where a second thread only
     # adds hand-over latency (measured: p99 2 ms -> 16 ms for ltv-mpc at nc 30), and
     # campaigns run one process per core anyway.
     with threadpool_limits(limits=1, user_api="blas"):
         session = RunSession(resolved, warnings, stopwatch)
-        plant, sensor = horizontal_plant(resolved)
+        plant, sensor = run_plant(resolved)
         run_session(session, plant, sensor, step)
     _check_finite(session.log.state, resolved.scenario)
     return session.result()
 
 
-def _horizontal_seeds(scenario: Scenario) -> list[np.random.SeedSequence]:
-    """The random streams of a horizontal run: children 0, 1 and 2 of the scenario seed are
-    the current's, the sensor's and the obstacle sensor's (2 came last, leaving 0 and 1 as
-    they were before it)."""
-    return np.random.SeedSequence(scenario.seed).spawn(3)
+def _seeds(scenario: Scenario) -> dict[str, np.random.SeedSequence]:
+    """The random streams of a run by what they drive. Horizontal: children 0, 1 and 2 of
+    the scenario seed are the current's, the sensor's and the obstacle sensor's (2 came last,
+    leaving 0 and 1 as they were before it). 6-DOF: 0 and 1 as in a horizontal scenario (so
+    its planar twin sees the same draws), 2 the depth sensor's, 3 the obstacle sensor's."""
+    if isinstance(scenario, SixDofScenario):
+        current, sensor, depth, obstacles = np.random.SeedSequence(scenario.seed).spawn(4)
+        return {"current": current, "sensor": sensor, "depth": depth, "obstacles": obstacles}
+    current, sensor, obstacles = np.random.SeedSequence(scenario.seed).spawn(3)
+    return {"current": current, "sensor": sensor, "obstacles": obstacles}
 
 
-def horizontal_plant(resolved: ResolvedScenario) -> tuple[HorizontalPlant, SensorNoise]:
-    """The simulated vehicle of a horizontal scenario in its current, and its sensor: what
-    ``auvmpc run`` steps a :class:`RunSession` against (tests step one by hand with them)."""
+def run_plant(resolved: ResolvedScenario) -> tuple[Plant, Sensor]:
+    """The simulated vehicle of a horizontal or 6-DOF scenario in its current, and its
+    sensors: what ``auvmpc run`` steps a :class:`RunSession` against (tests step one by hand
+    with them)."""
     scenario = resolved.scenario
-    disturbance_seed, sensor_seed, _ = _horizontal_seeds(scenario)
+    seeds = _seeds(scenario)
     sample_time = scenario.controller.sample_time
+    navigation = SensorNoise(scenario.sensing, np.random.default_rng(seeds["sensor"]))
+    if isinstance(resolved, ResolvedSixDofScenario):
+        water = scenario.disturbance.water_current
+        current = (
+            None
+            if water is None
+            else WaterCurrent(water, sample_time, np.random.default_rng(seeds["current"]))
+        )
+        sensing = scenario.sensing
+        sensor = SixDofSensor(
+            navigation, sensing.depth_std_m, sensing.depth_rate_std_m_per_s,
+            np.random.default_rng(seeds["depth"]),
+        )  # fmt: skip
+        return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
     disturbance = WorldDisturbance(
-        scenario.disturbance, sample_time, np.random.default_rng(disturbance_seed)
+        scenario.disturbance, sample_time, np.random.default_rng(seeds["current"])
     )
     plant = HorizontalPlant(resolved.plant, disturbance, sample_time, scenario.plant.max_step)
-    return plant, SensorNoise(scenario.sensing, np.random.default_rng(sensor_seed))
+    return plant, navigation
 
 
 class RunSession(Session):
-    """A horizontal scenario's controller, stepped sample by sample (``auvmpc.session``):
-    its names, timing and start, and :meth:`close`, which files what was stepped as a run.
+    """A horizontal or 6-DOF scenario's controller, stepped sample by sample
+    (``auvmpc.session``): its names, timing and start, and :meth:`close`, which files what
+    was stepped as a run. A 6-DOF scenario's controller is its horizontal controller and
+    depth MPC on the 6-DOF thrusters (controllers/channels.py).
 
     The batch run (:func:`simulate`) steps the same session against the scenario's plant.
     ``warnings``: the scenario's pre-run checks, when the caller has run them already.
@@ -237,35 +258,56 @@ class RunSession(Session):
         scenario = resolved.scenario
         self._stopwatch = stopwatch or Stopwatch()
         warnings = preflight(resolved) if warnings is None else warnings
-        controller = make_controller(scenario, resolved.model)
+        model = resolved.model
+        controller = make_controller(scenario, model)
         # getattr: a controller need not derive from base.Controller (a user's own, a test's).
         self.warnings = [*warnings, *getattr(controller, "build_warnings", ())]
         sample_time = scenario.controller.sample_time
-        initial_thrust = scenario.initial_thrust
+        steps = int(round(scenario.duration / sample_time))
+        given = scenario.initial_thrust
+        initial_thrust = None if given is None else np.array(given)
+        if isinstance(resolved, ResolvedSixDofScenario):
+            depth = build_controller(
+                scenario.depth_controller, model, water_depth_m=scenario.water_depth_m
+            )
+            controller = HorizontalAndDepth(
+                controller, depth, model, scenario.depth_controller.preview
+            )
+            reference: StateReference = WithDepth(resolved.reference)
+            log: SimLog = SixDofLog.allocate(
+                steps, model.six_dof.n_thrusters, sample_time, n_horizontal=model.n_thrusters
+            )
+            initial_thrust = _six_dof_thrust(model, given)
+            x, y, psi, u, v, r = scenario.initial_state
+            initial_state = [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r]
+        else:
+            reference = make_reference(scenario.reference, resolved.base_dir)
+            log = SimLog.allocate(steps, model.n_thrusters, sample_time)
+            initial_state = scenario.initial_state
         super().__init__(
             controller,
-            make_reference(scenario.reference, resolved.base_dir),
-            SimLog.allocate(
-                int(round(scenario.duration / sample_time)), resolved.model.n_thrusters,
-                sample_time,
-            ),
-            initial_state=scenario.initial_state,
-            initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
+            reference,
+            log,
+            initial_state=initial_state,
+            initial_thrust=initial_thrust,
             obstacles=scenario.obstacles,
-            perception=_perception(scenario, _horizontal_seeds(scenario)[2]),
+            perception=_perception(scenario, _seeds(scenario)["obstacles"]),
             vehicle_radius=scenario.controller.vehicle_radius,
-        )  # fmt: skip
+        )
         self.duration = self.log.steps * sample_time
 
     def result(self) -> RunResult:
         """What was stepped, as a finished run: its log, metrics, warnings and provenance."""
         scenario = self.resolved.scenario
         log = self.stepped_log
-        metrics = compute_metrics(
+        libraries = _solver_libraries(scenario)
+        kind, measure = RunResult, compute_metrics
+        if isinstance(log, SixDofLog):
+            kind, measure = SixDofRunResult, compute_six_dof_metrics
+        metrics = measure(
             log, self.resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
         )
-        libraries = _solver_libraries(scenario)
-        return RunResult(
+        return kind(
             self.resolved, log, metrics, provenance=self._stopwatch.record(libraries),
             warnings=self.warnings,
         )  # fmt: skip
@@ -321,67 +363,6 @@ def _simulate_depth(
     )
 
 
-def _simulate_six_dof(
-    resolved: ResolvedSixDofScenario, step, stopwatch: Stopwatch, warnings, libraries
-) -> SixDofRunResult:
-    """The horizontal controller and the depth MPC on the 6-DOF plant (auvmpc.sim.six_dof_loop).
-
-    Random streams: children 0 and 1 of the scenario seed are the current's and the horizontal
-    sensor's, as in a horizontal scenario (so its planar twin sees the same draws); child 2 is
-    the depth sensor's, child 3 the obstacle sensor's."""
-    from auvmpc.environment.currents import WaterCurrent
-    from auvmpc.sim.six_dof_loop import closed_loop_six_dof
-
-    scenario = resolved.scenario
-    current_seed, sensor_seed, depth_seed, obstacle_seed = np.random.SeedSequence(
-        scenario.seed
-    ).spawn(4)
-    sample_time = scenario.controller.sample_time
-    controller = make_controller(scenario, resolved.model)
-    warnings = [*warnings, *getattr(controller, "build_warnings", ())]
-    depth_controller = build_controller(
-        scenario.depth_controller, resolved.model, water_depth_m=scenario.water_depth_m
-    )
-    x, y, psi, u, v, r = scenario.initial_state
-    initial = np.array([x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r], float)
-    water = scenario.disturbance.water_current
-    initial_thrust = scenario.initial_thrust
-    sensing = scenario.sensing
-    with threadpool_limits(limits=1, user_api="blas"):
-        log = closed_loop_six_dof(
-            resolved.plant,
-            controller,
-            depth_controller,
-            resolved.reference,
-            duration=scenario.duration,
-            initial_state=initial,
-            current=None
-            if water is None
-            else WaterCurrent(water, sample_time, np.random.default_rng(current_seed)),
-            sensor=SensorNoise(sensing, np.random.default_rng(sensor_seed)),
-            depth_noise=(sensing.depth_std_m, sensing.depth_rate_std_m_per_s),
-            depth_rng=np.random.default_rng(depth_seed),
-            depth_preview=scenario.depth_controller.preview,
-            max_plant_step=scenario.plant.max_step,
-            initial_thrust=None if initial_thrust is None else np.array(initial_thrust),
-            obstacles=scenario.obstacles,
-            perception=_perception(scenario, obstacle_seed),
-            vehicle_radius=scenario.controller.vehicle_radius,
-            on_step=step,
-        )
-    _check_finite(log.full_state, scenario)
-    metrics = compute_six_dof_metrics(
-        log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
-    )
-    return SixDofRunResult(
-        resolved,
-        log,
-        metrics,
-        provenance=stopwatch.record((*libraries, str(scenario.depth_controller.qp_solver))),
-        warnings=warnings,
-    )
-
-
 def _check_finite(states: np.ndarray, scenario: Scenario) -> None:
     """A plant integration that diverged (e.g. from an initial speed far beyond what the
     vehicle's damping allows at the plant's step) is a failed run, not a result."""
@@ -401,11 +382,14 @@ def _solver_libraries(scenario: Scenario | DepthScenario) -> tuple[str, ...]:
     config = scenario.controller
     if isinstance(scenario, DepthScenario):
         return (str(config.qp_solver),)
+    libraries: tuple[str, ...] = ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
     if config.type in (ControllerType.MPC, ControllerType.LTV_MPC):
-        return (str(config.qp_solver),)
-    if config.type is ControllerType.DO_MPC:
-        return ("do-mpc",)
-    return ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
+        libraries = (str(config.qp_solver),)
+    elif config.type is ControllerType.DO_MPC:
+        libraries = ("do-mpc",)
+    if isinstance(scenario, SixDofScenario):  # the depth MPC's QP solver beside them
+        libraries = (*libraries, str(scenario.depth_controller.qp_solver))
+    return libraries
 
 
 def write_run(
@@ -488,9 +472,7 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     if info["scenario"].get("kind") == "six-dof":
         scenario = SixDofScenario.model_validate(info["scenario"])
         model = VehicleParams.model_validate(info["model"])
-        six_log = SixDofLog.read_csv_six_dof(
-            run_dir / "log.csv", model.n_thrusters, _initial_thrust(info, model)
-        )
+        six_log = _read_six_dof_log(run_dir, info, model)
         draw_figures(six_log, scenario, model, run_dir, fmt, dpi)
         return
     info, log = read_run(run_dir)
@@ -504,11 +486,17 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     )
 
 
-def _initial_thrust(info: dict[str, Any], model: VehicleParams) -> np.ndarray:
-    """F(-1) of every 6-DOF thruster of a saved 6-DOF run (vertical ones start at 0)."""
+def _read_six_dof_log(run_dir: Path, info: dict[str, Any], model: VehicleParams) -> SixDofLog:
+    """A saved 6-DOF run's log, its thrusters' F(-1) from its scenario."""
+    initial = _six_dof_thrust(model, info["scenario"].get("initial_thrust"))
+    return SixDofLog.read_csv_six_dof(run_dir / "log.csv", model.n_thrusters, initial)
+
+
+def _six_dof_thrust(model: VehicleParams, given) -> np.ndarray:
+    """F(-1) of every 6-DOF thruster from a scenario's ``initial_thrust`` (the horizontal
+    thrusters'; vertical ones start at 0)."""
     six = model.six_dof
     total = np.zeros(0 if six is None else six.n_thrusters)
-    given = info["scenario"].get("initial_thrust")
     if given is not None:
         total[: len(given)] = given
     return total
@@ -542,9 +530,7 @@ def read_planar_run(
     model = VehicleParams.model_validate(info["model"])
     if kind == "six-dof":
         scenario: Scenario = SixDofScenario.model_validate(info["scenario"])
-        six_log = SixDofLog.read_csv_six_dof(
-            run_dir / "log.csv", model.n_thrusters, _initial_thrust(info, model)
-        )
+        six_log = _read_six_dof_log(run_dir, info, model)
         return info, scenario, model, six_log.horizontal()
     info, log = read_run(run_dir)
     return info, Scenario.model_validate(info["scenario"]), model, log

@@ -41,11 +41,12 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
-from auvmpc.models.layout import StateLayout
+from auvmpc.models.layout import HORIZONTAL, StateLayout
 from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
 __all__ = [
+    "HORIZONTAL_INDEX",
     "PITCH_LIMIT_RAD",
     "SIX_DOF",
     "PitchSingularity",
@@ -57,6 +58,7 @@ __all__ = [
     "coriolis_rigid_body",
     "depth_rate",
     "dynamics",
+    "horizontal_state",
     "integrate",
     "plant_step_length",
     "restoring_forces",
@@ -65,6 +67,8 @@ __all__ = [
 
 SIX_DOF = StateLayout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
 NX = SIX_DOF.size
+# Where the horizontal model's [x, y, psi, u, v, r] sit in the 6-DOF state.
+HORIZONTAL_INDEX = np.array([SIX_DOF.index(name) for name in HORIZONTAL.names])
 # Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.
 PITCH_LIMIT_RAD = math.radians(85.0)
 
@@ -275,6 +279,11 @@ def check_pitch(state: np.ndarray) -> None:
             f"{math.degrees(PITCH_LIMIT_RAD):.0f} deg, where the zyx Euler-angle kinematics "
             "(1/cos theta) are near their singularity"
         )
+
+
+def horizontal_state(state: np.ndarray) -> np.ndarray:
+    """``[x, y, psi, u, v, r]`` (6,) of a 6-DOF state (12,) (or rows of them)."""
+    return np.asarray(state)[..., HORIZONTAL_INDEX]
 
 
 def depth_rate(state: np.ndarray) -> float:

@@ -62,7 +62,7 @@ class Scenario(StrictModel):
     kind: Literal["horizontal"] = Field(
         default="horizontal",
         description="horizontal-plane tracking ('depth': auvmpc.scenario.depth; 'six-dof': the "
-        "6-DOF plant, auvmpc.sim.six_dof_loop)",
+        "6-DOF plant, auvmpc.controllers.channels)",
     )
     name: str = Field(description="identifier")
     description: str = Field(default="", description="one line for humans")
@@ -145,7 +145,7 @@ class SixDofScenario(Scenario):
     plant is the vehicle's ``six_dof`` section as given)."""
 
     kind: Literal["six-dof"] = Field(  # type: ignore[assignment]
-        description="selects this schema: the 6-DOF plant (auvmpc.sim.six_dof_loop)"
+        description="selects this schema: the 6-DOF plant (auvmpc.controllers.channels)"
     )
     disturbance: SixDofDisturbanceConfig = Field(  # type: ignore[assignment]
         default_factory=SixDofDisturbanceConfig

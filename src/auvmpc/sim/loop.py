@@ -13,14 +13,14 @@ from typing import Protocol
 
 import numpy as np
 
-from auvmpc.controllers.base import Controller
+from auvmpc.controllers.base import Controller, timed_command
 from auvmpc.environment.disturbances import WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.plant import HorizontalPlant, Plant, plant_step
-from auvmpc.sim.session import Session, StateReference, Truth, timed_command
+from auvmpc.sim.session import Session, StateReference, Truth
 
 __all__ = [
     "Sensor",

@@ -290,18 +290,18 @@ def compute_six_dof_metrics(
 
     Parameters
     ----------
-    log : auvmpc.sim.six_dof_loop.SixDofLog
+    log : auvmpc.sim.log.SixDofLog
     limits : VehicleParams
         The nominal vehicle, with ``six_dof`` and ``heave`` sections.
     """
-    from auvmpc.sim.six_dof_loop import ThrustMapping
+    from auvmpc.controllers.channels import ThrustMapping
 
     metrics = compute_metrics(log.horizontal(), limits, transient_s, obstacle_margin_m)
     mapping = ThrustMapping(limits, log.sample_time)
     every_thruster = actuation_metrics(log, (mapping.lower, mapping.upper), mapping.rate_limit)
     steady = log.t >= transient_s - 1e-9
-    depth_error = log.full_state[:, SIX_DOF.index("z")] - log.depth_reference[:, 0]
-    roll, pitch = (np.abs(log.full_state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
+    depth_error = log.depth - log.depth_reference[:, 0]
+    roll, pitch = (np.abs(log.state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
     metrics.update(
         {
             **_pick(

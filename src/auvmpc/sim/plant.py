@@ -4,7 +4,9 @@ steps it: a :class:`Plant` of the scenario's kind.
 :class:`HorizontalPlant`: RK4 sub-steps of the 3-DOF model (auvmpc.models.vehicle) under the
 world-frame disturbance, evaluated where each sub-step asks, and the water current (held over
 the sample, like the force's slow part). :class:`HeavePlant`: RK4 sub-steps of the heave model
-(auvmpc.models.heave) under the surface waves' vertical force.
+(auvmpc.models.heave) under the surface waves' vertical force. :class:`SixDofPlant`: RK4
+sub-steps of the 6-DOF model (auvmpc.models.six_dof) in the water current, and
+:class:`SixDofSensor`, what its controllers measure of it.
 
 Two implementations of the same arithmetic: :func:`plant_step` in NumPy, and
 :class:`PlantStepper`, which evaluates the disturbance at every RK4 stage of the sample
@@ -22,20 +24,31 @@ from typing import Protocol
 import casadi as ca
 import numpy as np
 
-from auvmpc.environment.disturbances import WorldDisturbance
+from auvmpc.environment.currents import WaterCurrent
+from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.waves import WaveField, morison_inertia
 from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
 from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.six_dof import (
+    SIX_DOF,
+    check_pitch,
+    depth_rate,
+    horizontal_state,
+    integrate,
+    six_dof_model,
+)
 from auvmpc.models.vehicle import HeaveParams, VehicleParams, body_from_world, dynamics
 from auvmpc.native import NativeFunction, native_function
-from auvmpc.sim.log import DepthLog, SimLog
+from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
 
 __all__ = [
     "HeavePlant",
     "HorizontalPlant",
     "Plant",
     "PlantStepper",
+    "SixDofPlant",
+    "SixDofSensor",
     "plant_step",
     "stage_times",
     "substeps_for",
@@ -43,6 +56,7 @@ __all__ = [
 
 _HEADING = HORIZONTAL.heading
 _DEPTH = DEPTH.index("z")
+_SIX_DOF_DEPTH = SIX_DOF.index("z")  # NED, down (m)
 
 
 class Plant(Protocol):
@@ -121,6 +135,74 @@ class HeavePlant:
         return heave_plant_step(
             self.heave, state, thrust, t0, self.sample_time, self.substeps, self.wave_force
         )
+
+
+class SixDofPlant:
+    """The 6-DOF vehicle in the water current (or still water); its environment, logged at
+    each sample, is the water velocity at the vehicle (world NED, m/s)."""
+
+    log_type = SixDofLog
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        current: WaterCurrent | None,
+        sample_time: float,
+        max_step: float,
+    ) -> None:
+        self.model = six_dof_model(vehicle)
+        self.current, self.sample_time = current, sample_time
+        self.n_thrusters = vehicle.six_dof.n_thrusters
+        self.substeps = substeps_for(sample_time, max_step)
+        # A current that changes with depth is looked up at every RK4 stage; a uniform one is
+        # held over the sample (the compiled RK4 step).
+        self.profiled = current is not None and bool(current.config.depth_profile)
+
+    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+        """The water velocity at the vehicle (world NED, m/s), held over [t, t + sample)."""
+        if self.current is None:
+            return np.zeros(3)
+        return self.current.at(t, state[_SIX_DOF_DEPTH], depth_rate(state))[0]
+
+    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+        if self.profiled:
+            current = self.current
+            state = integrate(
+                self.model, state, thrust, self.sample_time, self.substeps,
+                lambda time_s, x: current.at(time_s, x[_SIX_DOF_DEPTH], depth_rate(x)), t0=t0,
+            )  # fmt: skip
+        else:
+            velocity = self.external_force(t0, state)
+            h = self.sample_time / self.substeps
+            check_pitch(state)
+            for _ in range(self.substeps):
+                state = np.asarray(self.model.step(state, thrust, velocity, h), dtype=float).ravel()
+                check_pitch(state)
+        if self.current is not None:
+            self.current.advance()
+        return state
+
+
+class SixDofSensor:
+    """What the 6-DOF controllers measure: the navigation sensor's ``[x, y, psi, u, v, r]``
+    and a depth sensor's depth and depth rate (NED), each with Gaussian noise of its own
+    generator (SixDofLog's ``measured_names``)."""
+
+    def __init__(
+        self,
+        navigation: SensorNoise,
+        depth_std_m: float,
+        depth_rate_std_m_per_s: float,
+        rng: np.random.Generator,
+    ) -> None:
+        self.navigation, self._rng = navigation, rng
+        self.depth_std, self.rate_std = depth_std_m, depth_rate_std_m_per_s
+
+    def measure(self, true_state: np.ndarray, t: float) -> np.ndarray:
+        horizontal = self.navigation.measure(horizontal_state(true_state))
+        depth = true_state[_SIX_DOF_DEPTH] + self.depth_std * self._rng.standard_normal()
+        rate = depth_rate(true_state) + self.rate_std * self._rng.standard_normal()
+        return np.concatenate([horizontal, [depth, rate]])
 
 
 def plant_step(

@@ -13,7 +13,6 @@ naming it (ConfigError), never a traceback from deep inside a solver.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -22,17 +21,17 @@ import numpy as np
 
 from auvmpc.controllers.base import (
     Controller,
-    ControlResult,
     ControlStatus,
     Observation,
     ObstacleState,
+    timed_command,
 )
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
-from auvmpc.sim.log import BACKOFF_NAMES, ESTIMATE_NAMES, SimLog
+from auvmpc.sim.log import SimLog
 
-__all__ = ["Session", "StateReference", "StepResult", "Truth", "timed_command"]
+__all__ = ["Session", "StateReference", "StepResult", "Truth"]
 
 
 @dataclass(frozen=True)
@@ -59,20 +58,6 @@ class StateReference(Protocol):
     """The reference in the plant's state layout, vectorised over time."""
 
     def states(self, t: np.ndarray) -> np.ndarray: ...
-
-
-def timed_command(
-    controller: Controller, observation: Observation, size: int, who: str = "controller"
-) -> tuple[ControlResult, np.ndarray, float]:
-    """``(result, thrust, solve ms)`` of one controller call; an invalid command (wrong size
-    or not finite) raises RuntimeError naming ``who`` and the sample."""
-    started = time.perf_counter()
-    result = controller.compute(observation)
-    solve_ms = 1e3 * (time.perf_counter() - started)
-    thrust = np.asarray(result.thrust, dtype=float)
-    if thrust.shape != (size,) or not np.all(np.isfinite(thrust)):
-        raise RuntimeError(f"{who} returned an invalid command at k={observation.k}: {thrust!r}")
-    return result, thrust, solve_ms
 
 
 class Session:
@@ -106,6 +91,7 @@ class Session:
         self.n_inputs = log.n_thrusters
         self.input_names = log.input_names
         self.state_names = log.layout.names
+        self.measurement_names = log.measured_names
         self.k = 0  # samples stepped so far
         self.finished = False  # the final state row is in
         self.closed = False  # filed as a run: nothing more may be stepped
@@ -135,7 +121,7 @@ class Session:
     ) -> StepResult:
         """One sample at time ``t`` (s): the command to hold until the next sample.
 
-        ``measurement`` is what the controller sees (the log's ``measured_size`` values);
+        ``measurement`` is what the controller sees (``measurement_names``, in that order);
         ``detections`` the obstacles as the caller perceives them (default: the scenario's,
         through its obstacle sensor if it has one, else exactly); ``truth`` what a simulator
         knows beyond the measurement. A failed solve does not raise: the result's status says
@@ -162,13 +148,11 @@ class Session:
             reference=self._preview,
             obstacles=self._detections(log.t[k], measurement) if detections is None else detections,
         )
-        result, thrust, log.solve_ms[k] = timed_command(self.controller, observation, self.n_inputs)
-        log.thrust[k] = thrust
-        log.status[k] = str(result.status)
-        log.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
-        log.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
+        result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
+        log.solve_ms[k] = solve_ms
+        log.record_command(k, result, thrust)
         self.k = k + 1
-        return StepResult(k, thrust.copy(), result.status, float(log.solve_ms[k]), result.info)
+        return StepResult(k, thrust.copy(), result.status, solve_ms, result.info)
 
     def finish(
         self,
@@ -209,7 +193,8 @@ class Session:
         naming the first that is wrong."""
         log = self.log
         t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
-        measured = _finite_vector("measurement", measurement, log.measured_size, log.layout.names)
+        names = log.measured_names
+        measured = _finite_vector("measurement", measurement, len(names), names)
         if truth is not None:
             truth = Truth(
                 _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),

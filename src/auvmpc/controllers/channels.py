@@ -1,0 +1,186 @@
+"""The paper's control architecture on the 6-DOF vehicle (paper section 4.2): two control
+channels, each on its own reduced model, on one set of thrusters.
+
+Every sample the horizontal controller (any registered one, built on the 3-DOF model) sees
+the measured ``[x, y, psi, u, v, r]``; the depth MPC (controllers/depth_mpc.py) sees the
+measured depth and depth rate and the depth reference; :class:`ThrustMapping` puts both
+demands on the vehicle's ``six_dof.thrusters`` within their hard force and rate limits. Roll
+and pitch are left to passive stability. To the loop and the session the pair is one
+controller (:class:`HorizontalAndDepth`) of the 6-DOF log's layouts (sim/log.py,
+``SixDofLog``).
+
+Conventions: the plant, the log and the 3-D reference use NED (z down, the depth below the
+surface); the depth controller works in z up (negative below the surface), as in the tank
+experiment. The conversion happens here and nowhere else: z_up = -z, z_up' = -z'.
+
+Thrusters: the first ``n`` entries of ``six_dof.thrusters`` are the horizontal ones, in the
+order of the 3-DOF ``thrusters`` (the horizontal controller's), with that vehicle's thrust and
+rate limits; the rest are the vertical set, with the ``heave`` section's limits. The depth
+controller's total heave force is split over the vertical set by least squares on their heave
+(Z) row: the least-norm split, which for a symmetric set is equal thrust and no roll moment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from auvmpc.controllers.base import (
+    Controller,
+    ControlResult,
+    ControlStatus,
+    Observation,
+    timed_command,
+)
+from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF, depth_rate, horizontal_state
+from auvmpc.models.vehicle import VehicleParams
+
+__all__ = ["ChannelResult", "HorizontalAndDepth", "ThrustMapping", "WithDepth"]
+
+# Slack in a saturation check: far below any physical force.
+CLIP_TOLERANCE_N = 1e-9
+_DEPTH = SIX_DOF.index("z")  # NED, down (m)
+# Where the depth sensor's [z, z'] (NED) sit in the 6-DOF measurement (SixDofLog's).
+_MEASURED_DEPTH = slice(HORIZONTAL.size, HORIZONTAL.size + 2)
+
+
+class ThrustMapping:
+    """Horizontal and heave demands onto the 6-DOF thrusters, within the hard limits.
+
+    Parameters
+    ----------
+    vehicle : VehicleParams
+        With ``six_dof`` and ``heave`` sections; its first ``n_thrusters`` six_dof entries
+        are the horizontal ones.
+    sample_time : float
+        s; the rate limits allow ``rate * sample_time`` per sample.
+    """
+
+    def __init__(self, vehicle: VehicleParams, sample_time: float) -> None:
+        six, heave = vehicle.six_dof, vehicle.heave
+        if six is None or heave is None:
+            raise ValueError(f"vehicle {vehicle.name!r} needs six_dof and heave sections")
+        self.n_horizontal = n = vehicle.n_thrusters
+        self.n_total = six.n_thrusters
+        heave_row = np.asarray(six.T)[2, n:]  # NED Z force per unit thrust of each vertical
+        # Least-norm F_v with heave_row @ F_v = Z: F_v = pinv(heave_row) Z.
+        self.heave_split = heave_row / float(heave_row @ heave_row)
+        count = self.n_total - n
+        self.lower = np.concatenate(
+            [np.full(n, vehicle.thrust_limits[0]), np.full(count, heave.thrust_limits[0])]
+        )
+        self.upper = np.concatenate(
+            [np.full(n, vehicle.thrust_limits[1]), np.full(count, heave.thrust_limits[1])]
+        )
+        self.rate_limit = np.concatenate(  # N/s
+            [np.full(n, vehicle.thrust_rate_limit), np.full(count, heave.thrust_rate_limit)]
+        )
+        self.max_step = sample_time * self.rate_limit
+
+    def vertical(self, heave_force_up: float) -> np.ndarray:
+        """The vertical thrusters' forces for an upward heave force (N): NED Z = -force."""
+        return self.heave_split * (-heave_force_up)
+
+    def apply(self, demand: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, int]:
+        """``demand`` (n_total,) saturated to the rate limits from ``previous`` and to the force
+        limits; also the number of thrusters whose demand had to be changed."""
+        low = np.maximum(self.lower, previous - self.max_step)
+        high = np.minimum(self.upper, previous + self.max_step)
+        applied = np.clip(demand, low, high)
+        return applied, int(np.sum(np.abs(applied - demand) > CLIP_TOLERANCE_N))
+
+
+@dataclass
+class ChannelResult(ControlResult):
+    """The horizontal controller's result (status, diagnostics), the mapped command of every
+    thruster, and what the depth channel and the mapping did (SixDofLog's columns)."""
+
+    horizontal_solve_ms: float = 0.0
+    depth_solve_ms: float = 0.0
+    depth_status: ControlStatus = ControlStatus.OK
+    saturated: int = 0  # thrusters whose demand the mapping had to change
+
+
+class WithDepth:
+    """A 3-D reference as the pair sees it: rows ``[x, y, psi, u, v, r, z, z']`` (NED)."""
+
+    def __init__(self, reference) -> None:
+        self.reference = reference  # a references.Reference with a depth profile
+
+    def states(self, t: np.ndarray) -> np.ndarray:
+        return np.hstack([self.reference.states(t), self.reference.depths(t)[:, :2]])
+
+
+class HorizontalAndDepth(Controller):
+    """The horizontal controller and the depth MPC as one controller of the 6-DOF vehicle.
+
+    It sees the 6-DOF measurement ``[x, y, psi, u, v, r, z, z']`` and a :class:`WithDepth`
+    preview; it returns every ``six_dof`` thruster's force (:class:`ChannelResult`).
+    ``depth_preview``: the depth MPC sees the reference ahead (else today's, held).
+    """
+
+    def __init__(
+        self,
+        horizontal: Controller,
+        depth,  # controllers.depth_mpc.DepthMpc
+        vehicle: VehicleParams,
+        depth_preview: bool,
+    ) -> None:
+        self.horizontal, self.depth, self.depth_preview = horizontal, depth, depth_preview
+        self.sample_time = horizontal.sample_time
+        self.preview_steps = max(horizontal.preview_steps, depth.preview_steps)
+        self.build_warnings = tuple(getattr(horizontal, "build_warnings", ()))
+        self.mapping = ThrustMapping(vehicle, self.sample_time)
+        self._heave_count = depth.heave.thruster_count
+
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        """``initial_state``: the true 6-DOF start (12,); ``initial_thrust`` every thruster's
+        F(-1) (the depth channel's total heave starts from 0)."""
+        n = self.mapping.n_horizontal
+        self._previous = np.asarray(initial_thrust, dtype=float).copy()
+        self.horizontal.reset(horizontal_state(initial_state), self._previous[:n].copy())
+        self.depth.reset(
+            np.array([-initial_state[_DEPTH], -depth_rate(initial_state)]),
+            np.zeros(self._heave_count),
+        )
+
+    def compute(self, observation: Observation) -> ChannelResult:
+        mapping, measured, reference = self.mapping, observation.state, observation.reference
+        horizontal_observation = Observation(
+            k=observation.k,
+            t=observation.t,
+            state=measured[: HORIZONTAL.size],
+            reference=reference[: self.horizontal.preview_steps + 1, : HORIZONTAL.size],
+            obstacles=observation.obstacles,
+        )
+        result, horizontal, horizontal_ms = timed_command(
+            self.horizontal, horizontal_observation, mapping.n_horizontal
+        )
+        target = reference[: self.depth.preview_steps + 1, HORIZONTAL.size :]
+        if not self.depth_preview:
+            target = np.repeat(target[:1], len(target), axis=0)
+        measured_depth, measured_rate = measured[_MEASURED_DEPTH]
+        depth_observation = Observation(
+            k=observation.k,
+            t=observation.t,
+            state=np.array([-measured_depth, -measured_rate]),
+            reference=np.column_stack([-target[:, 0], -target[:, 1]]),
+        )
+        depth_result, heave, depth_ms = timed_command(
+            self.depth, depth_observation, self._heave_count, "depth controller"
+        )
+        demand = np.concatenate([horizontal, mapping.vertical(float(heave.sum()))])
+        thrust, saturated = mapping.apply(demand, self._previous)
+        self._previous = thrust
+        return ChannelResult(
+            thrust=thrust,
+            status=result.status,
+            solve_time_s=result.solve_time_s,
+            info=result.info,
+            horizontal_solve_ms=horizontal_ms,
+            depth_solve_ms=depth_ms,
+            depth_status=depth_result.status,
+            saturated=saturated,
+        )
