@@ -36,7 +36,7 @@ def _stepped_with_the_project_plant(resolved):
     steps = round(session.duration / session.sample_time)
     for k in range(steps + 1):
         t = k * session.sample_time
-        truth = Truth(state, plant.external_force(t, state))
+        truth = Truth(state, plant.environment(t, state))
         measured = sensor.measure(state, t)
         if k == steps:
             session.finish(t, measured, truth)

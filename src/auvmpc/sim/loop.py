@@ -102,7 +102,7 @@ def run_session(
     state = session.initial_state.copy()
     for k in range(steps + 1):
         t = log.t[k]
-        truth = Truth(state, plant.external_force(t, state))
+        truth = Truth(state, plant.environment(t, state))
         # Measured on the last row too: what the controller would have seen (a depth log shows it).
         measured = sensor.measure(state, t)
         if k == steps:

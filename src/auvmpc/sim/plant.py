@@ -66,8 +66,9 @@ class Plant(Protocol):
     n_thrusters: int
     sample_time: float  # s, the sample :meth:`step` integrates over
 
-    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
-        """The environment's force on the vehicle at ``t`` (logged, one row per sample)."""
+    def environment(self, t: float, state: np.ndarray) -> np.ndarray:
+        """What the environment does at ``t`` (the log's ``disturbance_names``, one row per
+        sample): a force on the vehicle, or the water's velocity."""
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
         """The state one sample after ``t0`` under ``thrust`` held; the environment then
@@ -95,7 +96,7 @@ class HorizontalPlant:
         self.n_thrusters = vehicle.n_thrusters
         self.stepper = PlantStepper(vehicle, sample_time, substeps_for(sample_time, max_step))
 
-    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+    def environment(self, t: float, state: np.ndarray) -> np.ndarray:
         """World force and moment [X, Y, N] (N, N, N m)."""
         return self.disturbance.force_world(t)
 
@@ -128,7 +129,8 @@ class HeavePlant:
         """The waves' vertical force (N, up) on the vehicle at height ``z`` (m) at ``t``."""
         return 0.0 if self.waves is None else self.inertia * self.waves.vertical_acceleration(z, t)
 
-    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+    def environment(self, t: float, state: np.ndarray) -> np.ndarray:
+        """The waves' vertical force [Z] (N, up)."""
         return np.array([self.wave_force(state[_DEPTH], t)])
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
@@ -158,7 +160,7 @@ class SixDofPlant:
         # held over the sample (the compiled RK4 step).
         self.profiled = current is not None and bool(current.config.depth_profile)
 
-    def external_force(self, t: float, state: np.ndarray) -> np.ndarray:
+    def environment(self, t: float, state: np.ndarray) -> np.ndarray:
         """The water velocity at the vehicle (world NED, m/s), held over [t, t + sample)."""
         if self.current is None:
             return np.zeros(3)
@@ -172,7 +174,7 @@ class SixDofPlant:
                 lambda time_s, x: current.at(time_s, x[_SIX_DOF_DEPTH], depth_rate(x)), t0=t0,
             )  # fmt: skip
         else:
-            velocity = self.external_force(t0, state)
+            velocity = self.environment(t0, state)
             h = self.sample_time / self.substeps
             check_pitch(state)
             for _ in range(self.substeps):

@@ -48,10 +48,12 @@ class StepResult:
 @dataclass(frozen=True)
 class Truth:
     """What a simulator knows beyond the measurement: the true state (in the log's layout)
-    and the external force on the vehicle at the sample (the log's ``disturbance_names``)."""
+    and what the environment does at the sample, in the log's ``disturbance_names``: a
+    horizontal run's world force and moment, a depth run's wave force, a 6-DOF run's water
+    velocity at the vehicle."""
 
     state: np.ndarray
-    external_force: np.ndarray
+    environment: np.ndarray
 
 
 class StateReference(Protocol):
@@ -199,7 +201,7 @@ class Session:
             truth = Truth(
                 _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),
                 _finite_vector(
-                    "truth.external_force", truth.external_force, len(log.disturbance_names),
+                    "truth.environment", truth.environment, len(log.disturbance_names),
                     log.disturbance_names,
                 ),
             )  # fmt: skip
@@ -214,7 +216,7 @@ class Session:
         log.reference[k] = self._preview[0]
         if truth is not None:
             log.state[k] = truth.state
-            log.disturbance_world[k] = truth.external_force
+            log.disturbance_world[k] = truth.environment
         else:
             log.state[k] = measured
         if self.position is not None:
