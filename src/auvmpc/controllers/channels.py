@@ -26,13 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    timed_command,
-)
+from auvmpc.controllers.base import Controller, ControlResult, Observation, timed_command
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
@@ -99,7 +93,7 @@ class ChannelResult(ControlResult):
 
     horizontal_solve_ms: float = 0.0
     depth_solve_ms: float = 0.0
-    depth_status: ControlStatus = ControlStatus.OK
+    depth_status: str = "ok"  # a ControlStatus value
     saturated: int = 0  # thrusters whose demand the mapping had to change
 
 
@@ -175,12 +169,7 @@ class HorizontalAndDepth(Controller):
         thrust, saturated = mapping.apply(demand, self._previous)
         self._previous = thrust
         return ChannelResult(
-            thrust=thrust,
-            status=result.status,
-            solve_time_s=result.solve_time_s,
-            info=result.info,
-            horizontal_solve_ms=horizontal_ms,
-            depth_solve_ms=depth_ms,
-            depth_status=depth_result.status,
-            saturated=saturated,
-        )
+            thrust, result.status, result.solve_time_s, info=result.info,
+            horizontal_solve_ms=horizontal_ms, depth_solve_ms=depth_ms,
+            depth_status=str(depth_result.status), saturated=saturated,
+        )  # fmt: skip

@@ -43,10 +43,7 @@ class DepthMpc(IncrementalMpc):
         return cls(resolve_heave(model, {}), config, water_depth_m)
 
     def __init__(self, heave: HeaveParams, config, water_depth: float) -> None:
-        self.config = config
-        self.sample_time = config.sample_time
-        self.horizon = config.prediction_horizon
-        self.preview_steps = self.horizon
+        self.take_timing(config)
         if not config.known_net_buoyancy:
             heave = heave.model_copy(update={"net_buoyancy_N": 0.0})
         self.heave = heave
@@ -58,7 +55,6 @@ class DepthMpc(IncrementalMpc):
             config, heave.thruster_count, self.limits, slack_penalty=config.depth_slack_penalty
         )
         self.qp = CondensedQp(self.ocp, config.qp_solver, config.qp_iteration_limit)
-        self.solver_time_limit_ms = config.solver_time_limit_ms
         self.trust_region_weights = None  # the heave model is nearly linear
         state = ca.SX.sym("x", NX)
         thrust = ca.SX.sym("F", heave.thruster_count)

@@ -105,13 +105,9 @@ class DoMpcController(ShelledController):
             raise ValueError(f"obstacle_slots must be >= 0, got {obstacle_slots}")
         self._do_mpc = do_mpc
         self.model = model
-        self.config = config
+        self.take_timing(config)
         self.ocp = config.ocp(model)
-        self.sample_time = self.ocp.sample_time
-        self.horizon = self.ocp.horizon
-        self.preview_steps = self.horizon
         self.limits = self.ocp.limits
-        self.solver_time_limit_ms = config.solver_time_limit_ms
         # g_k: 1 where a move is free (0..nc-1, or the blocking steps), 0 where F is held.
         self._gates = np.zeros(self.horizon + 1)
         self._gates[list(self.ocp.move_steps)] = 1.0

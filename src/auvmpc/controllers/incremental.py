@@ -20,7 +20,11 @@ from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
-__all__ = ["IncrementalMpc"]
+__all__ = ["IncrementalMpc", "Tightened"]
+
+# What :meth:`IncrementalMpc.tightened` gives: the soft rows, the per-step force limits
+# (lower, upper) or None for the ocp's, and what the back-offs took (``info`` entries).
+Tightened = tuple[SoftRows, tuple[np.ndarray, np.ndarray] | None, dict[str, float]]
 
 
 class IncrementalMpc(ShelledController):
@@ -84,7 +88,7 @@ class IncrementalMpc(ShelledController):
         nominal: np.ndarray,
         soft: SoftRows,
         previous: np.ndarray,
-    ) -> tuple[SoftRows, tuple[np.ndarray, np.ndarray] | None, dict[str, float]]:
+    ) -> Tightened:
         """The soft rows and the per-step force limits (lower, upper) after the robust
         back-offs of a disturbance bound, with what they took (``info`` entries). Nominal
         plants: unchanged rows, the ocp's limits (None), nothing taken."""

@@ -31,7 +31,7 @@ from auvmpc.controllers.base import (
     tracked_reference,
 )
 from auvmpc.controllers.config import ControllerConfig
-from auvmpc.controllers.incremental import IncrementalMpc
+from auvmpc.controllers.incremental import IncrementalMpc, Tightened
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
@@ -68,15 +68,11 @@ class LinearMpc(IncrementalMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         config = config.for_vehicle(model)
         self.model = model
-        self.config = config
-        self.sample_time = config.sample_time
-        self.horizon = config.prediction_horizon
-        self.preview_steps = self.horizon
+        self.take_timing(config)
         self.ocp = config.ocp(model)
         self.limits = self.ocp.limits
         self.qp = CondensedQp(self.ocp, config.qp_solver, config.qp_iteration_limit)
         self.linearisation_iterations = config.linearisation_iterations
-        self.solver_time_limit_ms = config.solver_time_limit_ms
         self._observer = (
             DisturbanceObserver(model, config.sample_time, config.observer, config.model_substeps)
             if config.offset_free
@@ -115,7 +111,7 @@ class LinearMpc(IncrementalMpc):
         nominal: np.ndarray,
         soft: SoftRows,
         previous: np.ndarray,
-    ) -> tuple[SoftRows, tuple[np.ndarray, np.ndarray] | None, dict[str, float]]:
+    ) -> Tightened:
         """The obstacle rows and the thrust box backed off for the disturbance bound
         (ocp/tightening.py); unchanged without one."""
         if self.tightening is None:

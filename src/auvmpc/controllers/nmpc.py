@@ -103,12 +103,8 @@ class NonlinearMpc(ShelledController):
     ) -> None:
         config = config.for_vehicle(model)
         self.model = model
-        self.config = config
-        self.sample_time = config.sample_time
-        self.horizon = config.prediction_horizon
-        self.preview_steps = self.horizon
+        self.take_timing(config)
         self.limits = horizontal_limits(model)
-        self.solver_time_limit_ms = config.solver_time_limit_ms
         self.program = MultipleShootingProgram(model, config, obstacle_slots)
         if config.nmpc_mode is NmpcMode.FULL:
             self._solver: IpoptSolver | CondensedRealTimeIteration | SparseRealTimeIteration = (

@@ -122,6 +122,16 @@ class ShelledController(Controller):
         """Built from a vehicle and a ``ControllerConfig`` (controllers/registry.py)."""
         return cls(model, config)
 
+    def take_timing(self, config) -> None:
+        """What every shelled controller takes from its (resolved) configuration: the
+        sample time, the horizon (also the preview it asks for) and the solver's time
+        limit."""
+        self.config = config
+        self.sample_time = config.sample_time
+        self.horizon = config.prediction_horizon
+        self.preview_steps = self.horizon
+        self.solver_time_limit_ms = config.solver_time_limit_ms
+
     @abstractmethod
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         """A plan from this sample on, given the last applied command ``previous``."""

@@ -20,13 +20,9 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from auvmpc.errors import ConfigError
-
-if TYPE_CHECKING:
-    pass
-
 from auvmpc.experiments.campaign.paired import paired_columns, reusable_twins
 from auvmpc.experiments.campaign.sampling import (
     plan_run,

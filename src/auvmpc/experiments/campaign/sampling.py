@@ -13,20 +13,11 @@ import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from auvmpc.errors import ConfigError
-from auvmpc.scenario import (
-    ResolvedScenario,
-    apply_override,
-    validate_scenario,
-)
-
-if TYPE_CHECKING:
-    pass
-
 from auvmpc.experiments.campaign.criterion import (
     _is_number,
 )
@@ -44,6 +35,11 @@ from auvmpc.experiments.campaign.spec import (
     _resolved_dict,
     _split_length,
     _yaml_text,
+)
+from auvmpc.scenario import (
+    ResolvedScenario,
+    apply_override,
+    validate_scenario,
 )
 
 

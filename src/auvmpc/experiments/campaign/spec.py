@@ -17,26 +17,22 @@ from dataclasses import dataclass
 from enum import StrEnum
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from auvmpc.config import StrictModel, builtin_descriptions, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError
+from auvmpc.experiments.campaign.criterion import (
+    _is_number,
+    parse_criterion,
+)
 from auvmpc.scenario import (
     ResolvedScenario,
     apply_override,
     builtin_scenarios,
     scenario_to_dict,
     validate_scenario,
-)
-
-if TYPE_CHECKING:
-    pass
-
-from auvmpc.experiments.campaign.criterion import (
-    _is_number,
-    parse_criterion,
 )
 
 RESULTS_FILE = "results.sqlite"

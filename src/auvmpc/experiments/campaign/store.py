@@ -12,14 +12,10 @@ import sqlite3
 from collections.abc import Iterator, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from auvmpc import __version__
 from auvmpc.errors import ConfigError
-
-if TYPE_CHECKING:
-    pass
-
 from auvmpc.experiments.campaign.spec import (
     LOCK_FILE,
     RESULTS_FILE,
