@@ -74,9 +74,8 @@ def load_scenario(
 
 def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     """A copy of a loaded scenario with more fields changed (the original is untouched)."""
-    from auvmpc.errors import format_validation_error
-    from auvmpc.scenario import apply_override, validate_scenario
-    from auvmpc.scenario.depth import DepthScenario
+    from auvmpc.scenario import apply_override
+    from auvmpc.scenario.loader import resolve_document
 
     # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
     # must get its own defaults): only the fields its file set.
@@ -84,23 +83,7 @@ def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     data = given.model_dump(mode="json", exclude_unset=True)
     for text in _override_strings(overrides):
         apply_override(data, text)
-    if data.get("kind") == "depth":
-        from pydantic import ValidationError
-
-        try:
-            return ResolvedDepthScenario(DepthScenario.model_validate(data), scenario.base_dir)
-        except ValidationError as error:
-            raise format_validation_error(error) from None
-    if data.get("kind") == "six-dof":
-        from pydantic import ValidationError
-
-        from auvmpc.scenario import ResolvedSixDofScenario, SixDofScenario
-
-        try:
-            return ResolvedSixDofScenario(SixDofScenario.model_validate(data), scenario.base_dir)
-        except ValidationError as error:
-            raise format_validation_error(error) from None
-    return ResolvedScenario(validate_scenario(data), scenario.base_dir)
+    return resolve_document(data, scenario.base_dir)
 
 
 def build_controller(scenario: Scenario) -> Controller:
@@ -139,7 +122,8 @@ def session(scenario: Scenario | str | Path) -> RunSession:
 
     ``step(t, measurement, detections=None, truth=None)``: ``measurement`` in
     ``measurement_names`` order (a horizontal scenario's are its ``state_names``; a 6-DOF
-    one's the horizontal states, the depth and the depth rate); ``detections`` the obstacles
+    one's the horizontal states, the depth and the depth rate; a depth one's the pressure
+    sensor's depth); ``detections`` the obstacles
     you perceive (default: the scenario's, through its obstacle sensor if it has one);
     ``truth`` (sim.session.Truth) the true state and the environment (the log's
     ``disturbance_names``) if your simulator knows them, for the log and the metrics. A
@@ -150,8 +134,7 @@ def session(scenario: Scenario | str | Path) -> RunSession:
     Raises
     ------
     auvmpc.errors.ConfigError
-        A depth scenario (step-by-step sessions take horizontal and 6-DOF ones so far), or
-        a bad name, file, field or value.
+        A bad name, file, field or value, or something that is not a scenario.
     """
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
@@ -159,11 +142,6 @@ def session(scenario: Scenario | str | Path) -> RunSession:
         raise ConfigError(
             "scenario", type(scenario).__name__, "must be a preset name, a path or a scenario "
             "from auvmpc.load_scenario",
-        )  # fmt: skip
-    if isinstance(scenario, ResolvedDepthScenario):
-        raise ConfigError(
-            "kind", "depth", "step-by-step sessions take horizontal and 6-DOF scenarios so far "
-            "(run this one with auvmpc.simulate or auvmpc run)",
         )  # fmt: skip
     return RunSession(scenario)
 
@@ -184,23 +162,7 @@ def figures(run: RunResult) -> dict[str, Figure]:
     """The standard figures of a run (``trajectory``, ``errors``, ``velocities``, ``thrusts``,
     ``solve_times``; ``depth`` for a depth run; plus ``trajectory_3d``, ``tracking_errors``,
     ``depth_attitude`` for a 6-DOF run), titled with the controller and vehicle."""
-    from auvmpc.plots import figure_depth, run_figures, run_title
-
-    scenario = run.scenario
-    if isinstance(run, DepthRunResult):
-        title = f"{scenario.name}: {scenario.controller.type}"
-        return {"depth": figure_depth(run.log, run.resolved.heave_plant, title=title)}
-    from auvmpc.experiments.run import SixDofRunResult
-
-    model = run.resolved.model
-    radius = scenario.controller.vehicle_radius
-    title = run_title(scenario, model.name)
-    if isinstance(run, SixDofRunResult):  # the horizontal figures, then the 6-DOF ones
-        from auvmpc.plots import six_dof_figures
-
-        drawn = run_figures(run.log.horizontal(), scenario.obstacles, radius, model, title)
-        return {**drawn, **six_dof_figures(run.log, model, title)}
-    return run_figures(run.log, scenario.obstacles, radius, model, title)
+    return run.figures()
 
 
 def save_run(run: Run, folder: str | Path, figures: bool = True) -> Path:

@@ -30,6 +30,7 @@ __all__ = [
     "builtin_scenarios",
     "load_scenario",
     "planar_twin",
+    "resolve_document",
     "scenario_to_dict",
     "validate_scenario",
 ]
@@ -91,17 +92,30 @@ def load_scenario(
     data = read_yaml_mapping(text, "scenario", text_source, "scenario fields")
     for override in overrides:
         apply_override(data, override)
-    if data.get("kind") == "depth":
-        try:
-            return ResolvedDepthScenario(DepthScenario.model_validate(data), base_dir)
-        except ValidationError as error:
-            raise format_validation_error(error) from None
-    if data.get("kind") == "six-dof":
-        try:
-            return ResolvedSixDofScenario(SixDofScenario.model_validate(data), base_dir)
-        except ValidationError as error:
-            raise format_validation_error(error) from None
-    return ResolvedScenario(validate_scenario(data), base_dir)
+    return resolve_document(data, base_dir)
+
+
+# A scenario document's ``kind``: its schema and what it resolves to for its vehicle.
+SCENARIO_KINDS = {
+    "horizontal": (Scenario, ResolvedScenario),
+    "six-dof": (SixDofScenario, ResolvedSixDofScenario),
+    "depth": (DepthScenario, ResolvedDepthScenario),
+}
+
+
+def resolve_document(
+    data: dict[str, Any], base_dir: Path
+) -> ResolvedScenario | ResolvedDepthScenario:
+    """A scenario document (a mapping as read from YAML) validated by the schema its
+    ``kind`` names and resolved for its vehicle; a bad field is one line naming it. An
+    unknown ``kind`` is left to the horizontal schema, which names the kinds it takes."""
+    kind = data.get("kind")
+    schema, resolved = SCENARIO_KINDS[kind if kind in ("six-dof", "depth") else "horizontal"]
+    try:
+        document = schema.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error) from None
+    return resolved(document, base_dir)
 
 
 def validate_scenario(data: dict[str, Any]) -> Scenario:

@@ -1,0 +1,403 @@
+"""The kinds of run, one entry each in :data:`KINDS` (by the scenario's ``kind``).
+
+A :class:`RunKind` says, for its scenarios, everything that differs between a horizontal, a
+depth and a 6-DOF run: what a session steps (the controller as the loop sees it, the
+reference, the log and the start: :meth:`~RunKind.start`), the plant and sensors ``auvmpc
+run`` simulates (:meth:`~RunKind.plant`), the metrics and finished run it files
+(:meth:`~RunKind.finished`), its figures, the solver libraries it records, and how a saved
+run folder's log is read back (:meth:`~RunKind.read_log`). experiments/run.py is written
+once over them; a new kind of plant is one entry here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from auvmpc import __version__
+from auvmpc.controllers.base import Controller
+from auvmpc.controllers.channels import HorizontalAndDepth, WithDepth
+from auvmpc.controllers.registry import build_controller
+from auvmpc.environment.currents import WaterCurrent
+from auvmpc.environment.depth_sensor import PressureSensor
+from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
+from auvmpc.environment.obstacle_sensor import ObstaclePerception
+from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.environment.waves import WaveField
+from auvmpc.models.vehicle import VehicleParams
+from auvmpc.references import DepthStep, make_reference
+from auvmpc.scenario import (
+    ControllerType,
+    ResolvedDepthScenario,
+    ResolvedScenario,
+    ResolvedSixDofScenario,
+    Scenario,
+    SixDofScenario,
+    scenario_to_dict,
+)
+from auvmpc.scenario.depth import DepthScenario
+from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
+from auvmpc.sim.loop import Sensor
+from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
+from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
+from auvmpc.sim.session import StateReference
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "KINDS",
+    "DepthRunResult",
+    "Finished",
+    "RunKind",
+    "RunResult",
+    "SessionStart",
+    "SixDofRunResult",
+    "kind_of",
+]
+
+Resolved = ResolvedScenario | ResolvedDepthScenario
+
+
+@dataclass
+class SessionStart:
+    """What a session of a scenario steps, and from where (sim/session.py's arguments)."""
+
+    controller: Controller
+    reference: StateReference
+    log: SimLog
+    initial_state: Sequence[float]
+    initial_thrust: np.ndarray | None = None
+    obstacles: Sequence[ObstacleConfig] = ()
+    perception: ObstaclePerception | None = None
+    vehicle_radius: float = 0.0
+
+
+@dataclass
+class Finished:
+    """A finished run of any kind: the log, the metrics, and how to file them."""
+
+    resolved: Resolved
+    log: SimLog
+    metrics: dict[str, Any]
+    provenance: dict[str, Any] = field(default_factory=dict, kw_only=True)
+    warnings: list[str] = field(default_factory=list, kw_only=True)
+
+    @property
+    def scenario(self):
+        return self.resolved.scenario
+
+    @property
+    def kind(self) -> RunKind:
+        return kind_of(self.scenario)
+
+    def simulated_plant(self) -> VehicleParams:
+        """The vehicle the plant simulated (run.json's ``plant``)."""
+        return self.resolved.plant
+
+    def run_json(self) -> dict[str, Any]:
+        return {
+            "version": __version__,
+            "scenario": scenario_to_dict(self.scenario),
+            "plant": self.simulated_plant().model_dump(mode="json"),
+            "model": self.resolved.model.model_dump(mode="json"),
+            "metrics": self.metrics,
+            "choices": getattr(self.resolved, "choices", {}),
+            "warnings": list(self.warnings),
+            "provenance": self.provenance,
+        }
+
+    def csv_text(self) -> str:
+        return self.log.to_csv_text()
+
+    def figures(self) -> dict[str, Figure]:
+        """The run's figures by file stem, titled with the controller and vehicle."""
+        model, plant = self.resolved.model, self.simulated_plant()
+        return self.kind.figures(self.log, self.scenario, model, plant)
+
+    def draw(self, folder: Path, fmt: str = "png", dpi: int = 120) -> None:
+        from auvmpc.plots import save_figures
+
+        save_figures(self.figures(), folder, dpi=dpi, fmt=fmt)
+
+
+@dataclass
+class RunResult(Finished):
+    """A finished horizontal run (and the base of a 6-DOF one)."""
+
+    resolved: ResolvedScenario
+
+
+@dataclass
+class SixDofRunResult(RunResult):
+    """A finished run on the 6-DOF plant (``kind: six-dof``)."""
+
+    resolved: ResolvedSixDofScenario
+    log: SixDofLog
+
+
+@dataclass
+class DepthRunResult(Finished):
+    """A finished depth experiment."""
+
+    resolved: ResolvedDepthScenario
+    log: DepthLog
+
+    def simulated_plant(self) -> VehicleParams:
+        return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
+
+
+class RunKind:
+    """A horizontal run (``kind: horizontal``): the 3-DOF plant under a world-frame force and
+    current; the other kinds override what differs."""
+
+    name: ClassVar[str] = "horizontal"
+    scenario_type: ClassVar[type] = Scenario
+    result_type: ClassVar[type[Finished]] = RunResult
+    has_horizontal: ClassVar[bool] = True  # a horizontal path to animate and compare
+
+    def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
+        """The run's random streams by what they drive: children 0, 1 and 2 of the scenario
+        seed are the current's, the sensor's and the obstacle sensor's (2 came last, leaving
+        0 and 1 as they were before it)."""
+        current, sensor, obstacles = np.random.SeedSequence(scenario.seed).spawn(3)
+        return {"current": current, "sensor": sensor, "obstacles": obstacles}
+
+    def start(self, resolved, controller: Controller) -> SessionStart:
+        """What the session steps: ``controller`` is the scenario's, built by the caller."""
+        scenario = resolved.scenario
+        given = scenario.initial_thrust
+        return SessionStart(
+            controller,
+            make_reference(scenario.reference, resolved.base_dir),
+            SimLog.allocate(_steps(scenario), resolved.model.n_thrusters, _sample_time(scenario)),
+            scenario.initial_state,
+            None if given is None else np.array(given),
+            **self._surroundings(scenario),
+        )
+
+    def _surroundings(self, scenario) -> dict[str, Any]:
+        """The obstacles, what the controller perceives of them (through the scenario's
+        obstacle sensor and trackers, or exactly without one) and the vehicle's radius."""
+        perception = None
+        if scenario.obstacle_sensor is not None:
+            rng = np.random.default_rng(self.seeds(scenario)["obstacles"])
+            perception = ObstaclePerception(scenario.obstacle_sensor, scenario.obstacles, rng)
+        return {
+            "obstacles": scenario.obstacles,
+            "perception": perception,
+            "vehicle_radius": scenario.controller.vehicle_radius,
+        }
+
+    def plant(self, resolved) -> tuple[Plant, Sensor]:
+        """The simulated vehicle in its environment, and its sensors."""
+        scenario, seeds = resolved.scenario, self.seeds(resolved.scenario)
+        sample_time = _sample_time(scenario)
+        disturbance = WorldDisturbance(
+            scenario.disturbance, sample_time, np.random.default_rng(seeds["current"])
+        )
+        plant = HorizontalPlant(resolved.plant, disturbance, sample_time, scenario.plant.max_step)
+        return plant, SensorNoise(scenario.sensing, np.random.default_rng(seeds["sensor"]))
+
+    def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
+        scenario = resolved.scenario
+        return compute_metrics(
+            log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
+        )
+
+    def finished(
+        self, resolved, log: SimLog, provenance: dict[str, Any], warnings: list[str]
+    ) -> Finished:
+        """The finished run of ``log``, with its metrics."""
+        metrics = self.metrics(resolved, log)
+        return self.result_type(resolved, log, metrics, provenance=provenance, warnings=warnings)
+
+    def libraries(self, scenario) -> tuple[str, ...]:
+        """Distributions beyond numpy, scipy and casadi that the scenario's controller uses."""
+        kind = scenario.controller.type
+        if kind in (ControllerType.MPC, ControllerType.LTV_MPC):
+            return (str(scenario.controller.qp_solver),)
+        if kind is ControllerType.DO_MPC:
+            return ("do-mpc",)
+        return ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
+
+    def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
+        """The figures of a run by file stem (``model``: the controller's vehicle, whose
+        limits are drawn; ``plant``: the simulated one)."""
+        from auvmpc.plots import run_figures, run_title
+
+        title = run_title(scenario, model.name)
+        radius = scenario.controller.vehicle_radius
+        return run_figures(log, scenario.obstacles, radius, model, title)
+
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
+        """The log of a saved run folder of this kind (``info``: its run.json)."""
+        log = SimLog.read_csv(Path(run_dir) / "log.csv")
+        initial = info["scenario"].get("initial_thrust")
+        if initial is not None:  # read from a 6-DOF run's log.csv, the vertical ones are 0
+            log.initial_thrust = np.zeros(log.n_thrusters)
+            log.initial_thrust[: len(initial)] = initial
+        return log
+
+    def horizontal_view(self, log: SimLog) -> SimLog:
+        """What animate and compare read of a run with ``has_horizontal``: its horizontal log."""
+        return log
+
+
+class SixDofKind(RunKind):
+    """A 6-DOF run (``kind: six-dof``): the horizontal controller and the depth MPC as one
+    controller (controllers/channels.py) on the 6-DOF plant in the water current."""
+
+    name = "six-dof"
+    scenario_type = SixDofScenario
+    result_type = SixDofRunResult
+
+    def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
+        """Children 0 and 1 as in a horizontal scenario (so its planar twin sees the same
+        draws), 2 the depth sensor's, 3 the obstacle sensor's."""
+        current, sensor, depth, obstacles = np.random.SeedSequence(scenario.seed).spawn(4)
+        return {"current": current, "sensor": sensor, "depth": depth, "obstacles": obstacles}
+
+    def start(self, resolved, controller: Controller) -> SessionStart:
+        scenario, model = resolved.scenario, resolved.model
+        depth = build_controller(
+            scenario.depth_controller, model, water_depth_m=scenario.water_depth_m
+        )
+        x, y, psi, u, v, r = scenario.initial_state
+        return SessionStart(
+            HorizontalAndDepth(controller, depth, model, scenario.depth_controller.preview),
+            WithDepth(resolved.reference),
+            SixDofLog.allocate(
+                _steps(scenario), model.six_dof.n_thrusters, _sample_time(scenario),
+                n_horizontal=model.n_thrusters,
+            ),
+            [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
+            every_thruster(model, scenario.initial_thrust),
+            **self._surroundings(scenario),
+        )  # fmt: skip
+
+    def plant(self, resolved) -> tuple[Plant, Sensor]:
+        scenario, seeds = resolved.scenario, self.seeds(resolved.scenario)
+        sample_time = _sample_time(scenario)
+        water = scenario.disturbance.water_current
+        current = (
+            None
+            if water is None
+            else WaterCurrent(water, sample_time, np.random.default_rng(seeds["current"]))
+        )
+        sensing = scenario.sensing
+        sensor = SixDofSensor(
+            SensorNoise(sensing, np.random.default_rng(seeds["sensor"])),
+            sensing.depth_std_m, sensing.depth_rate_std_m_per_s,
+            np.random.default_rng(seeds["depth"]),
+        )  # fmt: skip
+        return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
+
+    def metrics(self, resolved, log) -> dict[str, Any]:
+        scenario = resolved.scenario
+        return compute_six_dof_metrics(
+            log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
+        )
+
+    def libraries(self, scenario) -> tuple[str, ...]:
+        """The horizontal controller's, then the depth MPC's QP solver."""
+        return (*super().libraries(scenario), str(scenario.depth_controller.qp_solver))
+
+    def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
+        """The horizontal figures of the horizontal view, then the 6-DOF ones."""
+        from auvmpc.plots import run_title, six_dof_figures
+
+        drawn = super().figures(log.horizontal(), scenario, model, plant)
+        return {**drawn, **six_dof_figures(log, model, run_title(scenario, model.name))}
+
+    def horizontal_view(self, log: SixDofLog) -> SimLog:
+        return log.horizontal()
+
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SixDofLog:
+        model = VehicleParams.model_validate(info["model"])
+        initial = every_thruster(model, info["scenario"].get("initial_thrust"))
+        return SixDofLog.read_csv_six_dof(Path(run_dir) / "log.csv", model.n_thrusters, initial)
+
+
+class DepthKind(RunKind):
+    """A depth run (``kind: depth``): the depth MPC on the heave plant in the tank, in calm
+    water or under waves."""
+
+    name = "depth"
+    scenario_type = DepthScenario
+    result_type = DepthRunResult
+    has_horizontal = False
+
+    def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
+        """Child 0 of the scenario seed is the waves', child 1 the sensor's."""
+        waves, sensor = np.random.SeedSequence(scenario.seed).spawn(2)
+        return {"waves": waves, "sensor": sensor}
+
+    def start(self, resolved, controller: Controller) -> SessionStart:
+        scenario = resolved.scenario
+        reference = DepthStep(scenario.reference, scenario.controller.preview)
+        thrusters = resolved.heave_plant.thruster_count
+        log = DepthLog.allocate(_steps(scenario), thrusters, _sample_time(scenario))
+        return SessionStart(controller, reference, log, scenario.start_state())
+
+    def plant(self, resolved) -> tuple[Plant, Sensor]:
+        scenario, seeds = resolved.scenario, self.seeds(resolved.scenario)
+        water_depth = scenario.tank.depth_m
+        waves = (
+            WaveField(scenario.waves, water_depth, np.random.default_rng(seeds["waves"]))
+            if scenario.waves is not None
+            else None
+        )
+        plant = HeavePlant(
+            resolved.model, resolved.heave_plant, waves, _sample_time(scenario),
+            scenario.plant.max_step,
+        )  # fmt: skip
+        return plant, PressureSensor(scenario.sensor, np.random.default_rng(seeds["sensor"]))
+
+    def metrics(self, resolved, log) -> dict[str, Any]:
+        return compute_depth_metrics(log, resolved.scenario.reference, resolved.heave_plant)
+
+    def libraries(self, scenario) -> tuple[str, ...]:
+        return (str(scenario.controller.qp_solver),)
+
+    def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
+        """The depth step (``plant``'s heave limits drawn)."""
+        from auvmpc.plots import figure_depth
+
+        title = f"{scenario.name}: {scenario.controller.type}"
+        return {"depth": figure_depth(log, plant.heave, title=title)}
+
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> DepthLog:
+        return DepthLog.read_csv(Path(run_dir) / "log.csv")
+
+
+KINDS: dict[str, RunKind] = {kind.name: kind for kind in (RunKind(), SixDofKind(), DepthKind())}
+
+
+def kind_of(scenario) -> RunKind:
+    """The kind of run of a scenario (a ``Scenario``, ``SixDofScenario`` or
+    ``DepthScenario``), or of a saved run's ``scenario`` mapping."""
+    name = scenario.get("kind", "horizontal") if isinstance(scenario, dict) else scenario.kind
+    return KINDS[name]
+
+
+def every_thruster(model: VehicleParams, given) -> np.ndarray:
+    """F(-1) of every 6-DOF thruster from a scenario's ``initial_thrust`` (the horizontal
+    thrusters'; vertical ones start at 0)."""
+    six = model.six_dof
+    total = np.zeros(0 if six is None else six.n_thrusters)
+    if given is not None:
+        total[: len(given)] = given
+    return total
+
+
+def _sample_time(scenario) -> float:
+    return scenario.controller.sample_time
+
+
+def _steps(scenario) -> int:
+    return int(round(scenario.duration / scenario.controller.sample_time))
