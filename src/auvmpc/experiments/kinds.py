@@ -320,7 +320,8 @@ class SixDofKind(RunKind):
     def read_log(self, run_dir: Path, info: dict[str, Any]) -> SixDofLog:
         model = VehicleParams.model_validate(info["model"])
         initial = every_thruster(model, info["scenario"].get("initial_thrust"))
-        return SixDofLog.read_csv_six_dof(Path(run_dir) / "log.csv", model.n_thrusters, initial)
+        path = Path(run_dir) / "log.csv"
+        return SixDofLog.read_csv(path, initial, n_horizontal=model.n_thrusters)
 
 
 class DepthKind(RunKind):

@@ -5,8 +5,9 @@ row k is what was applied over [t_k, t_k+1), so the last row has none
 (``shared/spec/interfaces.md``). Arrays are preallocated and time-major. The state columns
 are named by the log's state layout: :class:`SimLog` is a horizontal run's
 (``x, y, psi, u, v, r``), :class:`DepthLog` a depth run's (``z, w``), :class:`SixDofLog` a
-6-DOF run's (the 12 states, its horizontal part first in log.csv); same loop, same rows, one
-CSV writer (each kind says what cells a row has).
+6-DOF run's (the 12 states, its horizontal part first in log.csv); same loop, same rows. Each
+kind declares its log.csv columns and the fields they hold (:meth:`SimLog.csv_columns`); one
+writer and one reader serve them all.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -53,6 +54,19 @@ DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
 CURRENT_NAMES = ("current_north", "current_east", "current_down")
 
 
+@dataclass(frozen=True)
+class Column:
+    """A block of log.csv's columns (``names``) and the log field it holds; a field in the
+    log's ``PER_COMMAND`` has no value on the final row (empty cells there)."""
+
+    names: tuple[str, ...]
+    field: str | None  # None: written as 0 and not read (a column kept for the file's shape)
+    part: Any = None  # which of the field's columns the block is (None: all)
+    text: bool = False  # strings (a status), as they are
+    empty_is_inf: bool = False  # an empty cell is inf (no obstacle, no gap)
+    optional: bool = False  # logs written before these columns have none (read as 0)
+
+
 @dataclass
 class SimLog:
     """Time-major record of one run (N samples, n thrusters, nx states of ``layout``)."""
@@ -67,6 +81,8 @@ class SimLog:
     #: What the controller's sensors measure (``measured``'s columns, the session's
     #: measurement, in this order).
     measured_names: ClassVar[tuple[str, ...]] = HORIZONTAL.names
+    #: The commands' names in log.csv: this prefix and the thruster's number from 1.
+    input_prefix: ClassVar[str] = "F"
 
     t: np.ndarray  # (N+1,) s
     state: np.ndarray  # (N+1, nx) true plant state
@@ -126,17 +142,11 @@ class SimLog:
     @property
     def input_names(self) -> tuple[str, ...]:
         """The commands' names: the thrust columns of log.csv."""
-        return tuple(f"F{i + 1}" for i in range(self.n_thrusters))
+        return tuple(f"{self.input_prefix}{i + 1}" for i in range(self.n_thrusters))
 
     @property
     def n_thrusters(self) -> int:
         return self.thrust.shape[1]
-
-    def columns(self) -> list[str]:
-        return [
-            "t", *STATE_NAMES, *REFERENCE_NAMES, *self.input_names, "solve_ms", "status",
-            *DISTURBANCE_NAMES, "clearance_m", *ESTIMATE_NAMES, *BACKOFF_NAMES,
-        ]  # fmt: skip
 
     def record_command(self, k: int, result: ControlResult, thrust: np.ndarray) -> None:
         """Row k's command: the (checked) thrust, how it came and the diagnostics the log
@@ -146,50 +156,72 @@ class SimLog:
         self.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
         self.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
 
-    def to_csv_text(self) -> str:
-        return _csv_text(self.columns(), map(self.row_cells, range(self.steps + 1)))
+    def csv_columns(self) -> tuple[Column, ...]:
+        """log.csv's columns, in order, and the fields they hold."""
+        return (
+            Column(("t",), "t"),
+            Column(STATE_NAMES, "state"),
+            Column(REFERENCE_NAMES, "reference"),
+            Column(self.input_names, "thrust"),
+            Column(("solve_ms",), "solve_ms"),
+            Column(("status",), "status", text=True),
+            Column(DISTURBANCE_NAMES, "disturbance_world"),
+            Column(("clearance_m",), "clearance_m", empty_is_inf=True),
+            Column(ESTIMATE_NAMES, "disturbance_estimate", optional=True),
+            Column(BACKOFF_NAMES, "backoff", optional=True),
+        )
 
-    def row_cells(self, k: int) -> list[str]:
-        """Row k of log.csv, in :meth:`columns` order (a command's cells empty on the last)."""
-        applied = k < self.steps
-        return [
-            csv_number(self.t[k]),
-            *(csv_number(v) for v in self.state[k]),
-            *(csv_number(v) for v in self.reference[k]),
-            *_command_cells(self.thrust, k),
-            csv_number(self.solve_ms[k]) if applied else "",
-            self.status[k] if applied else "",
-            *(csv_number(v) for v in self.disturbance_world[k]),
-            csv_number(self.clearance_m[k]) if math.isfinite(self.clearance_m[k]) else "",
-            *_command_cells(self.disturbance_estimate, k),
-            *_command_cells(self.backoff, k),
-        ]
+    def columns(self) -> list[str]:
+        return [name for column in self.csv_columns() for name in column.names]
+
+    def to_csv_text(self) -> str:
+        blocks = self.csv_columns()
+        rows = (
+            [cell for block in blocks for cell in self._cells(block, k)]
+            for k in range(self.steps + 1)
+        )
+        return _csv_text(self.columns(), rows)
+
+    def _cells(self, column: Column, k: int) -> list[str]:
+        """Row k's cells of one block of columns."""
+        if column.field is None:
+            return [csv_number(0.0)] * len(column.names)
+        if column.field in self.PER_COMMAND and k >= self.steps:
+            return [""] * len(column.names)
+        value = getattr(self, column.field)[k]
+        if column.text:
+            return [value]
+        if np.ndim(value) == 0:
+            finite = math.isfinite(value) or not column.empty_is_inf
+            return [csv_number(value) if finite else ""]
+        part = value if column.part is None else np.asarray(value)[column.part]
+        return [csv_number(v) for v in part]
 
     @classmethod
-    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> SimLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
+    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None, **run: Any) -> SimLog:
+        """Load a log written by ``to_csv_text`` (values round-trip exactly); ``run``: what
+        the kind's ``allocate`` takes beyond the sizes (a 6-DOF log's ``n_horizontal``)."""
         rows = _csv_rows(path)
-        thrust_names = sorted(
-            (name for name in rows[0] if name[0] == "F" and name[1:].isdigit()),
-            key=lambda name: int(name[1:]),
-        )
+        prefix = cls.input_prefix
+        inputs = sum(name.startswith(prefix) and name[len(prefix) :].isdigit() for name in rows[0])
         steps = len(rows) - 1
         sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
-        log = cls.allocate(steps, len(thrust_names), sample_time)
-        for k, row in enumerate(rows):
-            log.t[k] = float(row["t"])
-            log.state[k] = [float(row[name]) for name in STATE_NAMES]
-            log.reference[k] = [float(row[name]) for name in REFERENCE_NAMES]
-            log.disturbance_world[k] = [float(row[name]) for name in DISTURBANCE_NAMES]
-            log.clearance_m[k] = float(row["clearance_m"]) if row["clearance_m"] else math.inf
-            if k < steps:
-                log.thrust[k] = [float(row[name]) for name in thrust_names]
-                log.solve_ms[k] = float(row["solve_ms"])
-                log.status[k] = row["status"]
-                if ESTIMATE_NAMES[0] in row:  # logs written before these columns have none
-                    log.disturbance_estimate[k] = [float(row[name]) for name in ESTIMATE_NAMES]
-                if BACKOFF_NAMES[0] in row:
-                    log.backoff[k] = [float(row[name]) for name in BACKOFF_NAMES]
+        log = cls.allocate(steps, inputs, sample_time, **run)
+        for column in log.csv_columns():
+            if column.field is None or (column.optional and column.names[0] not in rows[0]):
+                continue
+            values = getattr(log, column.field)
+            for k, row in enumerate(rows[:steps] if column.field in cls.PER_COMMAND else rows):
+                cells = [row[name] for name in column.names]
+                if column.text:
+                    values[k] = cells[0]
+                elif values.ndim == 1:
+                    empty = column.empty_is_inf and not cells[0]
+                    values[k] = math.inf if empty else float(cells[0])
+                elif column.part is None:
+                    values[k] = [float(cell) for cell in cells]
+                else:
+                    values[k, column.part] = [float(cell) for cell in cells]
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log
@@ -205,6 +237,7 @@ class DepthLog(SimLog):
     reference_names: ClassVar[tuple[str, ...]] = ("z_ref", "w_ref")  # log.csv keeps z_ref
     disturbance_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
     measured_names: ClassVar[tuple[str, ...]] = ("z",)  # the pressure sensor's depth
+    input_prefix: ClassVar[str] = "Fz"  # the vertical thrusters
 
     @property
     def z_ref(self) -> np.ndarray:
@@ -221,48 +254,17 @@ class DepthLog(SimLog):
         """(N+1,) the waves' vertical force on the vehicle at t_k (N, up)."""
         return self.disturbance_world[:, 0]
 
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        """The vertical thrusters' names: the thrust columns of log.csv."""
-        return tuple(f"Fz{i + 1}" for i in range(self.n_thrusters))
-
-    def columns(self) -> list[str]:
-        return [
-            "t", *self.layout.names, "z_ref", *self.input_names, "solve_ms", "status",
-            "z_measured", *self.disturbance_names,
-        ]  # fmt: skip
-
-    def row_cells(self, k: int) -> list[str]:
-        applied = k < self.steps
-        return [
-            csv_number(self.t[k]), *(csv_number(v) for v in self.state[k]),
-            csv_number(self.z_ref[k]), *_command_cells(self.thrust, k),
-            csv_number(self.solve_ms[k]) if applied else "",
-            self.status[k] if applied else "",
-            csv_number(self.z_measured[k]), csv_number(self.wave_force[k]),
-        ]  # fmt: skip
-
-    @classmethod
-    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None) -> DepthLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
-        rows = _csv_rows(path)
-        thrusters = sorted((c for c in rows[0] if c.startswith("Fz")), key=lambda c: int(c[2:]))
-        steps = len(rows) - 1
-        sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
-        log = cls.allocate(steps, len(thrusters), sample_time)
-        for k, row in enumerate(rows):
-            log.t[k] = float(row["t"])
-            log.state[k] = [float(row[name]) for name in cls.layout.names]
-            log.reference[k, _DEPTH] = float(row["z_ref"])
-            log.measured[k] = float(row["z_measured"])
-            log.disturbance_world[k] = [float(row[name]) for name in cls.disturbance_names]
-            if k < steps:
-                log.thrust[k] = [float(row[name]) for name in thrusters]
-                log.solve_ms[k] = float(row["solve_ms"])
-                log.status[k] = row["status"]
-        if initial_thrust is not None:
-            log.initial_thrust = np.asarray(initial_thrust, dtype=float)
-        return log
+    def csv_columns(self) -> tuple[Column, ...]:
+        return (
+            Column(("t",), "t"),
+            Column(self.layout.names, "state"),
+            Column(("z_ref",), "reference", part=[_DEPTH]),
+            Column(self.input_names, "thrust"),
+            Column(("solve_ms",), "solve_ms"),
+            Column(("status",), "status", text=True),
+            Column(("z_measured",), "measured"),
+            Column(self.disturbance_names, "disturbance_world"),
+        )
 
 
 @dataclass
@@ -313,7 +315,7 @@ class SixDofLog(SimLog):
     @property
     def depth_reference(self) -> np.ndarray:
         """(N+1, 2) [z_ref, z_ref'] (NED: m, m/s)."""
-        return self.reference[:, len(REFERENCE_NAMES) :]
+        return self.reference[:, _DEPTH_REFERENCE]
 
     @property
     def current_world(self) -> np.ndarray:
@@ -336,7 +338,7 @@ class SixDofLog(SimLog):
         return SimLog(
             t=self.t,
             state=self.state[:, HORIZONTAL_INDEX],
-            reference=self.reference[:, : len(REFERENCE_NAMES)],
+            reference=self.reference[:, _HORIZONTAL_REFERENCE],
             thrust=self.thrust[:, :n],
             solve_ms=self.solve_ms,
             disturbance_estimate=self.disturbance_estimate,
@@ -349,54 +351,28 @@ class SixDofLog(SimLog):
             backoff=self.backoff,
         )
 
-    def columns(self) -> list[str]:
-        return [
-            *super().columns(), *_SIX_DOF_EXTRA, *DEPTH_REFERENCE_NAMES, *CURRENT_NAMES,
-            "depth_solve_ms", "depth_status",
-        ]  # fmt: skip
-
-    def to_csv_text(self) -> str:
-        # The horizontal view's cells, with every thruster, then the 6-DOF rest.
-        planar = replace(self.horizontal(), thrust=self.thrust, initial_thrust=self.initial_thrust)
-        rows = (planar.row_cells(k) + self._rest_cells(k) for k in range(self.steps + 1))
-        return _csv_text(self.columns(), rows)
-
-    def _rest_cells(self, k: int) -> list[str]:
-        applied = k < self.steps
-        return [
-            *(csv_number(v) for v in self.state[k, _SIX_DOF_EXTRA_INDEX]),
-            *(csv_number(v) for v in self.depth_reference[k]),
-            *(csv_number(v) for v in self.current_world[k]),
-            csv_number(self.depth_solve_ms[k]) if applied else "",
-            self.depth_status[k] if applied else "",
-        ]
-
-    @classmethod
-    def read_csv_six_dof(
-        cls, path: Path, n_horizontal: int, initial_thrust: np.ndarray | None = None
-    ) -> SixDofLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly)."""
-        planar = SimLog.read_csv(path, initial_thrust)
-        rows = _csv_rows(path)
-        steps = planar.steps
-        log = cls.allocate(steps, planar.n_thrusters, planar.sample_time, n_horizontal=n_horizontal)
-        for name in (*SimLog.PER_COMMAND, "t", "initial_thrust", "clearance_m"):
-            setattr(log, name, getattr(planar, name))
-        log.state[:, HORIZONTAL_INDEX] = planar.state
-        log.reference[:, : len(REFERENCE_NAMES)] = planar.reference
-        for k, row in enumerate(rows):
-            log.state[k, _SIX_DOF_EXTRA_INDEX] = [float(row[name]) for name in _SIX_DOF_EXTRA]
-            log.depth_reference[k] = [float(row[name]) for name in DEPTH_REFERENCE_NAMES]
-            log.current_world[k] = [float(row[name]) for name in CURRENT_NAMES]
-            if k < steps:
-                log.depth_solve_ms[k] = float(row["depth_solve_ms"])
-                log.depth_status[k] = row["depth_status"]
-        return log
+    def csv_columns(self) -> tuple[Column, ...]:
+        # A horizontal log's columns (every thruster), then the 6-DOF rest.
+        planar = {column.field: column for column in super().csv_columns()}
+        planar["state"] = Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX)
+        planar["reference"] = Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE)
+        planar["disturbance_world"] = Column(DISTURBANCE_NAMES, None)  # no force: the current
+        return (
+            *planar.values(),
+            Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
+            Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
+            Column(CURRENT_NAMES, "disturbance_world"),
+            Column(("depth_solve_ms",), "depth_solve_ms"),
+            Column(("depth_status",), "depth_status", text=True),
+        )
 
 
 # The 6-DOF state's columns beyond the horizontal ones, in log.csv's order.
 _SIX_DOF_EXTRA = ("z", "phi", "theta", "w", "p", "q")
 _SIX_DOF_EXTRA_INDEX = np.array([SIX_DOF.index(name) for name in _SIX_DOF_EXTRA])
+# Where the horizontal reference and the depth's sit in a 6-DOF log's reference.
+_HORIZONTAL_REFERENCE = slice(0, len(REFERENCE_NAMES))
+_DEPTH_REFERENCE = slice(len(REFERENCE_NAMES), len(REFERENCE_NAMES) + len(DEPTH_REFERENCE_NAMES))
 _DEPTH = DEPTH.index("z")
 
 
@@ -407,13 +383,6 @@ def _csv_text(columns: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     writer.writerow(columns)
     writer.writerows(rows)
     return buffer.getvalue()
-
-
-def _command_cells(values: np.ndarray, k: int) -> list[str]:
-    """Row k's cells of a per-command array (N, m): empty on the final row, which has none."""
-    if k < len(values):
-        return [csv_number(v) for v in values[k]]
-    return [""] * values.shape[1]
 
 
 def csv_number(value: float) -> str:
