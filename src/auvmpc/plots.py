@@ -251,7 +251,9 @@ def figure_thrusts(log: SimLog, limits: VehicleParams, title: str = "") -> Figur
     starts = log.t[:-1]
     for i in range(log.n_thrusters):
         color = THRUSTER_COLORS[i % len(THRUSTER_COLORS)]
-        force_ax.stairs(log.thrust[:, i], log.t, color=color, linewidth=1.2, label=f"F{i + 1}")
+        force_ax.stairs(
+            log.thrust[:, i], log.t, color=color, linewidth=1.2, label=log.input_names[i]
+        )
         rate_ax.plot(starts, rate[:, i], color=color, linewidth=0.9, marker=".", markersize=3)
     limit_label = f"limits [{lower:g}, {upper:g}] N, ±{rate_limit:g} N/s"
     beyond = []
@@ -509,7 +511,7 @@ def figure_depth(log, limits, title: str = "") -> Figure:
             log.thrust[:, i],
             where="post",
             color=THRUSTER_COLORS[i % len(THRUSTER_COLORS)],
-            label=f"Fz{i + 1}",
+            label=log.input_names[i],
         )
     for bound in limits.thrust_limits:
         thrust_ax.axhline(bound, color="tab:red", ls=":", lw=1.0)
@@ -601,7 +603,7 @@ def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure
     for i in range(n, log.n_thrusters):
         thrust_ax.step(
             log.t[:steps], log.thrust[:, i], where="post",
-            color=THRUSTER_COLORS[i % len(THRUSTER_COLORS)], label=f"F{i + 1}",
+            color=THRUSTER_COLORS[i % len(THRUSTER_COLORS)], label=log.input_names[i],
         )  # fmt: skip
     if limits.heave is not None:
         for bound in limits.heave.thrust_limits:
@@ -913,8 +915,9 @@ def figure_compare_thrusts(
         for j in range(log.n_thrusters):
             axes[j].stairs(log.thrust[:, j], log.t, color=_series_color(i), linewidth=1.1,
                            label=label)  # fmt: skip
-    for j, ax in enumerate(axes):
-        ax.set_ylabel(f"F{j + 1} (N)")
+    widest = max((log for _, log in runs), key=lambda log: log.n_thrusters)
+    for name, ax in zip(widest.input_names, axes, strict=True):
+        ax.set_ylabel(f"{name} (N)")
     if limits is not None:
         lower, upper = limits.thrust_limits
         for ax in axes:

@@ -54,7 +54,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 
 __all__ = ["BaselineConfig", "BaselineController"]
@@ -64,6 +64,8 @@ __all__ = ["BaselineConfig", "BaselineController"]
 # in the allocation is far smaller, any real clipping far larger.
 _SATURATION_TOLERANCE_N = 1e-9
 _POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
+# The force and the moment of a generalised force, disturbance or thrust authority [X, Y, N].
+_FORCE, _MOMENT = PLANAR_FORCE.force, PLANAR_FORCE.moment
 
 
 class BaselineConfig(StrictModel):
@@ -183,7 +185,7 @@ class BaselineController(ShelledController):
         self._mass = np.array([model.m11, model.m22])
         # Scaling tau towards zero keeps its direction only if zero thrust is allowed.
         self._zero_thrust_feasible = model.thrust_min <= 0.0 <= model.thrust_max
-        self.reset(np.zeros(6), np.zeros(n))
+        self.reset(np.zeros(HORIZONTAL.size), np.zeros(n))
 
     # ----------------------------------------------------------------------------------------
     # Controller interface
@@ -196,8 +198,8 @@ class BaselineController(ShelledController):
 
     def assume_disturbance(self, disturbance: np.ndarray) -> None:
         """Start the integral state at a known ``[X, Y, N]`` (world force N, moment N m)."""
-        self._force_integral = np.array(disturbance[:2], dtype=float)
-        self._moment_integral = float(disturbance[2])
+        self._force_integral = np.array(disturbance[_FORCE], dtype=float)
+        self._moment_integral = float(disturbance[_MOMENT])
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
@@ -225,11 +227,14 @@ class BaselineController(ShelledController):
         self._previous_thrust = previous
         state = np.asarray(observation.state, dtype=float)
         reference = np.asarray(observation.reference, dtype=float)
-        if state.shape != (6,):
-            raise ValueError(f"observation.state must have shape (6,), got {state.shape}")
+        if state.shape != (HORIZONTAL.size,):
+            raise ValueError(
+                f"observation.state must have shape ({HORIZONTAL.size},), got {state.shape}"
+            )
         if reference.ndim != 2 or reference.shape[1] != HORIZONTAL.size or reference.shape[0] < 1:
             raise ValueError(
-                f"observation.reference must have shape (n >= 1, 6), got {reference.shape}"
+                f"observation.reference must have shape (n >= 1, {HORIZONTAL.size}), "
+                f"got {reference.shape}"
             )
 
         tau_des, errors, integrated = self._desired_generalised_force(state, reference)
@@ -240,7 +245,7 @@ class BaselineController(ShelledController):
         details = {
             "tau_u_N": float(tau_des[0]),
             "tau_v_N": float(tau_des[1]),
-            "tau_r_N_m": float(tau_des[2]),
+            "tau_r_N_m": float(tau_des[_MOMENT]),
             "along_track_error_m": float(errors[0]),
             "cross_track_error_m": float(errors[1]),
             "heading_error_rad": float(errors[2]),
@@ -329,8 +334,8 @@ class BaselineController(ShelledController):
         tau = (
             np.array([p.m11 * nu_dot[0], p.m22 * nu_dot[1], p.Iz * yaw_accel]) - damping - coriolis
         )
-        tau[:2] -= _rotation(psi).T @ self._force_integral
-        tau[2] -= self._moment_integral
+        tau[_FORCE] -= _rotation(psi).T @ self._force_integral
+        tau[_MOMENT] -= self._moment_integral
         # The integrators see the position error shrunk by the same cap: outside the range
         # where the loop is linear a large error must not pile up integral in a few samples.
         integrated = np.array([cap * error_path[0], cap * error_path[1], heading_error])
@@ -369,8 +374,8 @@ class BaselineController(ShelledController):
         the result.
         """
         p = self.model
-        thrust_yaw = p.T_pinv[:, 2] * tau_des[2]
-        thrust_planar = p.T_pinv[:, :2] @ tau_des[:2]
+        thrust_yaw = p.T_pinv[:, _MOMENT] * tau_des[_MOMENT]
+        thrust_planar = p.T_pinv[:, _FORCE] @ tau_des[_FORCE]
         if self._zero_thrust_feasible:
             lower = np.full(p.n_thrusters, p.thrust_min)
             upper = np.full(p.n_thrusters, p.thrust_max)
@@ -402,9 +407,9 @@ class BaselineController(ShelledController):
         if saturated:
             # The integral changes tau by -R^T force_step (and -moment_step); skip a step that
             # would deepen the cut the limits just made (deficit = asked - applied).
-            if -(body_to_world.T @ force_step) @ deficit[:2] > 0:
+            if -(body_to_world.T @ force_step) @ deficit[_FORCE] > 0:
                 force_step = np.zeros(2)
-            if -moment_step * deficit[2] > 0:
+            if -moment_step * deficit[_MOMENT] > 0:
                 moment_step = 0.0
         self._force_integral = _clip_norm(self._force_integral + force_step, g.max_integral_force_N)
         limit = g.max_integral_moment_N_m

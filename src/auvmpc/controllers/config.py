@@ -12,7 +12,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
@@ -464,9 +464,10 @@ RTI_AGILE_SAMPLES = 8.0
 def velocity_change_time(model: VehicleParams) -> float:
     """How long the full thrust authority takes to change the surge or the sway speed (the
     quicker of the two) by AGILITY_SPEED_M_PER_S, drag aside (s): m v / F."""
+    forces = model.thrust_authority[PLANAR_FORCE.force]  # surge and sway
     times = [
         mass / force if force > 0 else math.inf  # an axis without thrust: not agile on it
-        for mass, force in zip((model.m11, model.m22), model.thrust_authority[:2], strict=True)
+        for mass, force in zip((model.m11, model.m22), forces, strict=True)
     ]
     return AGILITY_SPEED_M_PER_S * min(times)
 

@@ -35,7 +35,7 @@ from auvmpc.controllers.incremental import IncrementalMpc, Tightened
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams, body_from_world, steady_speed
 from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
@@ -95,7 +95,7 @@ class LinearMpc(IncrementalMpc):
 
     def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._observer is None:
-            return measured, np.zeros(3)
+            return measured, np.zeros(PLANAR_FORCE.size)
         return self._observer.correct(measured)
 
     def after_command(self, command: np.ndarray) -> None:
@@ -240,7 +240,7 @@ def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tighten
         at = np.array([0.0, 0.0, 0.0, speed, 0.0, 0.0])
         drag = -(model.Xu * speed + model.Xuu * speed * abs(speed))
         holding = allocation @ np.array([drag, 0.0, 0.0])  # the thrust that keeps the speed
-        _, A, B = sampled.linearised_step(at, holding, np.zeros(3))
+        _, A, B = sampled.linearised_step(at, holding, np.zeros(PLANAR_FORCE.size))
         gains.append(tube_gain(np.asarray(A), np.asarray(B), half_range))
     return Tightening(bound.total_force_N, bound.moment_Nm, speeds, np.array(gains), half_range)
 
@@ -376,7 +376,7 @@ class PaperMpc(LinearMpc):
         n, ny = self.model.n_thrusters, self.horizon
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
         d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
-        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[2]])
+        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[PLANAR_FORCE.moment]])
         G = None
         if self.tightening is not None:  # in the world force: rotated at the frozen heading
             heading = state[HORIZONTAL.heading]

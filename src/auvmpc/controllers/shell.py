@@ -32,7 +32,7 @@ from auvmpc.controllers.base import (
     Observation,
     next_planned_move,
 )
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 
 if TYPE_CHECKING:
     from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
@@ -205,8 +205,8 @@ class ShelledController(Controller):
             status = ControlStatus.SATURATED
         else:
             status = ControlStatus.OK
-        disturbance = np.zeros(3)
-        if proposal.disturbance is not None and np.size(proposal.disturbance) == 3:
+        disturbance = np.zeros(PLANAR_FORCE.size)
+        if proposal.disturbance is not None and np.size(proposal.disturbance) == PLANAR_FORCE.size:
             disturbance = np.ravel(proposal.disturbance)  # horizontal: world X, Y, N
         return ControlResult(
             thrust=command,

@@ -16,6 +16,7 @@ from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig, gauss_markov_step
+from auvmpc.models.layout import PLANAR_FORCE
 
 __all__ = [
     "DisturbanceConfig",
@@ -94,7 +95,7 @@ class WorldDisturbance:
         self.sample_time = sample_time
         self._rng = rng
         self._mean = np.array([*config.current_force_world, config.moment_N_m], dtype=float)
-        self._variation = np.zeros(3)
+        self._variation = np.zeros(PLANAR_FORCE.size)
         variation = config.current_variation
         if variation is not None and variation.std_N > 0:
             # Start from the stationary distribution so the statistics do not drift.

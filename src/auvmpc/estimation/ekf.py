@@ -29,7 +29,7 @@ from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
@@ -102,8 +102,8 @@ class ObserverConfig(StrictModel):
         """
         update = {}
         # The world-frame X and Y share one scale: the current turns with the heading.
-        planar = float(max(model.thrust_authority[:2]))
-        yaw = float(model.thrust_authority[2])
+        planar = float(max(model.thrust_authority[PLANAR_FORCE.force]))
+        yaw = float(model.thrust_authority[PLANAR_FORCE.moment])
         if self.initial_disturbance_std is None:
             update["initial_disturbance_std"] = (
                 _PRIOR_FORCE_FRACTION * planar,
@@ -262,8 +262,9 @@ class DisturbanceObserver:
         # filter has diverged (seen after a spin: 1.9e5 N on a 100 N vehicle, kept by
         # every later step), and starts again from the measurement.
         authority = np.asarray(model.thrust_authority)
-        self._plausible_force = PLAUSIBLE_AUTHORITY_MULTIPLE * float(authority[:2].max())
-        self._plausible_moment = PLAUSIBLE_AUTHORITY_MULTIPLE * float(authority[2])
+        force, moment = authority[PLANAR_FORCE.force].max(), authority[PLANAR_FORCE.moment]
+        self._plausible_force = PLAUSIBLE_AUTHORITY_MULTIPLE * float(force)
+        self._plausible_moment = PLAUSIBLE_AUTHORITY_MULTIPLE * float(moment)
         self.restarts = 0
 
     def reset(self, initial_state: np.ndarray) -> None:

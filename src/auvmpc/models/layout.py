@@ -1,8 +1,8 @@
-"""Named state layouts: which entry of a model's state vector is which quantity.
+"""Named layouts: which entry of a model's state (or of a force) vector is which quantity.
 
-Code outside a model's own equations reads states through a layout (``HORIZONTAL.position``,
-``HORIZONTAL.index("psi")``) rather than by number, so that a model with another state
-order is one new layout, not edits wherever a number was written.
+Code outside a model's own equations reads vectors through a layout (``HORIZONTAL.position``,
+``HORIZONTAL.index("psi")``, ``PLANAR_FORCE.force``) rather than by number, so that a model
+with another order is one new layout, not edits wherever a number was written.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DEPTH", "HORIZONTAL", "StateLayout"]
+__all__ = ["DEPTH", "HORIZONTAL", "PLANAR_FORCE", "Layout"]
 
 
 @dataclass(frozen=True)
-class StateLayout:
-    """Names of a model's state entries, in order (units and frames: the model's module)."""
+class Layout:
+    """Names of a vector's entries, in order (units and frames: the model's module)."""
 
     names: tuple[str, ...]
 
@@ -46,6 +46,16 @@ class StateLayout:
         return self.index("psi")
 
     @property
+    def force(self) -> slice:
+        """The force's X, Y (N) of a planar force and moment."""
+        return self.span("X", "Y")
+
+    @property
+    def moment(self) -> int:
+        """The yaw moment N (N m) of a planar force and moment."""
+        return self.index("N")
+
+    @property
     def body_velocity(self) -> slice:
         """Surge and sway u, v (m/s)."""
         return self.span("u", "v")
@@ -66,7 +76,10 @@ class StateLayout:
 
 # The 3-DOF horizontal model (models/vehicle.py): world x, y (m), heading psi (rad), body surge
 # u, sway v (m/s), yaw rate r (rad/s).
-HORIZONTAL = StateLayout(names=("x", "y", "psi", "u", "v", "r"))
+HORIZONTAL = Layout(names=("x", "y", "psi", "u", "v", "r"))
 # The 1-DOF heave model (models/heave.py): depth z (m, up, negative below the surface), heave
 # rate w (m/s, up).
-DEPTH = StateLayout(names=("z", "w"))
+DEPTH = Layout(names=("z", "w"))
+# A force and yaw moment in the horizontal plane [X, Y, N] (N, N, N m): a world-frame
+# disturbance, a body-frame generalised force, a vehicle's thrust authority.
+PLANAR_FORCE = Layout(names=("X", "Y", "N"))

@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
-from auvmpc.models.layout import HORIZONTAL, StateLayout
+from auvmpc.models.layout import HORIZONTAL, Layout
 from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
@@ -65,7 +65,7 @@ __all__ = [
     "six_dof_model",
 ]
 
-SIX_DOF = StateLayout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
+SIX_DOF = Layout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
 NX = SIX_DOF.size
 # Where the horizontal model's [x, y, psi, u, v, r] sit in the 6-DOF state.
 HORIZONTAL_INDEX = np.array([SIX_DOF.index(name) for name in HORIZONTAL.names])

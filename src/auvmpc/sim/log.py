@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from auvmpc.models.layout import DEPTH, HORIZONTAL, StateLayout
+from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF
 
 if TYPE_CHECKING:
@@ -72,7 +72,7 @@ class SimLog:
     """Time-major record of one run (N samples, n thrusters, nx states of ``layout``)."""
 
     #: The plant state's names: the columns of ``state``.
-    layout: ClassVar[StateLayout] = HORIZONTAL
+    layout: ClassVar[Layout] = HORIZONTAL
     #: The reference's columns (what the controller is asked to follow, logged per row).
     reference_names: ClassVar[tuple[str, ...]] = REFERENCE_NAMES
     #: What the environment does at each row (``disturbance_world``'s columns): a horizontal
@@ -233,7 +233,7 @@ class DepthLog(SimLog):
     thrusts, the pressure sensor's reading and the wave force (docs/depth.md). Its log.csv
     columns: ``t, z, w, z_ref, Fz1..Fzn, solve_ms, status, z_measured, wave_force_N``."""
 
-    layout: ClassVar[StateLayout] = DEPTH
+    layout: ClassVar[Layout] = DEPTH
     reference_names: ClassVar[tuple[str, ...]] = ("z_ref", "w_ref")  # log.csv keeps z_ref
     disturbance_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
     measured_names: ClassVar[tuple[str, ...]] = ("z",)  # the pressure sensor's depth
@@ -280,7 +280,7 @@ class SixDofLog(SimLog):
     depth_status``.
     """
 
-    layout: ClassVar[StateLayout] = SIX_DOF
+    layout: ClassVar[Layout] = SIX_DOF
     reference_names: ClassVar[tuple[str, ...]] = (*REFERENCE_NAMES, *DEPTH_REFERENCE_NAMES)
     disturbance_names: ClassVar[tuple[str, ...]] = CURRENT_NAMES
     # The navigation sensor's [x, y, psi, u, v, r] and the depth sensor's depth and depth

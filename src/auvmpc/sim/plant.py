@@ -29,7 +29,7 @@ from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.waves import WaveField, morison_inertia
 from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
-from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.six_dof import (
     SIX_DOF,
     check_pitch,
@@ -57,6 +57,7 @@ __all__ = [
 _HEADING = HORIZONTAL.heading
 _DEPTH = DEPTH.index("z")
 _SIX_DOF_DEPTH = SIX_DOF.index("z")  # NED, down (m)
+_MOMENT = PLANAR_FORCE.moment  # of the world force and moment [X, Y, N]
 
 
 class Plant(Protocol):
@@ -163,7 +164,7 @@ class SixDofPlant:
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
         """The water velocity at the vehicle (world NED, m/s), held over [t, t + sample)."""
         if self.current is None:
-            return np.zeros(3)
+            return np.zeros(len(SixDofLog.disturbance_names))
         return self.current.at(t, state[_SIX_DOF_DEPTH], depth_rate(state))[0]
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
@@ -222,7 +223,7 @@ def plant_step(
         force = disturbance.force_world(t)
         d_u, d_v = body_from_world(force, x[_HEADING])
         water = disturbance.water_velocity_world(t)
-        return dynamics(x, thrust, plant, (d_u, d_v, force[2]), current_world=water)
+        return dynamics(x, thrust, plant, (d_u, d_v, force[_MOMENT]), current_world=water)
 
     h = duration / substeps
     for i in range(substeps):
@@ -269,15 +270,16 @@ def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunc
     """The sample's RK4 map (x, F, forces at the stage times, time-major, water velocity)
     -> x, compiled."""
     plant = VehicleParams.model_validate_json(plant_json)
-    x = ca.SX.sym("x", 6)
+    x = ca.SX.sym("x", HORIZONTAL.size)
     thrust = ca.SX.sym("F", plant.n_thrusters)
-    forces = ca.SX.sym("forces", 3, 3 * substeps)  # column j: the force at stage time j
-    water = ca.SX.sym("water", 2)
+    # Column j: the force at stage time j (RK4 evaluates three times per sub-step).
+    forces = ca.SX.sym("forces", PLANAR_FORCE.size, 3 * substeps)
+    water = ca.SX.sym("water", len(_STILL_WATER))
 
     def rhs(j: int, state):
         force = forces[:, j]
         d_u, d_v = body_from_world(force, state[_HEADING])
-        return dynamics(state, thrust, plant, (d_u, d_v, force[2]), current_world=water)
+        return dynamics(state, thrust, plant, (d_u, d_v, force[_MOMENT]), current_world=water)
 
     h = duration / substeps
     state = x

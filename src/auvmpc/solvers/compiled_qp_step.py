@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc import native
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.native import compiler
 from auvmpc.solvers.blasfeo_target import runtime_blasfeo
 from auvmpc.solvers.multiple_shooting import SLOT_FIELDS
@@ -75,12 +76,12 @@ class CompiledQpStep:
                 "the compiled QP step could not be set up: out of memory, or sizes or settings "
                 "that disagree with the generated stage functions"
             )
-        N, n = horizon, thrusters
+        N, n, nx, nd = horizon, thrusters, HORIZONTAL.size, PLANAR_FORCE.size
         # The arguments live in buffers of this object, their addresses taken once: numpy's
         # conversions per argument and call (ctypes.data_as) cost more than the QP's data.
         self._inputs = tuple(
             np.zeros(shape)
-            for shape in ((N + 1, 6), (N + 1, n), (N, n), 6, n, (N + 1, 6), (N, 6), 3,
+            for shape in ((N + 1, nx), (N + 1, n), (N, n), nx, n, (N + 1, nx), (N, nx), nd,
                           (slots, SLOT_FIELDS), slots, N)
         )  # fmt: skip
         self._iterations = np.zeros(1, dtype=np.intc)
