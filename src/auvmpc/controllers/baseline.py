@@ -65,7 +65,7 @@ __all__ = ["BaselineConfig", "BaselineController"]
 _SATURATION_TOLERANCE_N = 1e-9
 _POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
 # The force and the moment of a generalised force, disturbance or thrust authority [X, Y, N].
-_FORCE, _MOMENT = PLANAR_FORCE.force, PLANAR_FORCE.moment
+_FORCE, _MOMENT = PLANAR_FORCE.span("X", "Y"), PLANAR_FORCE.index("N")
 
 
 class BaselineConfig(StrictModel):

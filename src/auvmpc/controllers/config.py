@@ -464,7 +464,7 @@ RTI_AGILE_SAMPLES = 8.0
 def velocity_change_time(model: VehicleParams) -> float:
     """How long the full thrust authority takes to change the surge or the sway speed (the
     quicker of the two) by AGILITY_SPEED_M_PER_S, drag aside (s): m v / F."""
-    forces = model.thrust_authority[PLANAR_FORCE.force]  # surge and sway
+    forces = model.thrust_authority[PLANAR_FORCE.span("X", "Y")]  # surge and sway
     times = [
         mass / force if force > 0 else math.inf  # an axis without thrust: not agile on it
         for mass, force in zip((model.m11, model.m22), forces, strict=True)

@@ -376,7 +376,7 @@ class PaperMpc(LinearMpc):
         n, ny = self.model.n_thrusters, self.horizon
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
         d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
-        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[PLANAR_FORCE.moment]])
+        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[PLANAR_FORCE.index("N")]])
         G = None
         if self.tightening is not None:  # in the world force: rotated at the frozen heading
             heading = state[HORIZONTAL.heading]

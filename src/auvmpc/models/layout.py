@@ -1,7 +1,7 @@
 """Named layouts: which entry of a model's state (or of a force) vector is which quantity.
 
 Code outside a model's own equations reads vectors through a layout (``HORIZONTAL.position``,
-``HORIZONTAL.index("psi")``, ``PLANAR_FORCE.force``) rather than by number, so that a model
+``HORIZONTAL.index("psi")``, ``PLANAR_FORCE.index("N")``) rather than by number, so that a model
 with another order is one new layout, not edits wherever a number was written.
 """
 
@@ -44,16 +44,6 @@ class Layout:
     def heading(self) -> int:
         """psi (rad), continuous."""
         return self.index("psi")
-
-    @property
-    def force(self) -> slice:
-        """The force's X, Y (N) of a planar force and moment."""
-        return self.span("X", "Y")
-
-    @property
-    def moment(self) -> int:
-        """The yaw moment N (N m) of a planar force and moment."""
-        return self.index("N")
 
     @property
     def body_velocity(self) -> slice:

@@ -106,7 +106,7 @@ def _missing_force(model, missing, heading, velocity, acceleration, r, r_dot, di
     v = -vx * sin_h + vy * cos_h
     needed = (ax * cos_h + ay * sin_h + r * v, -ax * sin_h + ay * cos_h - r * u, r_dot[:, None])
     d_u, d_v = body_from_world(disturbance, heading)
-    moment = disturbance[PLANAR_FORCE.moment]
+    moment = disturbance[PLANAR_FORCE.index("N")]
     unforced = dynamics((0.0, 0.0, heading, u, v, r), np.zeros(model.n_thrusters), model,
                         (d_u, d_v, moment))[HORIZONTAL.span("u", "r")]  # fmt: skip
     inertia = (model.m11, model.m22, model.Iz)

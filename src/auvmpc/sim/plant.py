@@ -57,7 +57,7 @@ __all__ = [
 _HEADING = HORIZONTAL.heading
 _DEPTH = DEPTH.index("z")
 _SIX_DOF_DEPTH = SIX_DOF.index("z")  # NED, down (m)
-_MOMENT = PLANAR_FORCE.moment  # of the world force and moment [X, Y, N]
+_MOMENT = PLANAR_FORCE.index("N")  # of the world force and moment [X, Y, N]
 
 
 class Plant(Protocol):
