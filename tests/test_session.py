@@ -27,10 +27,10 @@ SAME_RUN_TOL = 1e-9
 OWN_PLANT_RMS_TOL_M = 1e-3
 
 
-def _stepped_with_the_project_plant(resolved):
+def _stepped_with_the_project_plant(resolved, live_log=None):
     """The batch run's loop written out by hand on the public session, against the plant and
     sensor auvmpc run builds for the scenario."""
-    session = auvmpc.session(resolved)
+    session = auvmpc.session(resolved, live_log=live_log)
     plant, sensor = run_plant(resolved)
     state = session.initial_state
     steps = round(session.duration / session.sample_time)
@@ -61,10 +61,13 @@ def _stepped_with_the_project_plant(resolved):
         ("paper-depth-waves", {"duration": 20}),
     ],
 )
-def test_stepping_the_session_with_the_project_plant_is_the_batch_run(name, overrides):
+def test_stepping_the_session_with_the_project_plant_is_the_batch_run(tmp_path, name, overrides):
     resolved = auvmpc.load_scenario(name, overrides)
     batch = auvmpc.simulate(resolved)
-    stepped = _stepped_with_the_project_plant(resolved)
+    live = tmp_path / "live.csv"
+    stepped = _stepped_with_the_project_plant(resolved, live)
+    # the log written as it went is the log.csv the session files
+    assert live.read_text() == stepped.log.to_csv_text()
     assert stepped.log.steps == batch.log.steps > 0
     for column in ("t", "state", "reference", "thrust", "measured", "disturbance_world",
                    "clearance_m", "disturbance_estimate", "backoff"):  # fmt: skip
@@ -124,6 +127,35 @@ def test_a_session_closed_early_files_what_was_stepped(tmp_path):
     # without finish, the last stepped sample's state ends the log
     assert run.log.steps == 4 and len(run.log.t) == 5
     assert (tmp_path / "run" / "run.json").is_file()
+
+
+def test_the_live_log_holds_every_row_as_soon_as_it_is_stepped(tmp_path):
+    live = tmp_path / "live.csv"
+    session = auvmpc.session(auvmpc.load_scenario("paper-ideal"), live_log=live)
+    state = session.initial_state
+    for k in range(5):
+        session.step(k * session.sample_time, state)
+        rows = live.read_text().splitlines()
+        assert len(rows) == k + 2  # the header and every sample stepped, each with its command
+        assert rows[-1].split(",")[0] == repr(k * session.sample_time)
+    run = session.close(tmp_path / "run", figures=False)
+    filed = (tmp_path / "run" / "log.csv").read_text().splitlines()
+    rows = live.read_text().splitlines()
+    # Without finish the filed log ends at the last stepped sample's state; the live log has
+    # that sample's command too.
+    assert rows[:-1] == filed[:-1] and len(rows) == len(filed) == run.log.steps + 2
+    assert rows[-1].split(",")[:7] == filed[-1].split(",")[:7]  # t and the state
+    assert filed[-1].split(",")[13] == "" != rows[-1].split(",")[13]  # F1: none filed
+
+
+def test_a_live_log_never_replaces_a_file(tmp_path):
+    mine = tmp_path / "mine.csv"
+    mine.write_text("my notes\n")
+    with pytest.raises(ConfigError, match="live_log.*exists already"):
+        auvmpc.session("paper-ideal", live_log=mine)
+    assert mine.read_text() == "my notes\n"
+    with pytest.raises(ConfigError, match="live_log.*cannot be created"):
+        auvmpc.session("paper-ideal", live_log=tmp_path / "no-such-folder" / "live.csv")
 
 
 def _stepped_twice(session):

@@ -111,7 +111,7 @@ def simulate(scenario: Scenario | str, on_step: Callable[[int, int], None] | Non
     return run(scenario, on_step)
 
 
-def session(scenario: Scenario | str | Path) -> RunSession:
+def session(scenario: Scenario | str | Path, live_log: str | Path | None = None) -> RunSession:
     """The scenario's controller, to step yourself sample by sample against your own
     simulator, rig or vehicle; a name or path is loaded first.
 
@@ -129,7 +129,8 @@ def session(scenario: Scenario | str | Path) -> RunSession:
     ``disturbance_names``) if your simulator knows them, for the log and the metrics. A
     failed solve never raises: the result's ``status`` says so and ``u`` is the safety
     shell's command. ``auvmpc run`` is a loop over the same session with the built-in plant
-    (docs/session.md).
+    (docs/session.md). ``live_log``: a new file (never an existing one) that gets each row
+    of log.csv as soon as it is stepped, flushed, so a crash keeps what was stepped.
 
     Raises
     ------
@@ -143,7 +144,7 @@ def session(scenario: Scenario | str | Path) -> RunSession:
             "scenario", type(scenario).__name__, "must be a preset name, a path or a scenario "
             "from auvmpc.load_scenario",
         )  # fmt: skip
-    return RunSession(scenario)
+    return RunSession(scenario, live_log=live_log)
 
 
 def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:

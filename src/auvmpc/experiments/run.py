@@ -129,7 +129,8 @@ class RunSession(Session):
     depth MPC on the 6-DOF thrusters (controllers/channels.py).
 
     The batch run (:func:`simulate`) steps the same session against the scenario's plant.
-    ``warnings``: the scenario's pre-run checks, when the caller has run them already.
+    ``warnings``: the scenario's pre-run checks, when the caller has run them already;
+    ``live_log``: a new file that gets log.csv row by row as the session is stepped.
     """
 
     def __init__(
@@ -137,6 +138,7 @@ class RunSession(Session):
         resolved: ResolvedScenario | ResolvedDepthScenario,
         warnings: list[str] | None = None,
         stopwatch: Stopwatch | None = None,
+        live_log: str | Path | None = None,
     ) -> None:
         from auvmpc.scenario.sanity import preflight
 
@@ -157,6 +159,7 @@ class RunSession(Session):
             obstacles=start.obstacles,
             perception=start.perception,
             vehicle_radius=start.vehicle_radius,
+            live_log=live_log,
         )
         self.duration = self.log.steps * self.sample_time
 
@@ -173,6 +176,7 @@ class RunSession(Session):
         when given (as ``auvmpc run --out``: new or empty, or with ``overwrite`` an earlier
         run folder of auvmpc's). The session is closed then: nothing more may be stepped."""
         self._check_open("close")
+        self.end_live_log()
         result = self.result()
         if out_dir is not None:
             write_run(result, Path(out_dir), figures=figures, overwrite=overwrite)

@@ -33,6 +33,7 @@ __all__ = [
     "CURRENT_NAMES",
     "DepthLog",
     "ESTIMATE_NAMES",
+    "LiveLog",
     "REFERENCE_NAMES",
     "SimLog",
     "SixDofLog",
@@ -176,17 +177,22 @@ class SimLog:
 
     def to_csv_text(self) -> str:
         blocks = self.csv_columns()
-        rows = (
-            [cell for block in blocks for cell in self._cells(block, k)]
-            for k in range(self.steps + 1)
-        )
+        rows = (self._row(blocks, k, k >= self.steps) for k in range(self.steps + 1))
         return _csv_text(self.columns(), rows)
 
-    def _cells(self, column: Column, k: int) -> list[str]:
+    def row_cells(self, k: int, final: bool = False) -> list[str]:
+        """Row k of log.csv; ``final``: the run's last row, which has no command (as every
+        row past the last command)."""
+        return self._row(self.csv_columns(), k, final or k >= self.steps)
+
+    def _row(self, blocks: tuple[Column, ...], k: int, final: bool) -> list[str]:
+        return [cell for block in blocks for cell in self._cells(block, k, final)]
+
+    def _cells(self, column: Column, k: int, final: bool) -> list[str]:
         """Row k's cells of one block of columns."""
         if column.field is None:
             return [csv_number(0.0)] * len(column.names)
-        if column.field in self.PER_COMMAND and k >= self.steps:
+        if final and column.field in self.PER_COMMAND:
             return [""] * len(column.names)
         value = getattr(self, column.field)[k]
         if column.text:
@@ -374,6 +380,39 @@ _SIX_DOF_EXTRA_INDEX = np.array([SIX_DOF.index(name) for name in _SIX_DOF_EXTRA]
 _HORIZONTAL_REFERENCE = slice(0, len(REFERENCE_NAMES))
 _DEPTH_REFERENCE = slice(len(REFERENCE_NAMES), len(REFERENCE_NAMES) + len(DEPTH_REFERENCE_NAMES))
 _DEPTH = DEPTH.index("z")
+
+
+class LiveLog:
+    """log.csv written as a run goes: the header, then each row as soon as it is complete,
+    flushed, so that a run that dies (a crash, a live vehicle's computer switched off) keeps
+    every sample stepped. It is the record, not the result: the run folder (``close``) is.
+    Opened exclusively: an existing file is never replaced."""
+
+    def __init__(self, path: str | Path, log: SimLog) -> None:
+        from auvmpc.errors import ConfigError
+
+        try:
+            self._file = open(path, "x", newline="")  # open until close()
+        except FileExistsError:
+            raise ConfigError(
+                "live_log", str(path), "exists already; a live log never replaces a file"
+            ) from None
+        except OSError as error:
+            raise ConfigError(
+                "live_log", str(path), f"cannot be created: {error.strerror}"
+            ) from None
+        self.path, self._log = Path(path), log
+        self._writer = csv.writer(self._file, lineterminator="\n")
+        self._writer.writerow(log.columns())
+        self._file.flush()
+
+    def append(self, k: int, final: bool = False) -> None:
+        """Row k of the log, now complete (``final``: the state after the last command)."""
+        self._writer.writerow(self._log.row_cells(k, final))
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
 
 
 def _csv_text(columns: Sequence[str], rows: Iterable[Sequence[str]]) -> str:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -29,7 +30,7 @@ from auvmpc.controllers.base import (
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
-from auvmpc.sim.log import SimLog
+from auvmpc.sim.log import LiveLog, SimLog
 
 __all__ = ["Session", "StateReference", "StepResult", "Truth"]
 
@@ -68,7 +69,8 @@ class Session:
     ``log`` is allocated for the run's samples (``log.steps`` commands); each :meth:`step`
     fills its row, :meth:`finish` the final state row, and :attr:`stepped_log` is the part
     filled so far. Without :class:`Truth` the log's state columns hold the measurement and
-    the vehicle-to-obstacle gap is the measured position's.
+    the vehicle-to-obstacle gap is the measured position's. ``live_log``: a new file that
+    gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
     """
 
     def __init__(
@@ -82,6 +84,7 @@ class Session:
         obstacles: Sequence[ObstacleConfig] = (),
         perception: ObstaclePerception | None = None,
         vehicle_radius: float = 0.0,
+        live_log: str | Path | None = None,
     ) -> None:
         self.controller = controller
         self.reference = reference
@@ -106,6 +109,8 @@ class Session:
         self._initial_state = np.asarray(initial_state, dtype=float).copy()
         controller.reset(self._initial_state.copy(), previous.copy())
         self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
+        # Created last: a session that could not be set up leaves no file behind.
+        self.live_log = None if live_log is None else LiveLog(live_log, log)
 
     @property
     def initial_state(self) -> np.ndarray:
@@ -153,6 +158,8 @@ class Session:
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
         log.solve_ms[k] = solve_ms
         log.record_command(k, result, thrust)
+        if self.live_log is not None:
+            self.live_log.append(k)
         self.k = k + 1
         return StepResult(k, thrust.copy(), result.status, solve_ms, result.info)
 
@@ -173,6 +180,15 @@ class Session:
             t, measurement, truth = self._checked(self.k, t, measurement, truth)
         self._record(self.k, t, measurement, truth)
         self.finished = True
+        if self.live_log is not None:
+            self.live_log.append(self.k, final=True)
+            self.live_log.close()
+
+    def end_live_log(self) -> None:
+        """Close the live log (if any) where the run stands; :meth:`finish` closes it after
+        the final row."""
+        if self.live_log is not None:
+            self.live_log.close()
 
     @property
     def stepped_log(self) -> SimLog:
