@@ -17,6 +17,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
         ("quickstart.py", ["quickstart-trajectory.png", "quickstart-run/log.csv"]),
         ("compare_vehicles.py", ["compare-vehicles-errors.png"]),
         ("own_simulator.py", ["own-simulator-run/log.csv", "own-simulator-run/run.json"]),
+        ("own_controller.py", ["pid-tracker-run/log.csv", "pid-tracker-run/run.json"]),
     ],
 )
 def test_example_script_runs(tmp_path, script, outputs):
@@ -45,6 +46,12 @@ def test_the_notebook_runs_in_a_kernel(tmp_path):
 
 
 def test_every_example_is_tested():
-    tested = {"quickstart.py", "compare_vehicles.py", "own_simulator.py", "tour.ipynb"}
+    tested = {
+        "quickstart.py",
+        "compare_vehicles.py",
+        "own_simulator.py",
+        "own_controller.py",
+        "tour.ipynb",
+    }
     present = {p.name for p in EXAMPLES.iterdir() if p.suffix in (".py", ".ipynb")}
     assert present == tested

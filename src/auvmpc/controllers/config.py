@@ -6,7 +6,7 @@ import math
 from enum import StrEnum
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
@@ -106,6 +106,20 @@ class DisturbanceBound(StrictModel):
         return self.total_force_N == 0.0 and self.moment_Nm == 0.0
 
 
+# The validation context of a scenario read back from a run folder's run.json.
+SAVED_RUN = "saved_run"
+
+
+def _registered_types(schema: dict[str, Any]) -> None:
+    """The file schema of ``controller.type``: the names registered when it is written (in a
+    fresh process the built-in ones), which are what a scenario may name."""
+    from auvmpc.controllers.registry import REGISTRY
+
+    names = [str(name) for name in REGISTRY if name != DEPTH_MPC]
+    schema.pop("anyOf", None)
+    schema.update({"type": "string", "enum": names})
+
+
 def check_control_horizon(control_horizon: int | None, prediction_horizon: int) -> None:
     """The moves fit in the horizon (a control horizon longer than it means nothing)."""
     if control_horizon is not None and control_horizon > prediction_horizon:
@@ -117,10 +131,12 @@ def check_control_horizon(control_horizon: int | None, prediction_horizon: int) 
 class ControllerConfig(StrictModel):
     """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
 
-    type: ControllerType = Field(
+    type: ControllerType | str = Field(
         default=ControllerType.NMPC,
         description="which controller (default: the real-time nmpc, the one that measured best "
-        "on the hard-survey sweep, docs/recovery.md)",
+        "on the hard-survey sweep, docs/recovery.md); or a name given to "
+        "controllers.registry.register_controller (docs/extending.md)",
+        json_schema_extra=lambda schema: _registered_types(schema),
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
@@ -248,12 +264,24 @@ class ControllerConfig(StrictModel):
 
     @field_validator("type", mode="before")
     @classmethod
-    def _not_the_depth_controller(cls, value: Any) -> Any:
+    def _a_registered_controller(cls, value: Any, info: ValidationInfo) -> Any:
+        """A built-in type as its ControllerType, a registered one as its name; read back
+        from a saved run (context ``saved_run``), any name: the figures of a run need no
+        controller, and the one that flew it need not be registered in this process."""
+        from auvmpc.controllers.registry import REGISTRY
+
         if value == DEPTH_MPC:
             raise FieldError(
                 "", value, "the depth controller (kind: depth scenarios, six-dof depth_controller)"
             )
-        return value
+        if isinstance(value, ControllerType):
+            return value
+        if isinstance(value, str) and value in set(ControllerType):
+            return ControllerType(value)
+        if isinstance(value, str) and (value in REGISTRY or (info.context or {}).get(SAVED_RUN)):
+            return value
+        known = ", ".join(repr(str(name)) for name in REGISTRY if name != DEPTH_MPC)
+        raise FieldError("", value, f"input should be one of {known}")
 
     @model_validator(mode="after")
     def _tightened_type(self) -> ControllerConfig:
@@ -261,7 +289,7 @@ class ControllerConfig(StrictModel):
             raise FieldError(
                 "disturbance_bound",
                 self.disturbance_bound.model_dump(),
-                f"{self.type.value} does not tighten its constraints; only "
+                f"{self.type} does not tighten its constraints; only "
                 f"{', '.join(kind.value for kind in TIGHTENED_TYPES)} do (leave it zero)",
             )
         return self

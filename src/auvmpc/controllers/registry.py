@@ -1,10 +1,14 @@
-"""Which class implements each controller type: adding a controller is its module plus a line
-here (and its name in ``ControllerType``, or its scenario kind's config for a depth one)."""
+"""Which class implements each controller type. A built-in controller is its module plus a
+line here (and its name in ``ControllerType``); a controller of your own is one file and one
+:func:`register_controller` call, after which scenarios name it as ``controller.type``
+(docs/extending.md)."""
 
 from __future__ import annotations
 
 import importlib
+import re
 
+from auvmpc.controllers.base import Controller
 from auvmpc.controllers.config import (
     DEPTH_MPC,
     ControllerConfig,
@@ -15,10 +19,10 @@ from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["REGISTRY", "build_controller"]
+__all__ = ["REGISTRY", "build_controller", "register_controller"]
 
 # Imported only when used: do-mpc is an optional extra, and CasADi set-up is not free.
-REGISTRY: dict[str, tuple[str, str]] = {
+REGISTRY: dict[str, tuple[str, str] | type] = {
     ControllerType.BASELINE: ("auvmpc.controllers.baseline", "BaselineController"),
     ControllerType.MPC: ("auvmpc.controllers.mpc", "PaperMpc"),
     ControllerType.LTV_MPC: ("auvmpc.controllers.ltv", "LtvMpc"),
@@ -29,12 +33,39 @@ REGISTRY: dict[str, tuple[str, str]] = {
 
 # The optimising horizontal controllers, whose shell recovers with the stabilising feedback
 # (the baseline is that feedback); the depth MPC's shell recovers with the depth feedback.
-RECOVERED_TYPES = (
+RECOVERED_TYPES = {
     ControllerType.MPC,
     ControllerType.LTV_MPC,
     ControllerType.NMPC,
     ControllerType.DO_MPC,
-)
+}
+# A registered name: lower-case words joined by hyphens, as the built-in ones.
+_NAME = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
+
+
+def register_controller(name: str, controller: type, *, recovered: bool = False) -> None:
+    """Make ``controller`` the class of ``controller.type: name`` in every scenario loaded
+    afterwards in this process.
+
+    ``controller`` is a ``controllers.base.Controller`` subclass built by
+    ``controller.from_config(model, config, obstacle_count=..., **surroundings)`` if it has
+    that class method, else by ``controller(model, config)``: ``model`` the nominal vehicle,
+    ``config`` the scenario's ``ControllerConfig`` filled in for it (``sample_time``,
+    ``prediction_horizon`` ... are yours to read). ``recovered``: a ``ShelledController``
+    whose shell steers by the stabilising feedback after a failed solve, as the built-in
+    MPCs' does. A name already taken raises ValueError.
+    """
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ValueError(f"controller name {name!r}: lower-case words joined by hyphens")
+    if name in REGISTRY:
+        raise ValueError(f"controller name {name!r} is taken (taken: {', '.join(REGISTRY)})")
+    if not isinstance(controller, type) or not issubclass(controller, Controller):
+        raise ValueError(f"{controller!r} is not a controllers.base.Controller subclass")
+    if recovered and not issubclass(controller, ShelledController):
+        raise ValueError(f"{controller.__name__}: only a ShelledController has a shell to recover")
+    REGISTRY[name] = controller
+    if recovered:
+        RECOVERED_TYPES.add(name)
 
 
 def build_controller(
@@ -47,10 +78,17 @@ def build_controller(
 
     ``surroundings``: what else the scenario says that the controller is built for, by
     name (a depth controller's ``water_depth_m``)."""
-    module, name = REGISTRY[config.type]
-    controller_class = getattr(importlib.import_module(module), name)
+    entry = REGISTRY[config.type]
+    if isinstance(entry, type):  # registered by register_controller
+        controller_class = entry
+    else:
+        module, name = entry
+        controller_class = getattr(importlib.import_module(module), name)
+    filled = config.for_vehicle(model)
+    if not hasattr(controller_class, "from_config"):
+        return controller_class(model, filled)
     controller = controller_class.from_config(
-        model, config.for_vehicle(model), obstacle_count=obstacle_count, **surroundings
+        model, filled, obstacle_count=obstacle_count, **surroundings
     )
     if config.type in RECOVERED_TYPES:
         controller.recovery = StabilisingFeedback(

@@ -13,6 +13,7 @@ from threadpoolctl import threadpool_limits
 
 from auvmpc import interrupts
 from auvmpc.controllers.base import Controller
+from auvmpc.controllers.config import SAVED_RUN
 from auvmpc.controllers.registry import build_controller
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.kinds import (
@@ -244,7 +245,7 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     kind = kind_of(info["scenario"])
     figures = kind.figures(
         kind.read_log(run_dir, info),
-        kind.scenario_type.model_validate(info["scenario"]),
+        kind.scenario_type.model_validate(info["scenario"], context={SAVED_RUN: True}),
         VehicleParams.model_validate(info["model"]),
         VehicleParams.model_validate(info["plant"]),
     )
@@ -266,7 +267,7 @@ def read_planar_run(
         raise ConfigError(
             "RUN_DIR", str(run_dir), f"a {kind.name} run; {command} takes horizontal and 6-DOF runs"
         )
-    scenario = kind.scenario_type.model_validate(info["scenario"])
+    scenario = kind.scenario_type.model_validate(info["scenario"], context={SAVED_RUN: True})
     model = VehicleParams.model_validate(info["model"])
     return info, scenario, model, kind.horizontal_view(kind.read_log(run_dir, info))
 
