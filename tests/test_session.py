@@ -263,3 +263,26 @@ def test_a_diverging_built_in_plant_is_a_failed_run_not_bad_input():
     )
     with pytest.raises(RunFailed, match="bluerov2-figure-eight with nmpc failed at"):
         auvmpc.simulate(scenario)
+
+
+@pytest.mark.parametrize("name", ["paper-6dof", "paper-depth-calm"])
+def test_a_measurement_that_is_not_the_whole_state_needs_the_truth(name):
+    """A 6-DOF session measures 8 of 12 states, a depth one 1 of 2: the log's state needs
+    the caller's full state, so stepping without it is one line naming ``truth``."""
+    session = auvmpc.session(name)
+    measured = np.zeros(len(session.measurement_names))
+    with pytest.raises(ConfigError, match="truth: needed"):
+        session.step(0.0, measured)
+
+
+def test_a_depth_session_closed_before_the_step_has_no_step_metrics():
+    """The tank's step comes at 10 s; closed at 5 s, the step's metrics are None (not a
+    traceback, not a settling time that never happened), and one value may be a number."""
+    session = auvmpc.session("paper-depth-calm")
+    state = session.initial_state
+    steps = round(5.0 / session.sample_time)
+    for k in range(steps):
+        session.step(k * session.sample_time, state[0], truth=Truth(state, np.zeros(1)))
+    run = session.close()
+    for key in ("rise_time_s", "settling_time_0p05m_s", "settling_time_2pct_s", "overshoot_m"):
+        assert run.metrics[key] is None, key

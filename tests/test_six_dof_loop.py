@@ -16,6 +16,7 @@ from scipy.integrate import solve_ivp
 
 from auvmpc.controllers.channels import ThrustMapping
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.reproduce import velocity_errors
 from auvmpc.experiments.run import read_planar_run, redraw, simulate, write_run
 from auvmpc.models import six_dof
 from auvmpc.models.vehicle import VehicleParams, load_vehicle
@@ -134,6 +135,13 @@ def test_paper_6dof_within_twice_the_planar_error_with_depth_and_attitude_bounde
         SIX_DOF_VS_PLANAR_ERROR_FACTOR * planar["max_position_error_after_transient_m"]
     )
     assert six["depth_rms_error_after_transient_m"] <= SIX_DOF_DEPTH_RMS_TOL_M
+    # The paper's Figure 6 (auvmpc reproduce's table): surge, sway and yaw-rate errors of the
+    # 6-DOF run's horizontal part, within the same factor of the planar run's.
+    transient = resolved.scenario.transient_s
+    six_velocity = velocity_errors(result.log.horizontal(), transient)
+    planar_velocity = velocity_errors(twin.log.horizontal(), transient)
+    for name, value in six_velocity.items():
+        assert value <= SIX_DOF_VS_PLANAR_ERROR_FACTOR * planar_velocity[name], name
     assert six["max_abs_roll_rad"] < SIX_DOF_TILT_LIMIT_RAD
     assert six["max_abs_pitch_rad"] < SIX_DOF_TILT_LIMIT_RAD
     assert six["thrust_limit_violations"] == 0

@@ -28,16 +28,17 @@ import numpy as np
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation, timed_command
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.models.six_dof import SIX_DOF, depth_rate, horizontal_state
+from auvmpc.models.six_dof import SIX_DOF, SIX_DOF_MEASUREMENT, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["ChannelResult", "HorizontalAndDepth", "ThrustMapping", "WithDepth"]
+__all__ = ["ChannelResult", "HorizontalAndDepth", "ThrustMapping", "ReferenceWithDepth"]
 
 # Slack in a saturation check: far below any physical force.
 CLIP_TOLERANCE_N = 1e-9
 _DEPTH = SIX_DOF.index("z")  # NED, down (m)
-# Where the depth sensor's [z, z'] (NED) sit in the 6-DOF measurement (SixDofLog's).
-_MEASURED_DEPTH = slice(HORIZONTAL.size, HORIZONTAL.size + 2)
+# Where the navigation solution and the depth sensor's [z, z'] (NED) sit in the measurement.
+_MEASURED_HORIZONTAL = SIX_DOF_MEASUREMENT.span("x", "r")
+_MEASURED_DEPTH = SIX_DOF_MEASUREMENT.span("z", "z_rate")
 
 
 class ThrustMapping:
@@ -97,8 +98,9 @@ class ChannelResult(ControlResult):
     saturated: int = 0  # thrusters whose demand the mapping had to change
 
 
-class WithDepth:
-    """A 3-D reference as the pair sees it: rows ``[x, y, psi, u, v, r, z, z']`` (NED)."""
+class ReferenceWithDepth:
+    """A 3-D reference as the pair sees it: rows ``[x, y, psi, u, v, r, z, z']`` (NED), the
+    horizontal reference and the depth's (SixDofLog's ``reference_names``)."""
 
     def __init__(self, reference) -> None:
         self.reference = reference  # a references.Reference with a depth profile
@@ -110,7 +112,7 @@ class WithDepth:
 class HorizontalAndDepth(Controller):
     """The horizontal controller and the depth MPC as one controller of the 6-DOF vehicle.
 
-    It sees the 6-DOF measurement ``[x, y, psi, u, v, r, z, z']`` and a :class:`WithDepth`
+    It sees the 6-DOF measurement (``SIX_DOF_MEASUREMENT``) and a :class:`ReferenceWithDepth`
     preview; it returns every ``six_dof`` thruster's force (:class:`ChannelResult`).
     ``depth_preview``: the depth MPC sees the reference ahead (else today's, held).
     """
@@ -125,7 +127,6 @@ class HorizontalAndDepth(Controller):
         self.horizontal, self.depth, self.depth_preview = horizontal, depth, depth_preview
         self.sample_time = horizontal.sample_time
         self.preview_steps = max(horizontal.preview_steps, depth.preview_steps)
-        self.build_warnings = tuple(getattr(horizontal, "build_warnings", ()))
         self.mapping = ThrustMapping(vehicle, self.sample_time)
         self._heave_count = depth.heave.thruster_count
 
@@ -145,7 +146,7 @@ class HorizontalAndDepth(Controller):
         horizontal_observation = Observation(
             k=observation.k,
             t=observation.t,
-            state=measured[: HORIZONTAL.size],
+            state=measured[_MEASURED_HORIZONTAL],
             reference=reference[: self.horizontal.preview_steps + 1, : HORIZONTAL.size],
             obstacles=observation.obstacles,
         )

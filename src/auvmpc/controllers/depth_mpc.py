@@ -43,7 +43,7 @@ class DepthMpc(IncrementalMpc):
         return cls(resolve_heave(model, {}), config, water_depth_m)
 
     def __init__(self, heave: HeaveParams, config, water_depth: float) -> None:
-        self.take_timing(config)
+        self.take_config(config)
         if not config.known_net_buoyancy:
             heave = heave.model_copy(update={"net_buoyancy_N": 0.0})
         self.heave = heave

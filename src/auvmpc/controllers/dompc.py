@@ -105,7 +105,7 @@ class DoMpcController(ShelledController):
             raise ValueError(f"obstacle_slots must be >= 0, got {obstacle_slots}")
         self._do_mpc = do_mpc
         self.model = model
-        self.take_timing(config)
+        self.take_config(config)
         self.ocp = config.ocp(model)
         self.limits = self.ocp.limits
         # g_k: 1 where a move is free (0..nc-1, or the blocking steps), 0 where F is held.

@@ -68,7 +68,7 @@ class LinearMpc(IncrementalMpc):
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         config = config.for_vehicle(model)
         self.model = model
-        self.take_timing(config)
+        self.take_config(config)
         self.ocp = config.ocp(model)
         self.limits = self.ocp.limits
         self.qp = CondensedQp(self.ocp, config.qp_solver, config.qp_iteration_limit)

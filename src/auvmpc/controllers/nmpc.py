@@ -103,7 +103,7 @@ class NonlinearMpc(ShelledController):
     ) -> None:
         config = config.for_vehicle(model)
         self.model = model
-        self.take_timing(config)
+        self.take_config(config)
         self.limits = horizontal_limits(model)
         self.program = MultipleShootingProgram(model, config, obstacle_slots)
         if config.nmpc_mode is NmpcMode.FULL:

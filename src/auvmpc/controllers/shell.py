@@ -122,9 +122,9 @@ class ShelledController(Controller):
         """Built from a vehicle and a ``ControllerConfig`` (controllers/registry.py)."""
         return cls(model, config)
 
-    def take_timing(self, config) -> None:
-        """What every shelled controller takes from its (resolved) configuration: the
-        sample time, the horizon (also the preview it asks for) and the solver's time
+    def take_config(self, config) -> None:
+        """Keep the (resolved) configuration and what every shelled controller takes from it:
+        the sample time, the horizon (also the preview it asks for) and the solver's time
         limit."""
         self.config = config
         self.sample_time = config.sample_time

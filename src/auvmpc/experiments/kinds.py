@@ -6,11 +6,13 @@ reference, the log and the start: :meth:`~RunKind.start`), the plant and sensors
 run`` simulates (:meth:`~RunKind.plant`), the metrics and finished run it files
 (:meth:`~RunKind.finished`), its figures, the solver libraries it records, and how a saved
 run folder's log is read back (:meth:`~RunKind.read_log`). experiments/run.py is written
-once over them; a new kind of plant is one entry here.
+once over them; a new kind of plant is one entry here, with its schema in scenario/, its
+Plant and its log's columns (docs/architecture.md).
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +22,7 @@ import numpy as np
 
 from auvmpc import __version__
 from auvmpc.controllers.base import Controller
-from auvmpc.controllers.channels import HorizontalAndDepth, WithDepth
+from auvmpc.controllers.channels import HorizontalAndDepth, ReferenceWithDepth
 from auvmpc.controllers.registry import build_controller
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.depth_sensor import PressureSensor
@@ -28,6 +30,7 @@ from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.environment.waves import WaveField
+from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import DepthStep, make_reference
 from auvmpc.scenario import (
@@ -35,11 +38,9 @@ from auvmpc.scenario import (
     ResolvedDepthScenario,
     ResolvedScenario,
     ResolvedSixDofScenario,
-    Scenario,
-    SixDofScenario,
     scenario_to_dict,
 )
-from auvmpc.scenario.depth import DepthScenario
+from auvmpc.scenario.loader import SCENARIO_KINDS
 from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
 from auvmpc.sim.loop import Sensor
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
@@ -53,11 +54,13 @@ __all__ = [
     "KINDS",
     "DepthRunResult",
     "Finished",
+    "HorizontalKind",
     "RunKind",
     "RunResult",
     "SessionStart",
     "SixDofRunResult",
     "kind_of",
+    "padded",
 ]
 
 Resolved = ResolvedScenario | ResolvedDepthScenario
@@ -151,14 +154,63 @@ class DepthRunResult(Finished):
         return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
 
 
-class RunKind:
-    """A horizontal run (``kind: horizontal``): the 3-DOF plant under a world-frame force and
-    current; the other kinds override what differs."""
+class RunKind(ABC):
+    """What one kind of run does its own way (module docstring); ``name`` is its scenarios'
+    ``kind``, whose schema is ``scenario.loader.SCENARIO_KINDS[name]``."""
 
-    name: ClassVar[str] = "horizontal"
-    scenario_type: ClassVar[type] = Scenario
-    result_type: ClassVar[type[Finished]] = RunResult
-    has_horizontal: ClassVar[bool] = True  # a horizontal path to animate and compare
+    name: ClassVar[str]
+    result_type: ClassVar[type[Finished]]
+    has_horizontal: ClassVar[bool]  # a horizontal path, to animate and compare
+
+    @property
+    def scenario_type(self) -> type:
+        """The schema of its scenarios (as written in a run folder's run.json)."""
+        return SCENARIO_KINDS[self.name][0]
+
+    @abstractmethod
+    def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
+        """The run's random streams by what they drive (children of the scenario seed)."""
+
+    @abstractmethod
+    def start(self, resolved, controller: Controller) -> SessionStart:
+        """What the session steps: ``controller`` is the scenario's, built by the caller."""
+
+    @abstractmethod
+    def plant(self, resolved) -> tuple[Plant, Sensor]:
+        """The simulated vehicle in its environment, and its sensors."""
+
+    @abstractmethod
+    def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
+        """The run's metrics (sim/metrics.py)."""
+
+    @abstractmethod
+    def libraries(self, scenario) -> tuple[str, ...]:
+        """Distributions beyond numpy, scipy and casadi that the scenario's controllers use."""
+
+    @abstractmethod
+    def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
+        """The figures of a run by file stem (``model``: the controller's vehicle, whose
+        limits are drawn; ``plant``: the simulated one)."""
+
+    @abstractmethod
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
+        """The log of a saved run folder of this kind (``info``: its run.json)."""
+
+    def finished(
+        self, resolved, log: SimLog, provenance: dict[str, Any], warnings: list[str]
+    ) -> Finished:
+        """The finished run of ``log``, with its metrics."""
+        metrics = self.metrics(resolved, log)
+        return self.result_type(resolved, log, metrics, provenance=provenance, warnings=warnings)
+
+
+class HorizontalKind(RunKind):
+    """A horizontal run (``kind: horizontal``): the 3-DOF plant under a world-frame force and
+    current."""
+
+    name = "horizontal"
+    result_type = RunResult
+    has_horizontal = True
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
         """The run's random streams by what they drive: children 0, 1 and 2 of the scenario
@@ -168,7 +220,6 @@ class RunKind:
         return {"current": current, "sensor": sensor, "obstacles": obstacles}
 
     def start(self, resolved, controller: Controller) -> SessionStart:
-        """What the session steps: ``controller`` is the scenario's, built by the caller."""
         scenario = resolved.scenario
         given = scenario.initial_thrust
         return SessionStart(
@@ -194,7 +245,6 @@ class RunKind:
         }
 
     def plant(self, resolved) -> tuple[Plant, Sensor]:
-        """The simulated vehicle in its environment, and its sensors."""
         scenario, seeds = resolved.scenario, self.seeds(resolved.scenario)
         sample_time = _sample_time(scenario)
         disturbance = WorldDisturbance(
@@ -217,7 +267,6 @@ class RunKind:
         return self.result_type(resolved, log, metrics, provenance=provenance, warnings=warnings)
 
     def libraries(self, scenario) -> tuple[str, ...]:
-        """Distributions beyond numpy, scipy and casadi that the scenario's controller uses."""
         kind = scenario.controller.type
         if kind in (ControllerType.MPC, ControllerType.LTV_MPC):
             return (str(scenario.controller.qp_solver),)
@@ -226,8 +275,6 @@ class RunKind:
         return ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
-        """The figures of a run by file stem (``model``: the controller's vehicle, whose
-        limits are drawn; ``plant``: the simulated one)."""
         from auvmpc.plots import run_figures, run_title
 
         title = run_title(scenario, model.name)
@@ -235,25 +282,17 @@ class RunKind:
         return run_figures(log, scenario.obstacles, radius, model, title)
 
     def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        """The log of a saved run folder of this kind (``info``: its run.json)."""
         log = SimLog.read_csv(Path(run_dir) / "log.csv")
-        initial = info["scenario"].get("initial_thrust")
-        if initial is not None:  # read from a 6-DOF run's log.csv, the vertical ones are 0
-            log.initial_thrust = np.zeros(log.n_thrusters)
-            log.initial_thrust[: len(initial)] = initial
-        return log
-
-    def horizontal_view(self, log: SimLog) -> SimLog:
-        """What animate and compare read of a run with ``has_horizontal``: its horizontal log."""
+        # (a 6-DOF run's log.csv read as a horizontal one has its vertical thrusters too)
+        log.initial_thrust = padded(info["scenario"].get("initial_thrust"), log.n_thrusters)
         return log
 
 
-class SixDofKind(RunKind):
+class SixDofKind(HorizontalKind):
     """A 6-DOF run (``kind: six-dof``): the horizontal controller and the depth MPC as one
     controller (controllers/channels.py) on the 6-DOF plant in the water current."""
 
     name = "six-dof"
-    scenario_type = SixDofScenario
     result_type = SixDofRunResult
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
@@ -270,13 +309,13 @@ class SixDofKind(RunKind):
         x, y, psi, u, v, r = scenario.initial_state
         return SessionStart(
             HorizontalAndDepth(controller, depth, model, scenario.depth_controller.preview),
-            WithDepth(resolved.reference),
+            ReferenceWithDepth(resolved.reference),
             SixDofLog.allocate(
                 _steps(scenario), model.six_dof.n_thrusters, _sample_time(scenario),
                 n_horizontal=model.n_thrusters,
             ),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
-            every_thruster(model, scenario.initial_thrust),
+            padded(scenario.initial_thrust, model.six_dof.n_thrusters),
             **self._surroundings(scenario),
         )  # fmt: skip
 
@@ -314,12 +353,9 @@ class SixDofKind(RunKind):
         drawn = super().figures(log.horizontal(), scenario, model, plant)
         return {**drawn, **six_dof_figures(log, model, run_title(scenario, model.name))}
 
-    def horizontal_view(self, log: SixDofLog) -> SimLog:
-        return log.horizontal()
-
     def read_log(self, run_dir: Path, info: dict[str, Any]) -> SixDofLog:
         model = VehicleParams.model_validate(info["model"])
-        initial = every_thruster(model, info["scenario"].get("initial_thrust"))
+        initial = padded(info["scenario"].get("initial_thrust"), model.six_dof.n_thrusters)
         path = Path(run_dir) / "log.csv"
         return SixDofLog.read_csv(path, initial, n_horizontal=model.n_thrusters)
 
@@ -329,7 +365,6 @@ class DepthKind(RunKind):
     water or under waves."""
 
     name = "depth"
-    scenario_type = DepthScenario
     result_type = DepthRunResult
     has_horizontal = False
 
@@ -376,21 +411,25 @@ class DepthKind(RunKind):
         return DepthLog.read_csv(Path(run_dir) / "log.csv")
 
 
-KINDS: dict[str, RunKind] = {kind.name: kind for kind in (RunKind(), SixDofKind(), DepthKind())}
+KINDS: dict[str, RunKind] = {
+    kind.name: kind for kind in (HorizontalKind(), SixDofKind(), DepthKind())
+}
 
 
 def kind_of(scenario) -> RunKind:
     """The kind of run of a scenario (a ``Scenario``, ``SixDofScenario`` or
-    ``DepthScenario``), or of a saved run's ``scenario`` mapping."""
+    ``DepthScenario``), or of a saved run's ``scenario`` mapping (a kind it does not know is
+    one line naming it)."""
     name = scenario.get("kind", "horizontal") if isinstance(scenario, dict) else scenario.kind
+    if not isinstance(name, str) or name not in KINDS:
+        raise ConfigError("scenario.kind", name, f"one of {', '.join(KINDS)}")
     return KINDS[name]
 
 
-def every_thruster(model: VehicleParams, given) -> np.ndarray:
-    """F(-1) of every 6-DOF thruster from a scenario's ``initial_thrust`` (the horizontal
-    thrusters'; vertical ones start at 0)."""
-    six = model.six_dof
-    total = np.zeros(0 if six is None else six.n_thrusters)
+def padded(given, count: int) -> np.ndarray:
+    """F(-1) of ``count`` thrusters from a scenario's ``initial_thrust`` (the horizontal
+    thrusters'; the others, a 6-DOF vehicle's vertical ones, start at 0)."""
+    total = np.zeros(count)
     if given is not None:
         total[: len(given)] = given
     return total

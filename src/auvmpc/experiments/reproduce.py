@@ -118,7 +118,7 @@ def _reproduce_into(
         mark_folder(folder, OutputKind.RUN)
         row = {"scenario": job.scenario, "controller": job.controller, "level": job.level}
         row.update({key: result.metrics[key] for key in SUMMARY_KEYS})
-        row.update(velocity_settling(result.log))
+        row.update(velocity_settling(result.log.horizontal()))
         rows.append(row)
     depth_rows = []
     for name in DEPTH_SCENARIOS:
@@ -220,7 +220,7 @@ def _six_dof_pair(name: str, label: str, out_dir: Path, figures: bool) -> list[d
         fill_run_folder(result, folder, figures=figures)
         mark_folder(folder, OutputKind.RUN)
         row = {"scenario": name, "controller": label, "plant": plant}
-        row.update(velocity_errors(result.log, run.scenario.transient_s))
+        row.update(velocity_errors(result.log.horizontal(), run.scenario.transient_s))
         row.update({key: result.metrics.get(key) for key in SIX_DOF_KEYS if key not in row})
         rows.append(row)
     return rows

@@ -269,7 +269,7 @@ def read_planar_run(
         )
     scenario = kind.scenario_type.model_validate(info["scenario"], context={SAVED_RUN: True})
     model = VehicleParams.model_validate(info["model"])
-    return info, scenario, model, kind.horizontal_view(kind.read_log(run_dir, info))
+    return info, scenario, model, kind.read_log(run_dir, info).horizontal()
 
 
 def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:

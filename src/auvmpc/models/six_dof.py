@@ -49,6 +49,7 @@ __all__ = [
     "HORIZONTAL_INDEX",
     "PITCH_LIMIT_RAD",
     "SIX_DOF",
+    "SIX_DOF_MEASUREMENT",
     "PitchSingularity",
     "SixDofModel",
     "Rzyx",
@@ -69,6 +70,9 @@ SIX_DOF = Layout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p"
 NX = SIX_DOF.size
 # Where the horizontal model's [x, y, psi, u, v, r] sit in the 6-DOF state.
 HORIZONTAL_INDEX = np.array([SIX_DOF.index(name) for name in HORIZONTAL.names])
+# What the 6-DOF vehicle's controllers measure: the navigation solution's [x, y, psi, u, v, r]
+# and a depth sensor's depth and depth rate (NED, m and m/s, down positive).
+SIX_DOF_MEASUREMENT = Layout(names=(*HORIZONTAL.names, "z", "z_rate"))
 # Refuse, don't clamp: 5 deg short of the singularity, where 1/cos(theta) is 11.5.
 PITCH_LIMIT_RAD = math.radians(85.0)
 

@@ -107,10 +107,13 @@ def resolve_document(
     data: dict[str, Any], base_dir: Path
 ) -> ResolvedScenario | ResolvedDepthScenario:
     """A scenario document (a mapping as read from YAML) validated by the schema its
-    ``kind`` names and resolved for its vehicle; a bad field is one line naming it. An
-    unknown ``kind`` is left to the horizontal schema, which names the kinds it takes."""
+    ``kind`` names and resolved for its vehicle; a bad field is one line naming it. A
+    document without a known ``kind`` is a horizontal one (which refuses a ``kind`` it is
+    not: "kind: input should be 'horizontal'")."""
     kind = data.get("kind")
-    schema, resolved = SCENARIO_KINDS[kind if kind in ("six-dof", "depth") else "horizontal"]
+    schema, resolved = SCENARIO_KINDS[
+        kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
+    ]
     try:
         document = schema.model_validate(data)
     except ValidationError as error:

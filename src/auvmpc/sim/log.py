@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
-from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF
+from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
 
 if TYPE_CHECKING:
     from auvmpc.controllers.base import ControlResult
@@ -62,7 +62,7 @@ class Column:
 
     names: tuple[str, ...]
     field: str | None  # None: written as 0 and not read (a column kept for the file's shape)
-    part: Any = None  # which of the field's columns the block is (None: all)
+    part: slice | np.ndarray | list[int] | None = None  # the field's columns (None: all)
     text: bool = False  # strings (a status), as they are
     empty_is_inf: bool = False  # an empty cell is inf (no obstacle, no gap)
     optional: bool = False  # logs written before these columns have none (read as 0)
@@ -96,8 +96,8 @@ class SimLog:
     clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
     sample_time: float
     initial_thrust: np.ndarray  # (n,) F(-1), what the first rate limit is measured from
-    # (N+1, m) what the sensor gave at t_k (the controller's input on rows 0..N-1); in memory
-    # only for a horizontal run, whose log.csv keeps the truth.
+    # (N+1, m) what the sensors gave at t_k (the controller's input on rows 0..N-1); in
+    # memory only for horizontal and 6-DOF runs, whose log.csv keeps the truth.
     measured: np.ndarray
     backoff: np.ndarray  # (N, 2) BACKOFF_NAMES over [t_k, t_k+1)
 
@@ -149,10 +149,18 @@ class SimLog:
     def n_thrusters(self) -> int:
         return self.thrust.shape[1]
 
-    def record_command(self, k: int, result: ControlResult, thrust: np.ndarray) -> None:
-        """Row k's command: the (checked) thrust, how it came and the diagnostics the log
-        keeps of the controller's ``info``."""
+    def horizontal(self) -> SimLog:
+        """The horizontal view: ``[x, y, psi, u, v, r]``, their reference and the horizontal
+        thrusters (what 3-DOF metrics and figures read); a horizontal log is its own."""
+        return self
+
+    def record_command(
+        self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
+    ) -> None:
+        """Row k's command: the (checked) thrust, how it came, the controller call's wall
+        time and the diagnostics the log keeps of the controller's ``info``."""
         self.thrust[k] = thrust
+        self.solve_ms[k] = solve_ms
         self.status[k] = str(result.status)
         self.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
         self.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
@@ -204,15 +212,17 @@ class SimLog:
         return [csv_number(v) for v in part]
 
     @classmethod
-    def read_csv(cls, path: Path, initial_thrust: np.ndarray | None = None, **run: Any) -> SimLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly); ``run``: what
-        the kind's ``allocate`` takes beyond the sizes (a 6-DOF log's ``n_horizontal``)."""
+    def read_csv(
+        cls, path: Path, initial_thrust: np.ndarray | None = None, **run_fields: Any
+    ) -> SimLog:
+        """Load a log written by ``to_csv_text`` (values round-trip exactly); ``run_fields``:
+        what the kind's ``allocate`` takes beyond the sizes (a 6-DOF log's ``n_horizontal``)."""
         rows = _csv_rows(path)
         prefix = cls.input_prefix
         inputs = sum(name.startswith(prefix) and name[len(prefix) :].isdigit() for name in rows[0])
         steps = len(rows) - 1
         sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
-        log = cls.allocate(steps, inputs, sample_time, **run)
+        log = cls.allocate(steps, inputs, sample_time, **run_fields)
         for column in log.csv_columns():
             if column.field is None or (column.optional and column.names[0] not in rows[0]):
                 continue
@@ -244,6 +254,9 @@ class DepthLog(SimLog):
     disturbance_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
     measured_names: ClassVar[tuple[str, ...]] = ("z",)  # the pressure sensor's depth
     input_prefix: ClassVar[str] = "Fz"  # the vertical thrusters
+
+    def horizontal(self) -> SimLog:
+        raise TypeError("a depth run has no horizontal path")
 
     @property
     def z_ref(self) -> np.ndarray:
@@ -289,14 +302,12 @@ class SixDofLog(SimLog):
     layout: ClassVar[Layout] = SIX_DOF
     reference_names: ClassVar[tuple[str, ...]] = (*REFERENCE_NAMES, *DEPTH_REFERENCE_NAMES)
     disturbance_names: ClassVar[tuple[str, ...]] = CURRENT_NAMES
-    # The navigation sensor's [x, y, psi, u, v, r] and the depth sensor's depth and depth
-    # rate (NED, down positive).
-    measured_names: ClassVar[tuple[str, ...]] = (*HORIZONTAL.names, "z", "z_rate")
+    measured_names: ClassVar[tuple[str, ...]] = SIX_DOF_MEASUREMENT.names
     PER_COMMAND: ClassVar[tuple[str, ...]] = (
         *SimLog.PER_COMMAND, "depth_solve_ms", "depth_status", "saturated",
     )  # fmt: skip
 
-    n_horizontal: int = 0  # thrust's first columns, the horizontal controller's thrusters
+    n_horizontal: int = 0  # thrust's first columns, the horizontal controller's (allocate's)
     depth_solve_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,)
     depth_status: list[str] = field(default_factory=list)  # (N,) the depth controller's
     saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (N,)
@@ -304,7 +315,7 @@ class SixDofLog(SimLog):
 
     @classmethod
     def allocate(
-        cls, steps: int, n_thrusters: int, sample_time: float, *, n_horizontal: int = 0
+        cls, steps: int, n_thrusters: int, sample_time: float, *, n_horizontal: int
     ) -> SixDofLog:
         log = super().allocate(steps, n_thrusters, sample_time)
         log.n_horizontal = n_horizontal
@@ -328,10 +339,12 @@ class SixDofLog(SimLog):
         """(N+1, 3) the water velocity at the vehicle over [t_k, t_k+1) (world NED, m/s)."""
         return self.disturbance_world
 
-    def record_command(self, k: int, result: ControlResult, thrust: np.ndarray) -> None:
-        super().record_command(k, result, thrust)
-        # The channels' own results (controllers/channels.py): their time, not the mapping's.
-        self.solve_ms[k] = result.horizontal_solve_ms
+    def record_command(
+        self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
+    ) -> None:
+        # The channels' own results (controllers/channels.py): each one's time, not the
+        # whole call's (which adds the mapping's).
+        super().record_command(k, result, thrust, result.horizontal_solve_ms)
         self.depth_solve_ms[k] = result.depth_solve_ms
         self.depth_status[k] = str(result.depth_status)
         self.saturated[k] = result.saturated
@@ -359,12 +372,13 @@ class SixDofLog(SimLog):
 
     def csv_columns(self) -> tuple[Column, ...]:
         # A horizontal log's columns (every thruster), then the 6-DOF rest.
-        planar = {column.field: column for column in super().csv_columns()}
-        planar["state"] = Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX)
-        planar["reference"] = Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE)
-        planar["disturbance_world"] = Column(DISTURBANCE_NAMES, None)  # no force: the current
+        horizontal_part = {
+            "state": Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX),
+            "reference": Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE),
+            "disturbance_world": Column(DISTURBANCE_NAMES, None),  # no force: the current
+        }
         return (
-            *planar.values(),
+            *(horizontal_part.get(column.field, column) for column in super().csv_columns()),
             Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
             Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
             Column(CURRENT_NAMES, "disturbance_world"),

@@ -55,7 +55,9 @@ def closed_loop(
     on_step: Callable[[int, int], None] | None = None,
 ) -> SimLog:
     """Run ``controller`` against ``plant`` for ``duration`` seconds; the log is the plant's
-    kind (``plant.log_type``: a horizontal :class:`SimLog`, a depth :class:`DepthLog`).
+    kind (``plant.log_type``: a horizontal :class:`SimLog`, a depth :class:`DepthLog`; a
+    6-DOF run's log needs its horizontal thruster count, so it goes through
+    experiments/run.py's RunSession).
 
     The controller sees the sensor's measurement every ``controller.sample_time``;
     its command is applied unaltered and held until the next sample, so the log

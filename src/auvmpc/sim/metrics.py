@@ -387,7 +387,10 @@ def compute_depth_metrics(
         "rise_time_s": _rise_time(t_after, progress),
         "settling_time_0p05m_s": _settling_time(t_after, error, 0.05),
         "settling_time_2pct_s": _settling_time(t_after, error, 0.02 * abs(change)),
-        "overshoot_m": float(max(0.0, np.max((z_after - step.final_depth_m) * np.sign(change)))),
+        # None when the run ended before the step (a session closed early).
+        "overshoot_m": float(max(0.0, np.max((z_after - step.final_depth_m) * np.sign(change))))
+        if len(z_after)
+        else None,
         "steady_state_error_mean_abs_m": float(np.mean(steady_error)),
         "steady_state_error_max_abs_m": float(np.max(steady_error)),
         "max_z_m": float(z.max()),
@@ -418,7 +421,9 @@ def _rise_time(t: np.ndarray, progress: np.ndarray) -> float | None:
 
 
 def _settling_time(t: np.ndarray, error: np.ndarray, band: float) -> float | None:
-    """Time of the last entry into the band (None if it ends outside)."""
+    """Time of the last entry into the band (None if it ends outside, or never got there)."""
+    if len(error) == 0:
+        return None
     outside = np.flatnonzero(error > band)
     if len(outside) == 0:
         return 0.0

@@ -187,9 +187,9 @@ class SixDofPlant:
 
 
 class SixDofSensor:
-    """What the 6-DOF controllers measure: the navigation sensor's ``[x, y, psi, u, v, r]``
-    and a depth sensor's depth and depth rate (NED), each with Gaussian noise of its own
-    generator (SixDofLog's ``measured_names``)."""
+    """What the 6-DOF controllers measure (``SIX_DOF_MEASUREMENT``): the navigation sensor's
+    ``[x, y, psi, u, v, r]`` and a depth sensor's depth and depth rate (NED), with Gaussian
+    noise: the navigation sensor's from its generator, the depth sensor's from ``rng``."""
 
     def __init__(
         self,
@@ -205,7 +205,7 @@ class SixDofSensor:
         horizontal = self.navigation.measure(horizontal_state(true_state))
         depth = true_state[_SIX_DOF_DEPTH] + self.depth_std * self._rng.standard_normal()
         rate = depth_rate(true_state) + self.rate_std * self._rng.standard_normal()
-        return np.concatenate([horizontal, [depth, rate]])
+        return np.concatenate([horizontal, [depth, rate]])  # SIX_DOF_MEASUREMENT's order
 
 
 def plant_step(

@@ -30,6 +30,7 @@ from auvmpc.controllers.base import (
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import Layout
 from auvmpc.sim.log import LiveLog, SimLog
 
 __all__ = ["Session", "StateReference", "StepResult", "Truth"]
@@ -69,7 +70,8 @@ class Session:
     ``log`` is allocated for the run's samples (``log.steps`` commands); each :meth:`step`
     fills its row, :meth:`finish` the final state row, and :attr:`stepped_log` is the part
     filled so far. Without :class:`Truth` the log's state columns hold the measurement and
-    the vehicle-to-obstacle gap is the measured position's. ``live_log``: a new file that
+    the vehicle-to-obstacle gap is the measured position's; a session whose measurement is
+    not its whole state (6-DOF, depth) needs the truth. ``live_log``: a new file that
     gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
     """
 
@@ -102,6 +104,11 @@ class Session:
         self.closed = False  # filed as a run: nothing more may be stepped
         # Where the position sits in the state: obstacle gaps and detections need it.
         self.position = log.layout.position if obstacles or perception is not None else None
+        # The measured position, where the obstacle sensor looks from (by the measurement's
+        # own names: they need not be the state's).
+        self._measured_position = (
+            None if self.position is None else Layout(log.measured_names).position
+        )
         previous = (
             np.zeros(self.n_inputs) if initial_thrust is None else np.asarray(initial_thrust, float)
         )
@@ -156,8 +163,7 @@ class Session:
             obstacles=self._detections(log.t[k], measurement) if detections is None else detections,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
-        log.solve_ms[k] = solve_ms
-        log.record_command(k, result, thrust)
+        log.record_command(k, result, thrust, solve_ms)
         if self.live_log is not None:
             self.live_log.append(k)
         self.k = k + 1
@@ -213,6 +219,12 @@ class Session:
         t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
         names = log.measured_names
         measured = _finite_vector("measurement", measurement, len(names), names)
+        if truth is None and names != log.layout.names:
+            raise ConfigError(
+                "truth", None, f"needed: the measurement ({', '.join(names)}) is not the whole "
+                f"state ({', '.join(log.layout.names)}); pass Truth(state, environment) with "
+                "your simulator's or navigation filter's full state",
+            )  # fmt: skip
         if truth is not None:
             truth = Truth(
                 _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),
@@ -246,7 +258,7 @@ class Session:
         (from the measured position) where there is one, else the scenario's exactly."""
         if self.perception is None:
             return visible_obstacles(self.obstacles, t)
-        return self.perception.observe(t, measured[self.position])
+        return self.perception.observe(t, measured[self._measured_position])
 
     def _duration_text(self) -> str:
         return f"{self.log.steps * self.sample_time:g} s at {self.sample_time:g} s"
@@ -274,10 +286,12 @@ def _finite_vector(name: str, values: Any, size: int, names: Sequence[str]) -> n
         array = array.astype(float)
     except (TypeError, ValueError):
         raise ConfigError(name, values, "must be real numbers") from None
+    if size == 1 and array.ndim == 0:  # one value handed over as a number
+        array = array.reshape(1)
     if array.shape != (size,):
-        raise ConfigError(
-            name, np.ravel(array)[:12].tolist(), f"needs {size} values ({', '.join(names)})"
-        )
+        count = f"{size} value{'s' * (size != 1)}"
+        shown = np.ravel(array)[:12].tolist()
+        raise ConfigError(name, shown, f"needs {count} ({', '.join(names)})")
     if not np.all(np.isfinite(array)):
         raise ConfigError(name, array.tolist(), "must be finite")
     return array

@@ -316,7 +316,7 @@ def _resimulate(payload: str, index: int, yardstick: bool) -> tuple[dict[str, An
     from auvmpc.experiments.run import simulate
 
     result = simulate(scenario_for_run(_campaign_from_payload(payload), index, yardstick=yardstick))
-    return result.metrics, result.log
+    return result.metrics, result.log.horizontal()
 
 
 def worst_case_figures(
