@@ -31,7 +31,7 @@ def _log(n_thrusters: int, current=(10.0, 5.0), steps: int = 20) -> SimLog:
     log.state[:, 0] = np.linspace(0, 5, steps + 1)
     log.reference[:, 0] = np.linspace(0, 5.5, steps + 1)
     log.thrust[:] = np.arange(1, n_thrusters + 1)
-    log.disturbance_world[:, :2] = current
+    log.environment[:, :2] = current
     log.status[:] = ["ok"] * steps
     return log
 

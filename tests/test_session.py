@@ -69,7 +69,7 @@ def test_stepping_the_session_with_the_project_plant_is_the_batch_run(tmp_path, 
     # the log written as it went is the log.csv the session files
     assert live.read_text() == stepped.log.to_csv_text()
     assert stepped.log.steps == batch.log.steps > 0
-    for column in ("t", "state", "reference", "thrust", "measured", "disturbance_world",
+    for column in ("t", "state", "reference", "thrust", "measured", "environment",
                    "clearance_m", "disturbance_estimate", "backoff"):  # fmt: skip
         np.testing.assert_allclose(
             getattr(stepped.log, column), getattr(batch.log, column), rtol=0, atol=SAME_RUN_TOL,

@@ -39,9 +39,9 @@ def test_same_seed_same_bits_other_seed_other_bits():
     ).log
     assert np.array_equal(first.state, again.state)
     assert np.array_equal(first.thrust, again.thrust)
-    assert np.array_equal(first.disturbance_world, again.disturbance_world)
+    assert np.array_equal(first.environment, again.environment)
     assert not np.array_equal(first.state, other.state)
-    assert not np.array_equal(first.disturbance_world, other.disturbance_world)
+    assert not np.array_equal(first.environment, other.environment)
 
 
 def test_gauss_markov_current_has_its_stationary_statistics():

@@ -397,7 +397,7 @@ class _Scene:
         self.zoom.set_ylim(y - half, y + half)
         error = float(np.hypot(*(log.state[k, _POSITION] - log.reference[k, _POSITION])))
         self.clock.set_text(f"t = {t:6.1f} s\nerror {error:5.2f} m")
-        force = log.disturbance_world[k, :2]
+        force = log.environment[k, :2]
         magnitude = float(np.hypot(*force))
         if magnitude > 1e-9:
             bearing = math.degrees(math.atan2(force[1], force[0]))

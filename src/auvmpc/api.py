@@ -126,7 +126,7 @@ def session(scenario: Scenario | str | Path, live_log: str | Path | None = None)
     sensor's depth); ``detections`` the obstacles
     you perceive (default: the scenario's, through its obstacle sensor if it has one);
     ``truth`` (sim.session.Truth) the true state and the environment (the log's
-    ``disturbance_names``) if your simulator knows them, for the log and the metrics. A
+    ``environment_names``) if your simulator knows them, for the log and the metrics. A
     failed solve never raises: the result's ``status`` says so and ``u`` is the safety
     shell's command. ``auvmpc run`` is a loop over the same session with the built-in plant
     (docs/session.md). ``live_log``: a new file (never an existing one) that gets each row

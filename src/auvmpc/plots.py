@@ -155,7 +155,7 @@ def figure_trajectory(
             label=label,
             zorder=5,
         )
-    _finish_trajectory_axes(ax, log.disturbance_world)
+    _finish_trajectory_axes(ax, log.environment)
     return figure
 
 
@@ -879,7 +879,7 @@ def figure_compare_trajectory(
             markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
     ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
             label="end of each run")  # fmt: skip
-    _finish_trajectory_axes(ax, first.disturbance_world)
+    _finish_trajectory_axes(ax, first.environment)
     return figure
 
 

@@ -76,9 +76,9 @@ class SimLog:
     layout: ClassVar[Layout] = HORIZONTAL
     #: The reference's columns (what the controller is asked to follow, logged per row).
     reference_names: ClassVar[tuple[str, ...]] = REFERENCE_NAMES
-    #: What the environment does at each row (``disturbance_world``'s columns): a horizontal
+    #: What the environment does at each row (``environment``'s columns): a horizontal
     #: run's external force, a depth run's wave force, a 6-DOF run's water current.
-    disturbance_names: ClassVar[tuple[str, ...]] = DISTURBANCE_NAMES
+    environment_names: ClassVar[tuple[str, ...]] = DISTURBANCE_NAMES
     #: What the controller's sensors measure (``measured``'s columns, the session's
     #: measurement, in this order).
     measured_names: ClassVar[tuple[str, ...]] = HORIZONTAL.names
@@ -92,7 +92,7 @@ class SimLog:
     solve_ms: np.ndarray  # (N,) wall time of the controller call
     disturbance_estimate: np.ndarray  # (N, 3) what the controller assumed over [t_k, t_k+1)
     status: list[str]  # (N,) ControlStatus values
-    disturbance_world: np.ndarray  # (N+1, nd) disturbance_names at t_k
+    environment: np.ndarray  # (N+1, nd) environment_names at t_k
     clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
     sample_time: float
     initial_thrust: np.ndarray  # (n,) F(-1), what the first rate limit is measured from
@@ -105,7 +105,7 @@ class SimLog:
     # others (sample_time, initial_thrust) are the run's. :meth:`first` cuts by these lists,
     # so a new field goes in one of them (tests/test_session.py checks that every one is).
     PER_SAMPLE: ClassVar[tuple[str, ...]] = (
-        "t", "state", "reference", "disturbance_world", "clearance_m", "measured",
+        "t", "state", "reference", "environment", "clearance_m", "measured",
     )  # fmt: skip
     PER_COMMAND: ClassVar[tuple[str, ...]] = (
         "thrust", "solve_ms", "disturbance_estimate", "status", "backoff",
@@ -122,7 +122,7 @@ class SimLog:
             solve_ms=np.zeros(steps),
             disturbance_estimate=np.zeros((steps, len(ESTIMATE_NAMES))),
             status=[""] * steps,
-            disturbance_world=np.zeros((steps + 1, len(cls.disturbance_names))),
+            environment=np.zeros((steps + 1, len(cls.environment_names))),
             clearance_m=np.full(steps + 1, math.inf),
             sample_time=sample_time,
             initial_thrust=np.zeros(n_thrusters),
@@ -174,7 +174,7 @@ class SimLog:
             Column(self.input_names, "thrust"),
             Column(("solve_ms",), "solve_ms"),
             Column(("status",), "status", text=True),
-            Column(DISTURBANCE_NAMES, "disturbance_world"),
+            Column(DISTURBANCE_NAMES, "environment"),
             Column(("clearance_m",), "clearance_m", empty_is_inf=True),
             Column(ESTIMATE_NAMES, "disturbance_estimate", optional=True),
             Column(BACKOFF_NAMES, "backoff", optional=True),
@@ -251,7 +251,7 @@ class DepthLog(SimLog):
 
     layout: ClassVar[Layout] = DEPTH
     reference_names: ClassVar[tuple[str, ...]] = ("z_ref", "w_ref")  # log.csv keeps z_ref
-    disturbance_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
+    environment_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
     measured_names: ClassVar[tuple[str, ...]] = ("z",)  # the pressure sensor's depth
     input_prefix: ClassVar[str] = "Fz"  # the vertical thrusters
 
@@ -271,7 +271,7 @@ class DepthLog(SimLog):
     @property
     def wave_force(self) -> np.ndarray:
         """(N+1,) the waves' vertical force on the vehicle at t_k (N, up)."""
-        return self.disturbance_world[:, 0]
+        return self.environment[:, 0]
 
     def csv_columns(self) -> tuple[Column, ...]:
         return (
@@ -282,7 +282,7 @@ class DepthLog(SimLog):
             Column(("solve_ms",), "solve_ms"),
             Column(("status",), "status", text=True),
             Column(("z_measured",), "measured"),
-            Column(self.disturbance_names, "disturbance_world"),
+            Column(self.environment_names, "environment"),
         )
 
 
@@ -301,7 +301,7 @@ class SixDofLog(SimLog):
 
     layout: ClassVar[Layout] = SIX_DOF
     reference_names: ClassVar[tuple[str, ...]] = (*REFERENCE_NAMES, *DEPTH_REFERENCE_NAMES)
-    disturbance_names: ClassVar[tuple[str, ...]] = CURRENT_NAMES
+    environment_names: ClassVar[tuple[str, ...]] = CURRENT_NAMES
     measured_names: ClassVar[tuple[str, ...]] = SIX_DOF_MEASUREMENT.names
     PER_COMMAND: ClassVar[tuple[str, ...]] = (
         *SimLog.PER_COMMAND, "depth_solve_ms", "depth_status", "saturated",
@@ -337,7 +337,7 @@ class SixDofLog(SimLog):
     @property
     def current_world(self) -> np.ndarray:
         """(N+1, 3) the water velocity at the vehicle over [t_k, t_k+1) (world NED, m/s)."""
-        return self.disturbance_world
+        return self.environment
 
     def record_command(
         self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
@@ -362,7 +362,7 @@ class SixDofLog(SimLog):
             solve_ms=self.solve_ms,
             disturbance_estimate=self.disturbance_estimate,
             status=self.status,
-            disturbance_world=np.zeros((len(self.t), len(DISTURBANCE_NAMES))),
+            environment=np.zeros((len(self.t), len(DISTURBANCE_NAMES))),
             clearance_m=self.clearance_m,
             sample_time=self.sample_time,
             initial_thrust=self.initial_thrust[:n],
@@ -375,13 +375,13 @@ class SixDofLog(SimLog):
         horizontal_part = {
             "state": Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX),
             "reference": Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE),
-            "disturbance_world": Column(DISTURBANCE_NAMES, None),  # no force: the current
+            "environment": Column(DISTURBANCE_NAMES, None),  # no force: the current
         }
         return (
             *(horizontal_part.get(column.field, column) for column in super().csv_columns()),
             Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
             Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
-            Column(CURRENT_NAMES, "disturbance_world"),
+            Column(CURRENT_NAMES, "environment"),
             Column(("depth_solve_ms",), "depth_solve_ms"),
             Column(("depth_status",), "depth_status", text=True),
         )

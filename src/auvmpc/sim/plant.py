@@ -68,7 +68,7 @@ class Plant(Protocol):
     sample_time: float  # s, the sample :meth:`step` integrates over
 
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
-        """What the environment does at ``t`` (the log's ``disturbance_names``, one row per
+        """What the environment does at ``t`` (the log's ``environment_names``, one row per
         sample): a force on the vehicle, or the water's velocity."""
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
@@ -164,7 +164,7 @@ class SixDofPlant:
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
         """The water velocity at the vehicle (world NED, m/s), held over [t, t + sample)."""
         if self.current is None:
-            return np.zeros(len(SixDofLog.disturbance_names))
+            return np.zeros(len(SixDofLog.environment_names))
         return self.current.at(t, state[_SIX_DOF_DEPTH], depth_rate(state))[0]
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:

@@ -50,7 +50,7 @@ class StepResult:
 @dataclass(frozen=True)
 class Truth:
     """What a simulator knows beyond the measurement: the true state (in the log's layout)
-    and what the environment does at the sample, in the log's ``disturbance_names``: a
+    and what the environment does at the sample, in the log's ``environment_names``: a
     horizontal run's world force and moment, a depth run's wave force, a 6-DOF run's water
     velocity at the vehicle."""
 
@@ -229,8 +229,8 @@ class Session:
             truth = Truth(
                 _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),
                 _finite_vector(
-                    "truth.environment", truth.environment, len(log.disturbance_names),
-                    log.disturbance_names,
+                    "truth.environment", truth.environment, len(log.environment_names),
+                    log.environment_names,
                 ),
             )  # fmt: skip
         return t, measured, truth
@@ -244,7 +244,7 @@ class Session:
         log.reference[k] = self._preview[0]
         if truth is not None:
             log.state[k] = truth.state
-            log.disturbance_world[k] = truth.environment
+            log.environment[k] = truth.environment
         else:
             log.state[k] = measured
         if self.position is not None:
