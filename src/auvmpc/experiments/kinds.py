@@ -172,6 +172,10 @@ class RunKind(ABC):
         """The run's random streams by what they drive (children of the scenario seed)."""
 
     @abstractmethod
+    def controller(self, scenario, model: VehicleParams) -> Controller:
+        """The scenario's controller on the nominal vehicle model ``model``."""
+
+    @abstractmethod
     def start(self, resolved, controller: Controller) -> SessionStart:
         """What the session steps: ``controller`` is the scenario's, built by the caller."""
 
@@ -218,6 +222,9 @@ class HorizontalKind(RunKind):
         0 and 1 as they were before it)."""
         current, sensor, obstacles = np.random.SeedSequence(scenario.seed).spawn(3)
         return {"current": current, "sensor": sensor, "obstacles": obstacles}
+
+    def controller(self, scenario, model: VehicleParams) -> Controller:
+        return build_controller(scenario.controller, model, obstacle_count=len(scenario.obstacles))
 
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario = resolved.scenario
@@ -372,6 +379,10 @@ class DepthKind(RunKind):
         """Child 0 of the scenario seed is the waves', child 1 the sensor's."""
         waves, sensor = np.random.SeedSequence(scenario.seed).spawn(2)
         return {"waves": waves, "sensor": sensor}
+
+    def controller(self, scenario, model: VehicleParams) -> Controller:
+        """The depth MPC, kept clear of the tank's bottom."""
+        return build_controller(scenario.controller, model, water_depth_m=scenario.tank.depth_m)
 
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario = resolved.scenario

@@ -14,7 +14,6 @@ from threadpoolctl import threadpool_limits
 from auvmpc import interrupts
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.config import SAVED_RUN
-from auvmpc.controllers.registry import build_controller
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.kinds import (
     KINDS,
@@ -53,10 +52,9 @@ __all__ = [
 
 
 def make_controller(scenario: Scenario | DepthScenario, model: VehicleParams) -> Controller:
-    """The scenario's controller, built on the nominal (controller-side) vehicle model."""
-    if isinstance(scenario, DepthScenario):
-        return build_controller(scenario.controller, model, water_depth_m=scenario.tank.depth_m)
-    return build_controller(scenario.controller, model, obstacle_count=len(scenario.obstacles))
+    """The scenario's controller, built on the nominal (controller-side) vehicle model (a
+    6-DOF scenario's horizontal one: its kind pairs it with the depth MPC)."""
+    return kind_of(scenario).controller(scenario, model)
 
 
 def simulate(
