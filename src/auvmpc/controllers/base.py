@@ -23,6 +23,8 @@ __all__ = [
     "ControlResult",
     "ControlStatus",
     "Controller",
+    "MemoryNeed",
+    "nlp_memory_need",
     "Observation",
     "ObstacleState",
     "feasible_thrust_box",
@@ -65,6 +67,33 @@ class ControlResult:
     info: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class MemoryNeed:
+    """The largest allocation building a controller's problem takes, what it is, and the
+    scenario field that sets its size (for a one-line refusal: scenario/sanity.py)."""
+
+    field: str
+    value: object
+    n_bytes: float
+    what: str  # e.g. "building the nmpc problem with ny=30"
+
+
+# Peak memory of building a CasADi/IPOPT problem grows about as ny^2: measured with
+# `/usr/bin/time -f %M` around make_controller for nmpc on jmse2210 (paper-ideal,
+# control_horizon null): ny = 500 -> 0.18 GB, ny = 2000 -> 1.16 GB.
+NLP_BYTES_PER_STAGE_SQUARED = 270
+FLOAT_BYTES = 8  # float64
+
+
+def nlp_memory_need(config) -> MemoryNeed:
+    """Building the CasADi nonlinear program of ``config`` (nmpc, do-mpc)."""
+    ny = config.prediction_horizon
+    return MemoryNeed(
+        "controller.prediction_horizon", ny, NLP_BYTES_PER_STAGE_SQUARED * ny * ny,
+        f"building the {config.type} problem with ny={ny}",
+    )  # fmt: skip
+
+
 class Controller(ABC):
     """A discrete-time controller run every ``sample_time`` seconds.
 
@@ -79,6 +108,18 @@ class Controller(ABC):
     # What a run should record about how this controller was built (e.g. a slower path
     # taken because the machine lacks something); the run adds them to its warnings.
     build_warnings: tuple[str, ...] = ()
+
+    @classmethod
+    def libraries(cls, config) -> tuple[str, ...]:
+        """Distributions beyond numpy, scipy and casadi it uses with ``config`` (run.json's
+        provenance names their versions)."""
+        return ()
+
+    @classmethod
+    def memory_need(cls, config, n_inputs: int, n_states: int) -> MemoryNeed | None:
+        """What building its problem for ``config`` allocates at most, with ``n_inputs``
+        thrusters and ``n_states`` states; None where that is small."""
+        return None
 
     @abstractmethod
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:

@@ -38,7 +38,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from auvmpc.controllers.base import Observation, align_heading
+from auvmpc.controllers.base import MemoryNeed, Observation, align_heading, nlp_memory_need
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
@@ -201,6 +201,14 @@ class DoMpcController(ShelledController):
         self._needs_guess = True
 
     # -- Controller interface ------------------------------------------------------------
+    @classmethod
+    def libraries(cls, config) -> tuple[str, ...]:
+        return ("do-mpc",)
+
+    @classmethod
+    def memory_need(cls, config, n_inputs: int, n_states: int) -> MemoryNeed:
+        return nlp_memory_need(config)
+
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> DoMpcController:
         return cls(model, config, obstacle_slots=obstacle_count)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.base import Observation
+from auvmpc.controllers.base import FLOAT_BYTES, MemoryNeed, Observation
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
@@ -39,6 +39,28 @@ class IncrementalMpc(ShelledController):
 
     qp: CondensedQp
     linearisation_iterations: int = 1
+
+    @classmethod
+    def libraries(cls, config) -> tuple[str, ...]:
+        return (str(config.qp_solver),)
+
+    @classmethod
+    def memory_need(cls, config, n_inputs: int, n_states: int) -> MemoryNeed:
+        """The condensed QP's arrays, which grow as ny x nc x n^2 (the sparse form, where it
+        is chosen, needs less)."""
+        ny, nc = config.prediction_horizon, len(config.move_schedule())
+        moves = nc * n_inputs
+        # move-to-input map (ny, n, moves), forcing and stacked predictions
+        # (ny, nx, moves + 1), the Hessian and constraint rows (moves^2 each)
+        n_bytes = FLOAT_BYTES * (
+            (ny + 1) * (n_inputs + 2 * n_states) * (moves + 1) + 3 * moves * moves
+        )
+        field, value = "controller.prediction_horizon", ny
+        if config.control_horizon is not None and config.control_horizon > 1000:
+            field, value = "controller.control_horizon", config.control_horizon
+        what = f"the condensed QP of {config.type} with ny={ny}, nc={nc} and {n_inputs} thrusters"
+        return MemoryNeed(field, value, n_bytes, what)
+
     trust_region_weights: np.ndarray | None = None  # (nx,) for plants linearised on a plan
     sparse_qp: SparseIncrementalQp | None = None  # set: the sparse form is available
     sparse_only: bool = False  # True: always the sparse form; False: condensed when well posed

@@ -64,8 +64,10 @@ import math
 import numpy as np
 
 from auvmpc.controllers.base import (
+    MemoryNeed,
     Observation,
     horizontal_limits,
+    nlp_memory_need,
     tracked_reference,
 )
 from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
@@ -134,6 +136,10 @@ class NonlinearMpc(ShelledController):
             else None
         )
         self.reset(np.zeros(NX), np.zeros(model.n_thrusters))
+
+    @classmethod
+    def memory_need(cls, config, n_inputs: int, n_states: int) -> MemoryNeed:
+        return nlp_memory_need(config)
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> NonlinearMpc:

@@ -19,7 +19,7 @@ from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["REGISTRY", "build_controller", "register_controller"]
+__all__ = ["REGISTRY", "build_controller", "class_of", "register_controller"]
 
 # Imported only when used: do-mpc is an optional extra, and CasADi set-up is not free.
 REGISTRY: dict[str, tuple[str, str] | type] = {
@@ -68,22 +68,26 @@ def register_controller(name: str, controller: type, *, recovered: bool = False)
         RECOVERED_TYPES.add(name)
 
 
+def class_of(controller_type: str) -> type[Controller]:
+    """The class of a controller type (a built-in one's module imported now)."""
+    entry = REGISTRY[controller_type]
+    if isinstance(entry, type):  # registered by register_controller
+        return entry
+    module, name = entry
+    return getattr(importlib.import_module(module), name)
+
+
 def build_controller(
     config: ControllerConfig | DepthControllerConfig,
     model: VehicleParams,
     obstacle_count: int = 0,
     **surroundings: float,
-) -> ShelledController:
+) -> Controller:
     """The configured controller on the nominal (controller-side) vehicle model.
 
     ``surroundings``: what else the scenario says that the controller is built for, by
     name (a depth controller's ``water_depth_m``)."""
-    entry = REGISTRY[config.type]
-    if isinstance(entry, type):  # registered by register_controller
-        controller_class = entry
-    else:
-        module, name = entry
-        controller_class = getattr(importlib.import_module(module), name)
+    controller_class = class_of(config.type)
     filled = config.for_vehicle(model)
     if not hasattr(controller_class, "from_config"):
         return controller_class(model, filled)

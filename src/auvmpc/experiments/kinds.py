@@ -23,7 +23,7 @@ import numpy as np
 from auvmpc import __version__
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.channels import HorizontalAndDepth, ReferenceWithDepth
-from auvmpc.controllers.registry import build_controller
+from auvmpc.controllers.registry import build_controller, class_of
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.depth_sensor import PressureSensor
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
@@ -34,7 +34,6 @@ from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import DepthStep, make_reference
 from auvmpc.scenario import (
-    ControllerType,
     ResolvedDepthScenario,
     ResolvedScenario,
     ResolvedSixDofScenario,
@@ -187,9 +186,11 @@ class RunKind(ABC):
     def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
         """The run's metrics (sim/metrics.py)."""
 
-    @abstractmethod
     def libraries(self, scenario) -> tuple[str, ...]:
-        """Distributions beyond numpy, scipy and casadi that the scenario's controllers use."""
+        """Distributions beyond numpy, scipy and casadi that the scenario's controllers use
+        (each controller class declares its own)."""
+        config = scenario.controller
+        return class_of(config.type).libraries(config)
 
     @abstractmethod
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
@@ -273,14 +274,6 @@ class HorizontalKind(RunKind):
         metrics = self.metrics(resolved, log)
         return self.result_type(resolved, log, metrics, provenance=provenance, warnings=warnings)
 
-    def libraries(self, scenario) -> tuple[str, ...]:
-        kind = scenario.controller.type
-        if kind in (ControllerType.MPC, ControllerType.LTV_MPC):
-            return (str(scenario.controller.qp_solver),)
-        if kind is ControllerType.DO_MPC:
-            return ("do-mpc",)
-        return ()  # baseline: NumPy only; nmpc: IPOPT inside casadi
-
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         from auvmpc.plots import run_figures, run_title
 
@@ -350,8 +343,9 @@ class SixDofKind(HorizontalKind):
         )
 
     def libraries(self, scenario) -> tuple[str, ...]:
-        """The horizontal controller's, then the depth MPC's QP solver."""
-        return (*super().libraries(scenario), str(scenario.depth_controller.qp_solver))
+        """The horizontal controller's, then the depth MPC's."""
+        depth = scenario.depth_controller
+        return (*super().libraries(scenario), *class_of(depth.type).libraries(depth))
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         """The horizontal figures of the horizontal view, then the 6-DOF ones."""
@@ -407,9 +401,6 @@ class DepthKind(RunKind):
 
     def metrics(self, resolved, log) -> dict[str, Any]:
         return compute_depth_metrics(log, resolved.scenario.reference, resolved.heave_plant)
-
-    def libraries(self, scenario) -> tuple[str, ...]:
-        return (str(scenario.controller.qp_solver),)
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         """The depth step (``plant``'s heave limits drawn)."""

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from auvmpc.controllers.base import FLOAT_BYTES
 from auvmpc.controllers.config import (
     AGILITY_SPEED_M_PER_S,
     HEADING_PER_SAMPLE_RAD,
@@ -46,6 +47,7 @@ from auvmpc.controllers.config import (
     default_sqp_iterations,
     velocity_change_time,
 )
+from auvmpc.controllers.registry import class_of
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
@@ -71,11 +73,6 @@ __all__ = [
 _RELATIVE_MARGIN = 1e-6
 # Memory a run may plan to use, as a share of what the machine has available now.
 _MEMORY_SHARE = 0.8
-_BYTES = 8  # float64
-# Peak memory of building the CasADi/IPOPT problem grows about as ny^2: measured with
-# `/usr/bin/time -f %M` around make_controller for nmpc on jmse2210 (paper-ideal,
-# control_horizon null): ny = 500 -> 0.18 GB, ny = 2000 -> 1.16 GB.
-_NLP_BYTES_PER_STAGE_SQUARED = 270
 
 
 def available_memory_bytes() -> int:
@@ -103,8 +100,9 @@ def _size(n_bytes: float) -> str:
 def check_memory(
     resolved: ResolvedScenario | ResolvedDepthScenario, available: int | None = None
 ) -> None:
-    """Refuse sizes that cannot fit: the log (duration / sample_time samples) and the
-    condensed QP of the linear MPCs, whose prediction arrays grow as ny x nc x n^2."""
+    """Refuse sizes that cannot fit: the log (duration / sample_time samples) and what
+    building the controller's problem takes (``memory_need`` of its class: the condensed
+    QP of the linear MPCs grows as ny x nc x n^2, the nonlinear program as ny^2)."""
     scenario = resolved.scenario
     config = scenario.controller
     budget = _MEMORY_SHARE * (available_memory_bytes() if available is None else available)
@@ -116,7 +114,7 @@ def check_memory(
     )
     nx = (DEPTH if isinstance(resolved, ResolvedDepthScenario) else HORIZONTAL).size
     # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
-    log_bytes = steps * (_BYTES * (3 * nx + n + 4) + 64)
+    log_bytes = steps * (FLOAT_BYTES * (3 * nx + n + 4) + 64)
     if log_bytes > budget:
         raise ConfigError(
             "duration",
@@ -124,38 +122,14 @@ def check_memory(
             f"{steps:.3g} samples of {config.sample_time} s need about {_size(log_bytes)} "
             f"of log, more than the {_size(budget)} of memory available",
         )
-    ny = config.prediction_horizon
-    if str(config.type) in ("nmpc", "do-mpc"):
-        nlp_bytes = _NLP_BYTES_PER_STAGE_SQUARED * ny * ny
-        if nlp_bytes > budget:
-            raise ConfigError(
-                "controller.prediction_horizon",
-                ny,
-                f"building the {config.type} problem with ny={ny} needs about "
-                f"{_size(nlp_bytes)}, more than the {_size(budget)} of memory available",
-            )
-        return
-    condensed = isinstance(resolved, ResolvedDepthScenario) or str(config.type) in (
-        "mpc",
-        "ltv-mpc",
-    )
-    if not condensed:
-        return
-    nc = len(config.move_schedule())
-    moves = nc * n
-    # move-to-input map (ny, n, moves), forcing and stacked predictions (ny, nx, moves + 1),
-    # the Hessian and constraint rows (moves^2 each)
-    qp_bytes = _BYTES * ((ny + 1) * (n + 2 * nx) * (moves + 1) + 3 * moves * moves)
-    if qp_bytes > budget:
-        field = "controller.prediction_horizon"
-        value: object = ny
-        if config.control_horizon is not None and config.control_horizon > 1000:
-            field, value = "controller.control_horizon", config.control_horizon
+    # What building the controller's problem takes, as its class declares it.
+    need = class_of(config.type).memory_need(config, n, nx)
+    if need is not None and need.n_bytes > budget:
         raise ConfigError(
-            field,
-            value,
-            f"the condensed QP of {config.type} with ny={ny}, nc={nc} and {n} thrusters "
-            f"needs about {_size(qp_bytes)}, more than the {_size(budget)} of memory available",
+            need.field,
+            need.value,
+            f"{need.what} needs about {_size(need.n_bytes)}, more than the {_size(budget)} "
+            "of memory available",
         )
 
 
