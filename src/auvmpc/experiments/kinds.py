@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -77,6 +77,10 @@ class SessionStart:
     obstacles: Sequence[ObstacleConfig] = ()
     perception: ObstaclePerception | None = None
     vehicle_radius: float = 0.0
+
+    def arguments(self) -> dict[str, Any]:
+        """As keyword arguments of ``Session`` (its fields are Session's parameters)."""
+        return {item.name: getattr(self, item.name) for item in fields(self)}
 
 
 @dataclass

@@ -148,18 +148,7 @@ class RunSession(Session):
         controller = make_controller(resolved.scenario, resolved.model)
         # getattr: a controller need not derive from base.Controller (a user's own, a test's).
         self.warnings = [*warnings, *getattr(controller, "build_warnings", ())]
-        start = self.kind.start(resolved, controller)
-        super().__init__(
-            start.controller,
-            start.reference,
-            start.log,
-            initial_state=start.initial_state,
-            initial_thrust=start.initial_thrust,
-            obstacles=start.obstacles,
-            perception=start.perception,
-            vehicle_radius=start.vehicle_radius,
-            live_log=live_log,
-        )
+        super().__init__(**self.kind.start(resolved, controller).arguments(), live_log=live_log)
         self.duration = self.log.steps * self.sample_time
 
     def result(self) -> Finished:
