@@ -195,6 +195,18 @@ def test_memory_check_covers_the_nonlinear_mpc():
     check_memory(load_scenario("paper-ideal", ["controller.type=nmpc"]), available=2**30)
 
 
+def test_memory_check_covers_the_sparse_qp_of_ltv_mpc():
+    """ltv-mpc may choose its sparse QP, whose set-up assembles H and A dense: measured
+    4.07 GB at ny = 600 (controllers/ltv.py). At ny = 3000 it needs tens of GiB: refused
+    in one line, before the run, where it used to be a MemoryError or the OOM killer."""
+    resolved = load_scenario("paper-ideal", ["controller.type=ltv-mpc",
+                                             "controller.prediction_horizon=3000"])  # fmt: skip
+    with pytest.raises(ConfigError, match=r"^controller\.prediction_horizon: setting up the"):
+        check_memory(resolved, available=24 * 2**30)
+    # the preset's ny = 30 needs a few MiB
+    check_memory(load_scenario("paper-ideal", ["controller.type=ltv-mpc"]), available=2**30)
+
+
 def test_warnings_are_printed_and_stored(monkeypatch, capsys, tmp_path):
     out = tmp_path / "run"
     code, _, stderr = run_cli(

@@ -12,6 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from auvmpc.controllers.base import FLOAT_BYTES, MemoryNeed
 from auvmpc.controllers.config import ControllerConfig, QpStructure
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.models.discrete import horizontal_model
@@ -32,8 +33,31 @@ def linearised_rollout(
     return horizontal_model(model, sample_time, substeps, jit).linearised_rollout(horizon)
 
 
+_SPARSE_SETUP_BYTES_PER_ENTRY = 6 * FLOAT_BYTES
+
+
 class LtvMpc(LinearMpc):
     """Condensed MPC on the model linearised along the shifted previous solution."""
+
+    @classmethod
+    def memory_need(cls, config, n_inputs: int, n_states: int) -> MemoryNeed:
+        """The larger of the condensed QP's arrays and, where the sparse form may be chosen,
+        the sparse QP's set-up (solvers/sparse_qp.py): H and A assembled dense with their
+        masks and the copies CasADi takes of them."""
+        condensed = super().memory_need(config, n_inputs, n_states)
+        if config.qp_structure is QpStructure.CONDENSED:
+            return condensed
+        ny, moves = config.prediction_horizon, len(config.move_schedule()) * n_inputs
+        stage = n_states + n_inputs  # [dX_k; p_k]
+        columns = (ny + 1) * stage + ny + moves  # + one slack per step, the moves
+        rows = ny * (stage + 1) + moves
+        # Measured (/usr/bin/time -f %M, paper-ideal, qp_structure sparse): peak 0.20 GB at
+        # ny = 30, 1.19 GB at 300, 4.07 GB at 600: 44-45 bytes per entry of H and A.
+        n_bytes = _SPARSE_SETUP_BYTES_PER_ENTRY * (columns * columns + rows * columns)
+        if n_bytes <= condensed.n_bytes:
+            return condensed
+        what = f"setting up the sparse QP of {config.type} with ny={ny}"
+        return MemoryNeed("controller.prediction_horizon", ny, n_bytes, what)
 
     def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
         super().__init__(model, config)
