@@ -54,7 +54,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import FieldError
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 
 __all__ = ["BaselineConfig", "BaselineController"]
@@ -64,8 +64,6 @@ __all__ = ["BaselineConfig", "BaselineController"]
 # in the allocation is far smaller, any real clipping far larger.
 _SATURATION_TOLERANCE_N = 1e-9
 _POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
-# The force and the moment of a generalised force, disturbance or thrust authority [X, Y, N].
-_FORCE, _MOMENT = PLANAR_FORCE.span("X", "Y"), PLANAR_FORCE.index("N")
 
 
 class BaselineConfig(StrictModel):
@@ -198,8 +196,8 @@ class BaselineController(ShelledController):
 
     def assume_disturbance(self, disturbance: np.ndarray) -> None:
         """Start the integral state at a known ``[X, Y, N]`` (world force N, moment N m)."""
-        self._force_integral = np.array(disturbance[_FORCE], dtype=float)
-        self._moment_integral = float(disturbance[_MOMENT])
+        self._force_integral = np.array(disturbance[PLANAR_FORCE_XY], dtype=float)
+        self._moment_integral = float(disturbance[PLANAR_MOMENT])
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
@@ -245,7 +243,7 @@ class BaselineController(ShelledController):
         details = {
             "tau_u_N": float(tau_des[0]),
             "tau_v_N": float(tau_des[1]),
-            "tau_r_N_m": float(tau_des[_MOMENT]),
+            "tau_r_N_m": float(tau_des[PLANAR_MOMENT]),
             "along_track_error_m": float(errors[0]),
             "cross_track_error_m": float(errors[1]),
             "heading_error_rad": float(errors[2]),
@@ -334,8 +332,8 @@ class BaselineController(ShelledController):
         tau = (
             np.array([p.m11 * nu_dot[0], p.m22 * nu_dot[1], p.Iz * yaw_accel]) - damping - coriolis
         )
-        tau[_FORCE] -= _rotation(psi).T @ self._force_integral
-        tau[_MOMENT] -= self._moment_integral
+        tau[PLANAR_FORCE_XY] -= _rotation(psi).T @ self._force_integral
+        tau[PLANAR_MOMENT] -= self._moment_integral
         # The integrators see the position error shrunk by the same cap: outside the range
         # where the loop is linear a large error must not pile up integral in a few samples.
         integrated = np.array([cap * error_path[0], cap * error_path[1], heading_error])
@@ -374,8 +372,8 @@ class BaselineController(ShelledController):
         the result.
         """
         p = self.model
-        thrust_yaw = p.T_pinv[:, _MOMENT] * tau_des[_MOMENT]
-        thrust_planar = p.T_pinv[:, _FORCE] @ tau_des[_FORCE]
+        thrust_yaw = p.T_pinv[:, PLANAR_MOMENT] * tau_des[PLANAR_MOMENT]
+        thrust_planar = p.T_pinv[:, PLANAR_FORCE_XY] @ tau_des[PLANAR_FORCE_XY]
         if self._zero_thrust_feasible:
             lower = np.full(p.n_thrusters, p.thrust_min)
             upper = np.full(p.n_thrusters, p.thrust_max)
@@ -407,9 +405,9 @@ class BaselineController(ShelledController):
         if saturated:
             # The integral changes tau by -R^T force_step (and -moment_step); skip a step that
             # would deepen the cut the limits just made (deficit = asked - applied).
-            if -(body_to_world.T @ force_step) @ deficit[_FORCE] > 0:
+            if -(body_to_world.T @ force_step) @ deficit[PLANAR_FORCE_XY] > 0:
                 force_step = np.zeros(2)
-            if -moment_step * deficit[_MOMENT] > 0:
+            if -moment_step * deficit[PLANAR_MOMENT] > 0:
                 moment_step = 0.0
         self._force_integral = _clip_norm(self._force_integral + force_step, g.max_integral_force_N)
         limit = g.max_integral_moment_N_m

@@ -12,7 +12,7 @@ from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
@@ -136,7 +136,7 @@ class ControllerConfig(StrictModel):
         description="which controller (default: the real-time nmpc, the one that measured best "
         "on the hard-survey sweep, docs/recovery.md); or a name given to "
         "controllers.registry.register_controller (docs/extending.md)",
-        json_schema_extra=lambda schema: _registered_types(schema),
+        json_schema_extra=_registered_types,
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
@@ -492,7 +492,7 @@ RTI_AGILE_SAMPLES = 8.0
 def velocity_change_time(model: VehicleParams) -> float:
     """How long the full thrust authority takes to change the surge or the sway speed (the
     quicker of the two) by AGILITY_SPEED_M_PER_S, drag aside (s): m v / F."""
-    forces = model.thrust_authority[PLANAR_FORCE.span("X", "Y")]  # surge and sway
+    forces = model.thrust_authority[PLANAR_FORCE_XY]  # surge and sway
     times = [
         mass / force if force > 0 else math.inf  # an axis without thrust: not agile on it
         for mass, force in zip((model.m11, model.m22), forces, strict=True)

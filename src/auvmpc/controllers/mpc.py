@@ -35,7 +35,7 @@ from auvmpc.controllers.incremental import IncrementalMpc, Tightened
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams, body_from_world, steady_speed
 from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
@@ -376,7 +376,7 @@ class PaperMpc(LinearMpc):
         n, ny = self.model.n_thrusters, self.horizon
         # The paper's g_c w_b term: the disturbance rotated at the frozen heading.
         d_u, d_v = body_from_world(disturbance, state[HORIZONTAL.heading])
-        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[PLANAR_FORCE.index("N")]])
+        offset = Bd[:, n:] @ np.array([d_u, d_v, disturbance[PLANAR_MOMENT]])
         G = None
         if self.tightening is not None:  # in the world force: rotated at the frozen heading
             heading = state[HORIZONTAL.heading]

@@ -29,7 +29,7 @@ from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_FORCE_XY, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
@@ -47,8 +47,6 @@ NX, ND = HORIZONTAL.size, PLANAR_FORCE.size
 
 
 # Disturbance statistics as fractions of the thrust authority (ObserverConfig.for_vehicle).
-# The force and the moment of a force estimate or a thrust authority [X, Y, N].
-_FORCE, _MOMENT = PLANAR_FORCE.span("X", "Y"), PLANAR_FORCE.index("N")
 _PRIOR_FORCE_FRACTION = 0.5
 _PRIOR_MOMENT_FRACTION = 0.1
 _RATE_FORCE_FRACTION = 0.025  # per sqrt(s)
@@ -105,8 +103,8 @@ class ObserverConfig(StrictModel):
         """
         update = {}
         # The world-frame X and Y share one scale: the current turns with the heading.
-        planar = float(max(model.thrust_authority[_FORCE]))
-        yaw = float(model.thrust_authority[_MOMENT])
+        planar = float(max(model.thrust_authority[PLANAR_FORCE_XY]))
+        yaw = float(model.thrust_authority[PLANAR_MOMENT])
         if self.initial_disturbance_std is None:
             update["initial_disturbance_std"] = (
                 _PRIOR_FORCE_FRACTION * planar,
@@ -265,7 +263,7 @@ class DisturbanceObserver:
         # filter has diverged (seen after a spin: 1.9e5 N on a 100 N vehicle, kept by
         # every later step), and starts again from the measurement.
         authority = np.asarray(model.thrust_authority)
-        force, moment = authority[_FORCE].max(), authority[_MOMENT]
+        force, moment = authority[PLANAR_FORCE_XY].max(), authority[PLANAR_MOMENT]
         self._plausible_force = PLAUSIBLE_AUTHORITY_MULTIPLE * float(force)
         self._plausible_moment = PLAUSIBLE_AUTHORITY_MULTIPLE * float(moment)
         self.restarts = 0

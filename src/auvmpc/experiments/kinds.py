@@ -220,6 +220,7 @@ class HorizontalKind(RunKind):
     name = "horizontal"
     result_type = RunResult
     has_horizontal = True
+    measure = staticmethod(compute_metrics)  # (log, model, transient_s, obstacle_margin)
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
         """The run's random streams by what they drive: children 0, 1 and 2 of the scenario
@@ -267,16 +268,9 @@ class HorizontalKind(RunKind):
 
     def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
         scenario = resolved.scenario
-        return compute_metrics(
+        return self.measure(
             log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
         )
-
-    def finished(
-        self, resolved, log: SimLog, provenance: dict[str, Any], warnings: list[str]
-    ) -> Finished:
-        """The finished run of ``log``, with its metrics."""
-        metrics = self.metrics(resolved, log)
-        return self.result_type(resolved, log, metrics, provenance=provenance, warnings=warnings)
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         from auvmpc.plots import run_figures, run_title
@@ -298,6 +292,7 @@ class SixDofKind(HorizontalKind):
 
     name = "six-dof"
     result_type = SixDofRunResult
+    measure = staticmethod(compute_six_dof_metrics)
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
         """Children 0 and 1 as in a horizontal scenario (so its planar twin sees the same
@@ -339,12 +334,6 @@ class SixDofKind(HorizontalKind):
             np.random.default_rng(seeds["depth"]),
         )  # fmt: skip
         return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
-
-    def metrics(self, resolved, log) -> dict[str, Any]:
-        scenario = resolved.scenario
-        return compute_six_dof_metrics(
-            log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
-        )
 
     def libraries(self, scenario) -> tuple[str, ...]:
         """The horizontal controller's, then the depth MPC's."""

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DEPTH", "HORIZONTAL", "PLANAR_FORCE", "Layout"]
+__all__ = ["DEPTH", "HORIZONTAL", "PLANAR_FORCE", "PLANAR_FORCE_XY", "PLANAR_MOMENT", "Layout"]
 
 
 @dataclass(frozen=True)
@@ -73,3 +73,5 @@ DEPTH = Layout(names=("z", "w"))
 # A force and yaw moment in the horizontal plane [X, Y, N] (N, N, N m): a world-frame
 # disturbance, a body-frame generalised force, a vehicle's thrust authority.
 PLANAR_FORCE = Layout(names=("X", "Y", "N"))
+# Its force [X, Y] and its moment N.
+PLANAR_FORCE_XY, PLANAR_MOMENT = PLANAR_FORCE.span("X", "Y"), PLANAR_FORCE.index("N")

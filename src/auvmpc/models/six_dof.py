@@ -342,21 +342,23 @@ def integrate(
     substeps: int,
     current_at: CurrentAt | None = None,
     t0: float = 0.0,
+    held_current: np.ndarray | None = None,
 ) -> np.ndarray:
     """The plant over one zero-order-hold sample: ``substeps`` RK4 steps (as the 3-DOF plant).
 
     ``current_at(t, x) -> (v_c, v_c')`` gives the water velocity at the vehicle and its rate
     along the path (world frame), e.g. from :class:`auvmpc.environment.currents.WaterCurrent`;
-    None is still water. The pitch is checked after every step.
+    without it the water velocity ``held_current`` (3,) is held over the sample (the compiled
+    RK4 step), still water if None. The pitch is checked after every step.
     """
     thrust = np.asarray(thrust, dtype=float)
     state = np.asarray(state, dtype=float)
     h = duration / substeps
     check_pitch(state)
     if current_at is None:
-        still = np.zeros(3)
+        held = np.zeros(3) if held_current is None else held_current
         for _ in range(substeps):
-            state = np.asarray(model.step(state, thrust, still, h), dtype=float).ravel()
+            state = np.asarray(model.step(state, thrust, held, h), dtype=float).ravel()
             check_pitch(state)
         return state
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams, body_from_world, dynamics, top_yaw_rate
 
 __all__ = ["CRAB_TURN_FRACTION", "crab_reference"]
@@ -106,7 +106,7 @@ def _missing_force(model, missing, heading, velocity, acceleration, r, r_dot, di
     v = -vx * sin_h + vy * cos_h
     needed = (ax * cos_h + ay * sin_h + r * v, -ax * sin_h + ay * cos_h - r * u, r_dot[:, None])
     d_u, d_v = body_from_world(disturbance, heading)
-    moment = disturbance[PLANAR_FORCE.index("N")]
+    moment = disturbance[PLANAR_MOMENT]
     unforced = dynamics((0.0, 0.0, heading, u, v, r), np.zeros(model.n_thrusters), model,
                         (d_u, d_v, moment))[HORIZONTAL.span("u", "r")]  # fmt: skip
     inertia = (model.m11, model.m22, model.Iz)

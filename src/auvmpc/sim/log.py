@@ -185,15 +185,13 @@ class SimLog:
 
     def to_csv_text(self) -> str:
         blocks = self.csv_columns()
-        rows = (self._row(blocks, k, k >= self.steps) for k in range(self.steps + 1))
-        return _csv_text(self.columns(), rows)
+        return _csv_text(self.columns(), (self.row(blocks, k) for k in range(self.steps + 1)))
 
-    def row_cells(self, k: int, final: bool = False) -> list[str]:
-        """Row k of log.csv; ``final``: the run's last row, which has no command (as every
-        row past the last command)."""
-        return self._row(self.csv_columns(), k, final or k >= self.steps)
-
-    def _row(self, blocks: tuple[Column, ...], k: int, final: bool) -> list[str]:
+    def row(self, blocks: tuple[Column, ...], k: int, final: bool = False) -> list[str]:
+        """Row k of log.csv by ``blocks`` (:meth:`csv_columns`, made once per log);
+        ``final``: the run's last row, which has no command (as every row past the last
+        command)."""
+        final = final or k >= self.steps
         return [cell for block in blocks for cell in self._cells(block, k, final)]
 
     def _cells(self, column: Column, k: int, final: bool) -> list[str]:
@@ -366,7 +364,7 @@ class SixDofLog(SimLog):
             clearance_m=self.clearance_m,
             sample_time=self.sample_time,
             initial_thrust=self.initial_thrust[:n],
-            measured=self.measured[:, : HORIZONTAL.size],
+            measured=self.measured[:, SIX_DOF_MEASUREMENT.span("x", "r")],
             backoff=self.backoff,
         )
 
@@ -415,14 +413,14 @@ class LiveLog:
             raise ConfigError(
                 "live_log", str(path), f"cannot be created: {error.strerror}"
             ) from None
-        self.path, self._log = Path(path), log
+        self.path, self._log, self._blocks = Path(path), log, log.csv_columns()
         self._writer = csv.writer(self._file, lineterminator="\n")
         self._writer.writerow(log.columns())
         self._file.flush()
 
     def append(self, k: int, final: bool = False) -> None:
         """Row k of the log, now complete (``final``: the state after the last command)."""
-        self._writer.writerow(self._log.row_cells(k, final))
+        self._writer.writerow(self._log.row(self._blocks, k, final))
         self._file.flush()
 
     def close(self) -> None:

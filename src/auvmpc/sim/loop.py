@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from auvmpc.controllers.base import Controller, timed_command
+from auvmpc.controllers.base import Controller
 from auvmpc.environment.disturbances import WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
@@ -28,7 +28,6 @@ __all__ = [
     "closed_loop",
     "plant_step",
     "run_session",
-    "timed_command",
 ]
 
 

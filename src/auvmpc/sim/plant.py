@@ -29,10 +29,9 @@ from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.waves import WaveField, morison_inertia
 from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
-from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
 from auvmpc.models.six_dof import (
     SIX_DOF,
-    check_pitch,
     depth_rate,
     horizontal_state,
     integrate,
@@ -57,7 +56,6 @@ __all__ = [
 _HEADING = HORIZONTAL.heading
 _DEPTH = DEPTH.index("z")
 _SIX_DOF_DEPTH = SIX_DOF.index("z")  # NED, down (m)
-_MOMENT = PLANAR_FORCE.index("N")  # of the world force and moment [X, Y, N]
 
 
 class Plant(Protocol):
@@ -174,13 +172,11 @@ class SixDofPlant:
                 self.model, state, thrust, self.sample_time, self.substeps,
                 lambda time_s, x: current.at(time_s, x[_SIX_DOF_DEPTH], depth_rate(x)), t0=t0,
             )  # fmt: skip
-        else:
+        else:  # uniform in space: held over the sample
             velocity = self.environment(t0, state)
-            h = self.sample_time / self.substeps
-            check_pitch(state)
-            for _ in range(self.substeps):
-                state = np.asarray(self.model.step(state, thrust, velocity, h), dtype=float).ravel()
-                check_pitch(state)
+            state = integrate(
+                self.model, state, thrust, self.sample_time, self.substeps, held_current=velocity
+            )
         if self.current is not None:
             self.current.advance()
         return state
@@ -223,7 +219,7 @@ def plant_step(
         force = disturbance.force_world(t)
         d_u, d_v = body_from_world(force, x[_HEADING])
         water = disturbance.water_velocity_world(t)
-        return dynamics(x, thrust, plant, (d_u, d_v, force[_MOMENT]), current_world=water)
+        return dynamics(x, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water)
 
     h = duration / substeps
     for i in range(substeps):
@@ -279,7 +275,7 @@ def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunc
     def rhs(j: int, state):
         force = forces[:, j]
         d_u, d_v = body_from_world(force, state[_HEADING])
-        return dynamics(state, thrust, plant, (d_u, d_v, force[_MOMENT]), current_world=water)
+        return dynamics(state, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water)
 
     h = duration / substeps
     state = x

@@ -21,10 +21,9 @@ import casadi as ca
 import numpy as np
 
 from auvmpc import native
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.native import compiler
 from auvmpc.solvers.blasfeo_target import runtime_blasfeo
-from auvmpc.solvers.multiple_shooting import SLOT_FIELDS
+from auvmpc.solvers.multiple_shooting import ND, NX, SLOT_FIELDS
 
 if TYPE_CHECKING:  # sparse_rti imports this module
     from auvmpc.solvers.sparse_rti import StageQp
@@ -76,12 +75,12 @@ class CompiledQpStep:
                 "the compiled QP step could not be set up: out of memory, or sizes or settings "
                 "that disagree with the generated stage functions"
             )
-        N, n, nx, nd = horizon, thrusters, HORIZONTAL.size, PLANAR_FORCE.size
+        N, n = horizon, thrusters
         # The arguments live in buffers of this object, their addresses taken once: numpy's
         # conversions per argument and call (ctypes.data_as) cost more than the QP's data.
         self._inputs = tuple(
             np.zeros(shape)
-            for shape in ((N + 1, nx), (N + 1, n), (N, n), nx, n, (N + 1, nx), (N, nx), nd,
+            for shape in ((N + 1, NX), (N + 1, n), (N, n), NX, n, (N + 1, NX), (N, NX), ND,
                           (slots, SLOT_FIELDS), slots, N)
         )  # fmt: skip
         self._iterations = np.zeros(1, dtype=np.intc)

@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 
@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # read, never imported at run time: solvers sit below control
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "Sample", "Solution"]
 
-NX, ND = HORIZONTAL.size, 3  # state [x, y, psi, u, v, r], world force [X, Y, N]
+NX, ND = HORIZONTAL.size, PLANAR_FORCE.size  # state [x, y, psi, u, v, r], force [X, Y, N]
 # Obstacle slots in the program (built once): the nearest this many visible obstacles count.
 MAX_OBSTACLES = 8
 # Per slot: centre x, y now (m), velocity x, y (m/s), reach = radius + vehicle radius + margin.

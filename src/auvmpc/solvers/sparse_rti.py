@@ -45,12 +45,14 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 from auvmpc.solvers.compiled_qp_step import compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, hpipm_solver, slack_scale
 from auvmpc.solvers.multiple_shooting import (
     DISTANCE_SMOOTHING_M2,
+    ND,
+    NX,
     SLOT_FIELDS,
     Iterate,
     MultipleShootingProgram,
@@ -69,8 +71,6 @@ _STEP_REGULARISATION = 1e-9
 _OBSTACLE_RANGE_M = 5.0
 _SOLVED, _NOT_FINITE, _EVALUATION_FAILED = 0, -1, -2
 _HEADING = HORIZONTAL.index("psi")
-# The stage state z_k = [dX_k; dp_k]: its first _NX entries are the vehicle's state.
-_NX = HORIZONTAL.size
 
 
 class SparseRealTimeIteration:
@@ -134,7 +134,7 @@ class SparseRealTimeIteration:
                 dz, dv = self._step.dz, self._step.dv
                 if code != _SOLVED or not (np.isfinite(dz).all() and np.isfinite(dv).all()):
                     return Solution(None, total, time.perf_counter() - started, status)
-                thrust = thrust + dz[:N, _NX:] + dv[:, :n]  # dF_k = dp_k + w_k (stage_qp)
+                thrust = thrust + dz[:N, NX:] + dv[:, :n]  # dF_k = dp_k + w_k (stage_qp)
                 if program.n_slots:
                     slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
                 if resimulate:
@@ -142,7 +142,7 @@ class SparseRealTimeIteration:
                     rolled = program.rollout(sample.state, thrust.T, disturbance)
                     states = np.vstack([sample.state, np.asarray(rolled).T])
                 else:
-                    states = states + dz[:, :_NX]
+                    states = states + dz[:, :NX]  # z_k = [dX_k; dp_k]
                 if not np.all(np.isfinite(states)):
                     return Solution(None, total, time.perf_counter() - started, "non-finite states")
         slacks = np.zeros((N, program.n_slots))
@@ -191,7 +191,7 @@ def stage_qp(program: MultipleShootingProgram) -> StageQp:
 
 
 def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
-    n, S, NX = program.n_thrusters, program.n_slots, _NX
+    n, S = program.n_thrusters, program.n_slots
     # One slack input per stage for its obstacle rows; none without obstacle slots.
     nz, nv, ng = NX + n, n + (1 if S else 0), S
     ocp = program.ocp
@@ -203,7 +203,7 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     P, P_next = ca.SX.sym("P", n), ca.SX.sym("P_next", n)  # P_k = F_{k-1} of the iterate
     F = ca.SX.sym("F", n)
     reference, weight = ca.SX.sym("r", NX), ca.SX.sym("W", NX)
-    force = ca.SX.sym("d_world", PLANAR_FORCE.size)
+    force = ca.SX.sym("d_world", ND)
     slots = ca.SX.sym("slots", SLOT_FIELDS, S)
     used = ca.SX.sym("used", S)
     movable = ca.SX.sym("movable")
@@ -306,13 +306,13 @@ class CasadiQpStep:
 
     def __init__(self, qp: StageQp, horizon: int, thrusters: int, slots: int,
                  iteration_limit: int | None) -> None:  # fmt: skip
-        N, n, NX = horizon, thrusters, _NX
+        N, n = horizon, thrusters
         nz, nv = qp.states, qp.inputs
         X, P = ca.SX.sym("X", NX, N + 1), ca.SX.sym("P", n, N + 1)
         F, reference = ca.SX.sym("F", n, N), ca.SX.sym("ref", NX, N + 1)
         weight = ca.SX.sym("W", NX, N)
         x_hat, previous = ca.SX.sym("x_hat", NX), ca.SX.sym("F_prev", n)
-        force = ca.SX.sym("d_world", PLANAR_FORCE.size)
+        force = ca.SX.sym("d_world", ND)
         slot_data = ca.SX.sym("slots", SLOT_FIELDS, slots)
         used, movable = ca.SX.sym("used", slots), ca.SX.sym("movable", N)
 
