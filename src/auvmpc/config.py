@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any
@@ -39,6 +41,27 @@ class StrictModel(BaseModel):
         extra="forbid",
         allow_inf_nan=False,
         validate_default=True,
+    )
+
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False):
+        """pydantic's copy, without the values derived from the old fields: a
+        ``functools.cached_property`` keeps its value in the instance's ``__dict__``, which
+        pydantic copies, so a copy with new thrust limits would keep the old actuators."""
+        copied = super().model_copy(update=update, deep=deep)
+        if update:
+            for name in _cached_properties(type(self)):
+                copied.__dict__.pop(name, None)
+        return copied
+
+
+@functools.cache
+def _cached_properties(model: type) -> tuple[str, ...]:
+    """The names of a class's ``functools.cached_property`` members, its bases' too."""
+    return tuple(
+        name
+        for klass in model.__mro__
+        for name, member in vars(klass).items()
+        if isinstance(member, functools.cached_property)
     )
 
 

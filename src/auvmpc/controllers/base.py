@@ -11,9 +11,9 @@ from enum import StrEnum
 import numpy as np
 
 from auvmpc.environment.obstacles import ObstacleState
+from auvmpc.models.actuators import ActuatorLimits
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.ocp.tracking import ActuatorLimits
 from auvmpc.ocp.underactuated_reference import crab_reference
 
 __all__ = [
@@ -181,7 +181,7 @@ def next_planned_move(plan: np.ndarray | None, previous: np.ndarray):
 
 def horizontal_limits(params: VehicleParams) -> ActuatorLimits:
     """The horizontal thrusters' hard limits."""
-    return ActuatorLimits(params.thrust_min, params.thrust_max, params.thrust_rate_limit)
+    return params.actuators.limits
 
 
 def feasible_thrust_box(

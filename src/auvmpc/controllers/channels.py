@@ -62,16 +62,8 @@ class ThrustMapping:
         heave_row = np.asarray(six.T)[2, n:]  # NED Z force per unit thrust of each vertical
         # Least-norm F_v with heave_row @ F_v = Z: F_v = pinv(heave_row) Z.
         self.heave_split = heave_row / float(heave_row @ heave_row)
-        count = self.n_total - n
-        self.lower = np.concatenate(
-            [np.full(n, vehicle.thrust_limits[0]), np.full(count, heave.thrust_limits[0])]
-        )
-        self.upper = np.concatenate(
-            [np.full(n, vehicle.thrust_limits[1]), np.full(count, heave.thrust_limits[1])]
-        )
-        self.rate_limit = np.concatenate(  # N/s
-            [np.full(n, vehicle.thrust_rate_limit), np.full(count, heave.thrust_rate_limit)]
-        )
+        limits = vehicle.six_dof_actuators.limits
+        self.lower, self.upper, self.rate_limit = limits.lower, limits.upper, limits.rate
         self.max_step = sample_time * self.rate_limit
 
     def vertical(self, heave_force_up: float) -> np.ndarray:

@@ -19,7 +19,7 @@ from auvmpc.models.heave import heave_dynamics, resolve_heave
 from auvmpc.models.integrators import rk4
 from auvmpc.models.layout import DEPTH
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
-from auvmpc.ocp.tracking import ActuatorLimits, TrackingOcp
+from auvmpc.ocp.tracking import TrackingOcp
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
 __all__ = ["DepthMpc"]
@@ -48,9 +48,7 @@ class DepthMpc(IncrementalMpc):
             heave = heave.model_copy(update={"net_buoyancy_N": 0.0})
         self.heave = heave
         self.water_depth = water_depth
-        self.limits = ActuatorLimits(
-            heave.thrust_limits[0], heave.thrust_limits[1], heave.thrust_rate_limit
-        )
+        self.limits = heave.actuators.limits
         self.ocp = TrackingOcp.from_config(
             config, heave.thruster_count, self.limits, slack_penalty=config.depth_slack_penalty
         )

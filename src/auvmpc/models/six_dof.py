@@ -213,7 +213,7 @@ def _expression(params: VehicleParams, state, thrust, current_world, current_rat
         - ca.DM(np.array(six.quadratic_damping)) * ca.fabs(nu_r) * nu_r
     )  # D(nu_r) nu_r, diagonal: element-wise
     g = restoring_forces(six.weight(params.mass), six.buoyancy, r_g, r_b, phi, theta)
-    tau = ca.mtimes(ca.DM(six.T), thrust)
+    tau = params.six_dof_actuators.force(nu_r, thrust)
 
     forces = (
         tau

@@ -30,6 +30,7 @@ from pydantic import AfterValidator, Field, model_validator
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.errors import FieldError
+from auvmpc.models.actuators.thruster import thrust_column
 
 __all__ = [
     "SixDofParams",
@@ -85,12 +86,10 @@ def skew(a) -> np.ndarray:
 
 def allocation_matrix_6dof(thrusters) -> np.ndarray:
     """Columns [d_i; r_i x d_i] (6, n): tau = [X, Y, Z, K, M, N] = T @ F (six-dof.md)."""
-    columns = []
-    for thruster in thrusters:
-        direction = thruster.unit_direction
-        position = np.array(thruster.position, dtype=float)
-        columns.append(np.concatenate([direction, np.cross(position, direction)]))
-    return np.array(columns, dtype=float).T
+    return np.array(
+        [thrust_column(thruster.position, thruster.unit_direction) for thruster in thrusters],
+        dtype=float,
+    ).T
 
 
 def rigid_body_mass_matrix(mass: float, inertia: np.ndarray, r_g: np.ndarray) -> np.ndarray:

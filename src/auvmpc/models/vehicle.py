@@ -32,7 +32,9 @@ from pydantic import AfterValidator, Field, ValidationError, model_validator
 
 from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.actuators import WRENCH, ActuatorSet, FixedThruster
+from auvmpc.models.actuators.thruster import planar_direction, thrust_column
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.six_dof_params import SixDofParams
 
 __all__ = [
@@ -57,6 +59,9 @@ __all__ = [
 
 STATE_NAMES = HORIZONTAL.names  # the state order of the equations above
 NX = HORIZONTAL.size
+# The 3-DOF model's force [f_u, f_v, M_r] is the body wrench's X, Y and N rows.
+PLANAR_ROWS = PLANAR_FORCE.names
+_PLANAR_INDEX = [WRENCH.index(name) for name in PLANAR_ROWS]
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 Damping = Annotated[
@@ -95,6 +100,17 @@ class HeaveParams(StrictModel):
     thruster_count: int = Field(ge=1, description="number of vertical thrusters")
     thrust_limits: ThrustLimits = Field(description="per vertical thruster [min, max] (N)")
     thrust_rate_limit: PositiveFloat = Field(description="per vertical thruster (N/s)")
+
+    @cached_property
+    def actuators(self) -> ActuatorSet:
+        """The vertical thrusters ``Fz1..Fzn``, each pushing straight up (NED -z) through the
+        body origin: the heave model's force is their sum."""
+        lower, upper = self.thrust_limits
+        return ActuatorSet(tuple(
+            FixedThruster(f"Fz{i + 1}", (0.0, 0.0, 0.0), (0.0, 0.0, -1.0), lower, upper,
+                          self.thrust_rate_limit)
+            for i in range(self.thruster_count)
+        ))  # fmt: skip
 
 
 class VehicleParams(StrictModel):
@@ -174,7 +190,7 @@ class VehicleParams(StrictModel):
         if six is None:
             return
         n = len(self.thrusters)
-        planar = six.T[np.ix_([0, 1, 5], range(min(n, six.n_thrusters)))]
+        planar = six.T[np.ix_(_PLANAR_INDEX, range(min(n, six.n_thrusters)))]
         if six.n_thrusters < n or not np.allclose(
             planar, allocation_matrix(self.thrusters), atol=THRUSTER_LAYOUT_TOL
         ):
@@ -243,11 +259,45 @@ class VehicleParams(StrictModel):
         return len(self.thrusters)
 
     @cached_property
+    def actuators(self) -> ActuatorSet:
+        """The horizontal thrusters ``F1..Fn`` (the 3-DOF model's inputs) with their limits."""
+        lower, upper = self.thrust_limits
+        return ActuatorSet(tuple(
+            FixedThruster.planar(f"F{i + 1}", t.position, t.angle_deg, lower=lower, upper=upper,
+                                 rate=self.thrust_rate_limit)
+            for i, t in enumerate(self.thrusters)
+        ))  # fmt: skip
+
+    def with_actuators(self, actuators: ActuatorSet) -> VehicleParams:
+        """This vehicle with other horizontal actuators, one per ``thrusters`` entry (a kind
+        of your own: docs/extending.md). The 3-DOF model reads them; ``T`` and what is
+        derived from it exist only for a set that is linear in its commands."""
+        if actuators.size != self.n_thrusters:
+            raise FieldError("actuators", actuators.layout.names,
+                             f"need one per thruster ({self.n_thrusters})")  # fmt: skip
+        copied = self.model_copy()
+        copied.__dict__["actuators"] = actuators  # where the cached property keeps its value
+        return copied
+
+    @cached_property
+    def six_dof_actuators(self) -> ActuatorSet:
+        """The 6-DOF model's inputs ``F1..Fn``: the ``six_dof`` thrusters, the horizontal ones
+        first with the horizontal limits, then the vertical ones with the heave section's
+        (check_six_dof_layout)."""
+        six = self.six_dof
+        if six is None or self.heave is None:
+            raise FieldError("vehicle", self.name, "needs six_dof and heave sections")
+        limits = [self.actuators.actuators[0], self.heave.actuators.actuators[0]]
+        return ActuatorSet(tuple(
+            FixedThruster(f"F{i + 1}", thruster.position, tuple(thruster.unit_direction),
+                          **_limits_of(limits[i >= self.n_thrusters]))
+            for i, thruster in enumerate(six.thrusters)
+        ))  # fmt: skip
+
+    @property
     def T(self) -> np.ndarray:
         """Allocation matrix (3, n): tau = [f_u, f_v, M_r] = T @ F."""
-        matrix = allocation_matrix(self.thrusters)
-        matrix.setflags(write=False)
-        return matrix
+        return self.actuators.allocation(PLANAR_ROWS)
 
     @cached_property
     def T_pinv(self) -> np.ndarray:
@@ -369,15 +419,17 @@ def allocation_rank(matrix: np.ndarray) -> int:
 
 
 def allocation_matrix(thrusters: tuple[Thruster, ...] | list[Thruster]) -> np.ndarray:
-    """Columns [cos a, sin a, px sin a - py cos a] per thruster (interfaces.md)."""
-    columns = []
-    for thruster in thrusters:
-        angle = math.radians(thruster.angle_deg)
-        px, py = thruster.position
-        columns.append(
-            [math.cos(angle), math.sin(angle), px * math.sin(angle) - py * math.cos(angle)]
-        )
-    return np.array(columns, dtype=float).T
+    """Columns [cos a, sin a, px sin a - py cos a] per thruster (interfaces.md): the X, Y, N
+    rows of each one's wrench."""
+    columns = [
+        thrust_column((*thruster.position, 0.0), planar_direction(thruster.angle_deg))
+        for thruster in thrusters
+    ]
+    return np.array(columns, dtype=float)[:, _PLANAR_INDEX].T
+
+
+def _limits_of(actuator: FixedThruster) -> dict[str, float]:
+    return {"lower": actuator.lower, "upper": actuator.upper, "rate": actuator.rate}
 
 
 def body_from_world(force_world, psi):
@@ -390,7 +442,10 @@ def body_from_world(force_world, psi):
     return fx * cos_psi + fy * sin_psi, -fx * sin_psi + fy * cos_psi
 
 
-def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, current_world=None):
+def dynamics(
+    state, thrust, params: VehicleParams, disturbance_body=None, current_world=None,
+    effectiveness=None,
+):  # fmt: skip
     """State derivative of the 3-DOF model (module docstring).
 
     Parameters
@@ -400,6 +455,7 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, curren
     params : VehicleParams
     disturbance_body : (3,) [d_u, d_v, d_r] or None
     current_world : (2,) water velocity (V_x, V_y) in the world frame (m/s), or None
+    effectiveness : (n,) each thruster's share of its command that acts (1 healthy), or None
 
     Returns
     -------
@@ -417,23 +473,23 @@ def dynamics(state, thrust, params: VehicleParams, disturbance_body=None, curren
     symbolic = isinstance(state, ca.SX | ca.MX) or isinstance(thrust, ca.SX | ca.MX)
     _, _, psi, u, v, r = (state[i] for i in range(NX))
     if symbolic:
-        tau = ca.mtimes(ca.DM(params.T), thrust)
-        tau_u, tau_v, tau_r = tau[0], tau[1], tau[2]
         cos_psi, sin_psi, absolute = ca.cos(psi), ca.sin(psi), ca.fabs
     else:
-        tau_u, tau_v, tau_r = params.T @ np.asarray(thrust, dtype=float)
         # NumPy's functions: a state of arrays evaluates many states at once.
         cos_psi, sin_psi, absolute = np.cos(psi), np.sin(psi), np.abs
-    if disturbance_body is not None:
-        tau_u = tau_u + disturbance_body[0]
-        tau_v = tau_v + disturbance_body[1]
-        tau_r = tau_r + disturbance_body[2]
-    p = params
     if current_world is None:
         u_r, v_r = u, v
     else:
         u_c, v_c = body_from_world(current_world, psi)
         u_r, v_r = u - u_c, v - v_c
+    nu_r = (u_r, v_r, 0.0, 0.0, 0.0, r)
+    tau = params.actuators.force(nu_r, thrust, PLANAR_ROWS, effectiveness)
+    tau_u, tau_v, tau_r = tau[0], tau[1], tau[2]
+    if disturbance_body is not None:
+        tau_u = tau_u + disturbance_body[0]
+        tau_v = tau_v + disturbance_body[1]
+        tau_r = tau_r + disturbance_body[2]
+    p = params
     u_dot = (p.Xu * u_r + p.Xuu * absolute(u_r) * u_r + p.m22 * v_r * r + tau_u) / p.m11
     v_dot = (p.Yv * v_r + p.Yvv * absolute(v_r) * v_r - p.m11 * u_r * r + tau_v) / p.m22
     if current_world is not None:

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from auvmpc.models.actuators import ActuatorLimits
+
 __all__ = ["SLACK_QUADRATIC_WEIGHT", "ActuatorLimits", "ThrustPenalty", "TrackingOcp"]
 
 # The soft constraints' cost is penalty * s + SLACK_QUADRATIC_WEIGHT * s^2: the linear part
@@ -30,39 +32,6 @@ class ThrustPenalty(StrEnum):
 
     ABSOLUTE = "absolute"
     INCREMENT = "increment"
-
-
-@dataclass(frozen=True)
-class ActuatorLimits:
-    """Hard limits of a set of actuators: force box and rate, per actuator."""
-
-    lower: float | np.ndarray  # N
-    upper: float | np.ndarray  # N
-    rate: float | np.ndarray  # N/s
-
-    def box(self, previous: np.ndarray, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
-        """Per-actuator [lower, upper] reachable in one sample under both hard limits."""
-        max_step = self.rate * sample_time
-        lower = np.maximum(self.lower, previous - max_step)
-        upper = np.minimum(self.upper, previous + max_step)
-        # A previous command outside the force limits (never ours) leaves an empty box:
-        # the rate limit wins, moving towards the force box as fast as it allows.
-        empty = lower > upper
-        if np.any(empty):
-            towards = np.clip(
-                np.clip(previous, self.lower, self.upper), previous - max_step, previous + max_step
-            )
-            lower = np.where(empty, towards, lower)
-            upper = np.where(empty, towards, upper)
-        return lower, upper
-
-    def project(
-        self, command: np.ndarray, previous: np.ndarray, sample_time: float
-    ) -> tuple[np.ndarray, bool]:
-        """Clip a command into the hard-limit box; also say whether it had to move."""
-        lower, upper = self.box(previous, sample_time)
-        clipped = np.minimum(np.maximum(command, lower), upper)  # np.clip, at half the cost
-        return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,74 @@
+"""What every actuator kind has (:class:`Actuator`) and the hard limits of a set of them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from auvmpc.models.layout import Layout
+
+__all__ = ["WRENCH", "Actuator", "ActuatorLimits"]
+
+# The generalised force on the body, Fossen's tau: force X, Y, Z (N) and moment K, M, N (N m)
+# about the body origin, body axes x forward, y starboard, z down.
+WRENCH = Layout(names=("X", "Y", "Z", "K", "M", "N"))
+
+
+class Actuator(Protocol):
+    """One actuator: its input's name, its hard limits and the force it makes."""
+
+    name: str  # the input's name (log.csv column, Session.input_names)
+    lower: float  # command box, the actuator's own units
+    upper: float
+    rate: float  # largest command change per second
+
+    @property
+    def linear(self) -> bool:
+        """Whether the wrench is ``column * command`` whatever ``nu_r`` (then the set has an
+        allocation matrix, which linear-model controllers need)."""
+        ...
+
+    @property
+    def column(self) -> np.ndarray:
+        """(6,) wrench per unit command, for a linear actuator."""
+        ...
+
+    def wrench(self, nu_r: Any, command: Any) -> Any:
+        """(6,) ``[X, Y, Z, K, M, N]`` at relative velocity ``nu_r`` (6,) for ``command``:
+        NumPy in, NumPy out; CasADi in, CasADi out."""
+        ...
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """Hard limits of a set of actuators: command box and rate, per actuator."""
+
+    lower: float | np.ndarray  # N
+    upper: float | np.ndarray  # N
+    rate: float | np.ndarray  # N/s
+
+    def box(self, previous: np.ndarray, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per-actuator [lower, upper] reachable in one sample under both hard limits."""
+        max_step = self.rate * sample_time
+        lower = np.maximum(self.lower, previous - max_step)
+        upper = np.minimum(self.upper, previous + max_step)
+        # A previous command outside the force limits (never ours) leaves an empty box:
+        # the rate limit wins, moving towards the force box as fast as it allows.
+        empty = lower > upper
+        if np.any(empty):
+            towards = np.clip(
+                np.clip(previous, self.lower, self.upper), previous - max_step, previous + max_step
+            )
+            lower = np.where(empty, towards, lower)
+            upper = np.where(empty, towards, upper)
+        return lower, upper
+
+    def project(
+        self, command: np.ndarray, previous: np.ndarray, sample_time: float
+    ) -> tuple[np.ndarray, bool]:
+        """Clip a command into the hard-limit box; also say whether it had to move."""
+        lower, upper = self.box(previous, sample_time)
+        clipped = np.minimum(np.maximum(command, lower), upper)  # np.clip, at half the cost
+        return clipped, bool(np.any(np.abs(clipped - command) > 1e-9))
