@@ -164,7 +164,7 @@ def test_depth_runs_in_the_shared_loop_with_a_registered_controller(tmp_path):
     from auvmpc.controllers.registry import REGISTRY
     from auvmpc.controllers.shell import INFO_KEYS
     from auvmpc.experiments.run import make_controller
-    from auvmpc.sim.log import DepthLog
+    from auvmpc.sim.log import DEPTH_LOG, SimLog
 
     resolved = load_scenario("paper-depth-calm", ["duration=12", "reference.step_time_s=2"])
     assert "depth-mpc" in REGISTRY
@@ -174,15 +174,15 @@ def test_depth_runs_in_the_shared_loop_with_a_registered_controller(tmp_path):
     )
     assert set(INFO_KEYS) <= set(result.info)
     run = simulate(resolved)
-    assert isinstance(run.log, DepthLog)
+    assert run.log.format is DEPTH_LOG
     assert run.log.layout.names == ("z", "w")
     write_run(run, tmp_path / "run", figures=False)
     header = (tmp_path / "run" / "log.csv").read_text().splitlines()[0].split(",")
     assert header == ["t", "z", "w", "z_ref", "Fz1", "Fz2", "solve_ms", "status",
                       "z_measured", "wave_force_N"]  # fmt: skip
-    again = DepthLog.read_csv(tmp_path / "run" / "log.csv")
+    again = SimLog.read_csv(tmp_path / "run" / "log.csv", format=DEPTH_LOG)
     np.testing.assert_array_equal(again.state, run.log.state)
-    np.testing.assert_array_equal(again.z_measured, run.log.z_measured)
+    np.testing.assert_array_equal(again.column("z_measured"), run.log.column("z_measured"))
     np.testing.assert_array_equal(again.thrust, run.log.thrust)
     # The same actuation metrics as a horizontal run, computed the same way.
     assert run.metrics["fallback_steps"] == run.metrics["solver_failures"] == 0

@@ -70,13 +70,21 @@ def test_stepping_the_session_with_the_project_plant_is_the_batch_run(tmp_path, 
     assert live.read_text() == stepped.log.to_csv_text()
     assert stepped.log.steps == batch.log.steps > 0
     for column in ("t", "state", "reference", "thrust", "measured", "environment",
-                   "clearance_m", "disturbance_estimate", "backoff"):  # fmt: skip
+                   "clearance_m"):  # fmt: skip
         np.testing.assert_allclose(
             getattr(stepped.log, column), getattr(batch.log, column), rtol=0, atol=SAME_RUN_TOL,
             err_msg=column,
         )  # fmt: skip
     assert stepped.log.status == batch.log.status
-    assert getattr(stepped.log, "depth_status", None) == getattr(batch.log, "depth_status", None)
+    assert stepped.log.diagnostics.keys() == batch.log.diagnostics.keys()
+    for name, values in batch.log.diagnostics.items():
+        if name == "depth_solve_ms":
+            continue  # a wall time
+        if isinstance(values, list):
+            assert stepped.log.diagnostics[name] == values, name
+        else:
+            np.testing.assert_allclose(stepped.log.diagnostics[name], values, rtol=0,
+                                       atol=SAME_RUN_TOL, err_msg=name)  # fmt: skip
     assert stepped.log.to_csv_text().count("\n") == batch.log.to_csv_text().count("\n")
     for key, value in batch.metrics.items():
         if "solve_ms" in key:
@@ -234,15 +242,20 @@ def test_detections_handed_over_are_what_the_controller_sees():
 
 
 def test_every_log_field_is_cut_by_first():
-    """SimLog.first cuts the fields it lists; a field in neither list would stay full length."""
+    """SimLog.first cuts the fields it lists and every diagnostic; a field in neither list
+    would stay full length."""
     from dataclasses import fields
 
-    listed = set(SimLog.PER_SAMPLE) | set(SimLog.PER_COMMAND) | {"sample_time", "initial_thrust"}
-    assert {f.name for f in fields(SimLog)} == listed
-    log = SimLog.allocate(10, 4, 0.5)
+    from auvmpc.sim.log import PER_COMMAND, PER_SAMPLE, SIX_DOF_LOG
+
+    run_fields = {"format", "sample_time", "initial_thrust", "diagnostics", "horizontal_inputs"}
+    assert {f.name for f in fields(SimLog)} == set(PER_SAMPLE) | set(PER_COMMAND) | run_fields
+    log = SimLog.allocate(10, 8, 0.5, SIX_DOF_LOG, horizontal_inputs=4)
     cut = log.first(4)
-    assert all(len(getattr(cut, name)) == 4 for name in SimLog.PER_SAMPLE)
-    assert all(len(getattr(cut, name)) == 3 for name in SimLog.PER_COMMAND)
+    assert all(len(getattr(cut, name)) == 4 for name in PER_SAMPLE)
+    assert all(len(getattr(cut, name)) == 3 for name in PER_COMMAND)
+    assert all(len(values) == 3 for values in cut.diagnostics.values())
+    assert len(cut.diagnostics) == len(SIX_DOF_LOG.diagnostics) == 5
 
 
 def test_what_is_not_a_scenario_is_refused_in_one_line():

@@ -20,6 +20,7 @@ from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.experiments.run import simulate
 from auvmpc.references import LineConfig, make_reference
 from auvmpc.scenario import load_scenario
+from auvmpc.sim.log import SimLog
 from auvmpc.sim.loop import closed_loop
 from auvmpc.sim.metrics import compute_metrics
 
@@ -162,11 +163,12 @@ def test_the_log_records_the_disturbance_the_controller_assumed(tmp_path):
     )
     log = simulate(resolved).log
     # The EKF's random walk settles within the first 20 s; 0.5 N is 10 % of the force.
-    np.testing.assert_allclose(log.disturbance_estimate[-10:, :2], [[5.0, 3.0]] * 10, atol=0.5)
+    estimate = log.diagnostics["disturbance_estimate"]
+    np.testing.assert_allclose(estimate[-10:, :2], [[5.0, 3.0]] * 10, atol=0.5)
     path = tmp_path / "log.csv"
     path.write_text(log.to_csv_text())
     np.testing.assert_array_equal(
-        SimLog.read_csv(path).disturbance_estimate, log.disturbance_estimate
+        SimLog.read_csv(path).diagnostics["disturbance_estimate"], estimate
     )
     assert set(ESTIMATE_NAMES) <= set(log.columns())
 
@@ -178,18 +180,15 @@ def test_the_log_records_the_disturbance_the_controller_assumed(tmp_path):
 def test_every_kind_of_log_reads_back_to_the_same_file_and_fields(tmp_path, name, seconds):
     """One writer and one reader serve every kind of log (sim/log.py, csv_columns): what a
     run writes reads back to the same text, and every field log.csv holds to the bit."""
-    from auvmpc.sim.log import SixDofLog
-
     log = simulate(load_scenario(name, [f"duration={seconds}"])).log
     path = tmp_path / "log.csv"
     path.write_text(log.to_csv_text())
-    run = {"n_horizontal": log.n_horizontal} if isinstance(log, SixDofLog) else {}
-    back = type(log).read_csv(path, log.initial_thrust, **run)
+    back = SimLog.read_csv(path, log.initial_thrust, log.format, log.horizontal_inputs)
     assert back.to_csv_text() == log.to_csv_text()
     for block in log.csv_columns():
         if block.field is None:
             continue  # written as 0 (a 6-DOF log's dist_* beside its current)
-        written, read = getattr(log, block.field), getattr(back, block.field)
+        written, read = log._values(block.field), back._values(block.field)
         if block.text:
             assert read == written, block.names
             continue

@@ -29,7 +29,7 @@ from auvmpc.controllers.base import Controller
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import DepthRunResult, RunResult, RunSession, make_controller
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario
-from auvmpc.sim.log import DepthLog, SimLog
+from auvmpc.sim.log import SimLog
 
 __all__ = list(auvmpc._API)
 
@@ -147,7 +147,7 @@ def session(scenario: Scenario | str | Path, live_log: str | Path | None = None)
     return RunSession(scenario, live_log=live_log)
 
 
-def log_dataframe(run: Run | SimLog | DepthLog) -> pd.DataFrame:
+def log_dataframe(run: Run | SimLog) -> pd.DataFrame:
     """The log as a DataFrame with the columns of ``log.csv`` (one row per sample k).
 
     The thrust of the last row is NaN (the command on row k is applied over

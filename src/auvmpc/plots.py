@@ -494,14 +494,15 @@ def figure_depth(log, limits, title: str = "") -> Figure:
 
     Parameters
     ----------
-    log : auvmpc.sim.log.DepthLog
+    log : auvmpc.sim.log.SimLog
+        A depth run's (``DEPTH_LOG``).
     limits : HeaveParams
         Vertical thrust limits to draw.
     """
     figure, axes = _time_panels(2, title)
     depth_ax, thrust_ax = axes
-    depth_ax.plot(log.t, log.z_measured, color="0.6", lw=0.8, label="measured (sensor)")
-    depth_ax.step(log.t, log.z_ref, where="post", color="0.3", ls="--", label="reference")
+    depth_ax.plot(log.t, log.column("z_measured"), color="0.6", lw=0.8, label="measured (sensor)")
+    depth_ax.step(log.t, log.column("z_ref"), where="post", color="0.3", ls="--", label="reference")
     depth_ax.plot(log.t, log.state[:, DEPTH.index("z")], color="tab:blue", label="depth z (true)")
     depth_ax.set_ylabel("z (m, up)")
     steps = len(log.thrust)
@@ -535,7 +536,8 @@ def six_dof_figures(log, limits: VehicleParams, title: str = "") -> dict[str, Fi
 
     Parameters
     ----------
-    log : auvmpc.sim.log.SixDofLog
+    log : auvmpc.sim.log.SimLog
+        A 6-DOF run's (``SIX_DOF_LOG``).
     limits : VehicleParams
         With a ``heave`` section: the vertical thrust limits drawn.
     """
@@ -551,7 +553,7 @@ def figure_trajectory_3d(log, title: str = "") -> Figure:
     figure = _new_figure(7.0, 6.0, title)
     ax = figure.add_subplot(projection="3d")
     ax.plot(
-        *log.reference[:, _POSITION].T, log.depth_reference[:, 0],
+        *log.reference[:, _POSITION].T, log.column("z_ref"),
         label="reference", **REFERENCE_STYLE,
     )  # fmt: skip
     position = log.state[:, SIX_DOF.span("x", "z")]  # x north, y east, z down (m)
@@ -591,15 +593,15 @@ def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure
     """Depth and its reference, roll and pitch, and the vertical thrusters' forces."""
     figure, axes = _time_panels(4, title)
     depth_ax, roll_ax, pitch_ax, thrust_ax = axes
-    depth_ax.plot(log.t, log.depth_reference[:, 0], label="reference", **REFERENCE_STYLE)
-    depth_ax.plot(log.t, log.depth, label="true", **ACTUAL_STYLE)
+    depth_ax.plot(log.t, log.column("z_ref"), label="reference", **REFERENCE_STYLE)
+    depth_ax.plot(log.t, log.column("z"), label="true", **ACTUAL_STYLE)
     depth_ax.invert_yaxis()
     depth_ax.set_ylabel("depth z (m, down)")
     roll_ax.plot(log.t, np.degrees(log.state[:, SIX_DOF.index("phi")]), **ACTUAL_STYLE)
     roll_ax.set_ylabel("roll phi (deg)")
     pitch_ax.plot(log.t, np.degrees(log.state[:, SIX_DOF.index("theta")]), **ACTUAL_STYLE)
     pitch_ax.set_ylabel("pitch theta (deg)")
-    n, steps = log.n_horizontal, log.steps
+    n, steps = log.horizontal_inputs, log.steps
     for i in range(n, log.n_thrusters):
         thrust_ax.step(
             log.t[:steps], log.thrust[:, i], where="post",

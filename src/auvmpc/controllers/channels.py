@@ -7,7 +7,7 @@ measured depth and depth rate and the depth reference; :class:`ThrustMapping` pu
 demands on the vehicle's ``six_dof.thrusters`` within their hard force and rate limits. Roll
 and pitch are left to passive stability. To the loop and the session the pair is one
 controller (:class:`HorizontalAndDepth`) of the 6-DOF log's layouts (sim/log.py,
-``SixDofLog``).
+``SIX_DOF_LOG``).
 
 Conventions: the plant, the log and the 3-D reference use NED (z down, the depth below the
 surface); the depth controller works in z up (negative below the surface), as in the tank
@@ -82,7 +82,7 @@ class ThrustMapping:
 @dataclass
 class ChannelResult(ControlResult):
     """The horizontal controller's result (status, diagnostics), the mapped command of every
-    thruster, and what the depth channel and the mapping did (SixDofLog's columns)."""
+    thruster, and what the depth channel and the mapping did (SIX_DOF_LOG's columns)."""
 
     horizontal_solve_ms: float = 0.0
     depth_solve_ms: float = 0.0
@@ -92,7 +92,7 @@ class ChannelResult(ControlResult):
 
 class ReferenceWithDepth:
     """A 3-D reference as the pair sees it: rows ``[x, y, psi, u, v, r, z, z']`` (NED), the
-    horizontal reference and the depth's (SixDofLog's ``reference_names``)."""
+    horizontal reference and the depth's (SIX_DOF_LOG's ``reference_names``)."""
 
     def __init__(self, reference) -> None:
         self.reference = reference  # a references.Reference with a depth profile

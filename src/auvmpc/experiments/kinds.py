@@ -40,7 +40,7 @@ from auvmpc.scenario import (
     scenario_to_dict,
 )
 from auvmpc.scenario.loader import SCENARIO_KINDS
-from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
+from auvmpc.sim.log import DEPTH_LOG, SIX_DOF_LOG, SimLog
 from auvmpc.sim.loop import Sensor
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
 from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
@@ -143,7 +143,7 @@ class SixDofRunResult(RunResult):
     """A finished run on the 6-DOF plant (``kind: six-dof``)."""
 
     resolved: ResolvedSixDofScenario
-    log: SixDofLog
+    log: SimLog  # in SIX_DOF_LOG
 
 
 @dataclass
@@ -151,7 +151,7 @@ class DepthRunResult(Finished):
     """A finished depth experiment."""
 
     resolved: ResolvedDepthScenario
-    log: DepthLog
+    log: SimLog  # in DEPTH_LOG
 
     def simulated_plant(self) -> VehicleParams:
         return self.resolved.model.model_copy(update={"heave": self.resolved.heave_plant})
@@ -309,9 +309,9 @@ class SixDofKind(HorizontalKind):
         return SessionStart(
             HorizontalAndDepth(controller, depth, model, scenario.depth_controller.preview),
             ReferenceWithDepth(resolved.reference),
-            SixDofLog.allocate(
+            SimLog.allocate(
                 _steps(scenario), model.six_dof.n_thrusters, _sample_time(scenario),
-                n_horizontal=model.n_thrusters,
+                SIX_DOF_LOG, horizontal_inputs=model.n_thrusters,
             ),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
             padded(scenario.initial_thrust, model.six_dof.n_thrusters),
@@ -347,11 +347,11 @@ class SixDofKind(HorizontalKind):
         drawn = super().figures(log.horizontal(), scenario, model, plant)
         return {**drawn, **six_dof_figures(log, model, run_title(scenario, model.name))}
 
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SixDofLog:
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
         model = VehicleParams.model_validate(info["model"])
         initial = padded(info["scenario"].get("initial_thrust"), model.six_dof.n_thrusters)
         path = Path(run_dir) / "log.csv"
-        return SixDofLog.read_csv(path, initial, n_horizontal=model.n_thrusters)
+        return SimLog.read_csv(path, initial, SIX_DOF_LOG, horizontal_inputs=model.n_thrusters)
 
 
 class DepthKind(RunKind):
@@ -375,7 +375,7 @@ class DepthKind(RunKind):
         scenario = resolved.scenario
         reference = DepthStep(scenario.reference, scenario.controller.preview)
         thrusters = resolved.heave_plant.thruster_count
-        log = DepthLog.allocate(_steps(scenario), thrusters, _sample_time(scenario))
+        log = SimLog.allocate(_steps(scenario), thrusters, _sample_time(scenario), DEPTH_LOG)
         return SessionStart(controller, reference, log, scenario.start_state())
 
     def plant(self, resolved) -> tuple[Plant, Sensor]:
@@ -402,8 +402,8 @@ class DepthKind(RunKind):
         title = f"{scenario.name}: {scenario.controller.type}"
         return {"depth": figure_depth(log, plant.heave, title=title)}
 
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> DepthLog:
-        return DepthLog.read_csv(Path(run_dir) / "log.csv")
+    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
+        return SimLog.read_csv(Path(run_dir) / "log.csv", format=DEPTH_LOG)
 
 
 KINDS: dict[str, RunKind] = {

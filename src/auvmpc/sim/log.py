@@ -1,13 +1,15 @@
 """What a closed-loop run did, sample by sample, and its CSV form (log.csv).
 
-Row k holds the TRUE plant state at t_k and the reference at t_k; the thrust on
-row k is what was applied over [t_k, t_k+1), so the last row has none
-(``shared/spec/interfaces.md``). Arrays are preallocated and time-major. The state columns
-are named by the log's state layout: :class:`SimLog` is a horizontal run's
-(``x, y, psi, u, v, r``), :class:`DepthLog` a depth run's (``z, w``), :class:`SixDofLog` a
-6-DOF run's (the 12 states, its horizontal part first in log.csv); same loop, same rows. Each
-kind declares its log.csv columns and the fields they hold (:meth:`SimLog.csv_columns`); one
-writer and one reader serve them all.
+Row k holds the TRUE plant state at t_k and the reference at t_k; the command on row k is
+what was applied over [t_k, t_k+1), so the last row has none (``shared/spec/interfaces.md``).
+Arrays are preallocated and time-major.
+
+One log for every kind of run: a :class:`LogFormat` is what a kind logs, as data: the names
+of its state (a layout), reference, environment and measurement, its inputs' prefix, the
+diagnostics it keeps of each controller result, log.csv's columns and the fields they hold,
+and where its horizontal part sits. :data:`HORIZONTAL_LOG` (``x, y, psi, u, v, r``),
+:data:`DEPTH_LOG` (``z, w``) and :data:`SIX_DOF_LOG` (the 12 states, the horizontal part
+first in log.csv) are the three; one writer and one reader serve them all.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,12 +33,14 @@ if TYPE_CHECKING:
 __all__ = [
     "BACKOFF_NAMES",
     "CURRENT_NAMES",
-    "DepthLog",
+    "DEPTH_LOG",
     "ESTIMATE_NAMES",
-    "LiveLog",
+    "HORIZONTAL_LOG",
     "REFERENCE_NAMES",
+    "SIX_DOF_LOG",
+    "LiveLog",
+    "LogFormat",
     "SimLog",
-    "SixDofLog",
 ]
 
 STATE_NAMES = HORIZONTAL.names
@@ -53,12 +57,14 @@ BACKOFF_NAMES = ("obstacle_backoff_m", "thrust_backoff_fraction")
 # (world NED, m/s).
 DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
 CURRENT_NAMES = ("current_north", "current_east", "current_down")
+# Stands for the log's input names in a format's columns (they depend on the vehicle).
+INPUTS = ("<inputs>",)
 
 
 @dataclass(frozen=True)
 class Column:
-    """A block of log.csv's columns (``names``) and the log field it holds; a field in the
-    log's ``PER_COMMAND`` has no value on the final row (empty cells there)."""
+    """A block of log.csv's columns (``names``) and the log field or diagnostic it holds; a
+    per-command field has no value on the final row (empty cells there)."""
 
     names: tuple[str, ...]
     field: str | None  # None: written as 0 and not read (a column kept for the file's shape)
@@ -68,29 +74,87 @@ class Column:
     optional: bool = False  # logs written before these columns have none (read as 0)
 
 
+@dataclass(frozen=True)
+class Diagnostic:
+    """A value the log keeps of each controller result, per command: the result's ``info``
+    entries ``names`` (0 where absent), or its attribute ``attribute``."""
+
+    field: str
+    names: tuple[str, ...]
+    attribute: str | None = None
+    text: bool = False  # a status, kept as a string
+    dtype: type = float
+
+    def allocate(self, steps: int) -> np.ndarray | list[str]:
+        if self.text:
+            return [""] * steps
+        shape = (steps,) if self.attribute is not None else (steps, len(self.names))
+        return np.zeros(shape, dtype=self.dtype)
+
+    def record(self, values: np.ndarray | list[str], k: int, result: ControlResult) -> None:
+        if self.attribute is None:
+            values[k] = [result.info.get(name, 0.0) for name in self.names]
+        else:
+            value = getattr(result, self.attribute)
+            values[k] = str(value) if self.text else value
+
+
+@dataclass(frozen=True)
+class HorizontalPart:
+    """Where a log's horizontal run sits: state columns, reference and measurement columns,
+    and the first ``horizontal_inputs`` inputs (the log's own)."""
+
+    state: np.ndarray
+    reference: slice
+    measured: slice
+
+
+@dataclass(frozen=True, eq=False)
+class LogFormat:
+    """What a kind of run logs (module docstring)."""
+
+    name: str
+    layout: Layout  # the plant state's names: the columns of ``state``
+    reference_names: tuple[str, ...]  # what the controller is asked to follow, per row
+    #: What the environment does at each row: a horizontal run's external force, a depth
+    #: run's wave force, a 6-DOF run's water current.
+    environment_names: tuple[str, ...]
+    #: What the controller's sensors measure (the session's measurement, in this order).
+    measured_names: tuple[str, ...]
+    input_prefix: str  # the inputs' names: this prefix and the input's number from 1
+    diagnostics: tuple[Diagnostic, ...]
+    columns: tuple[Column, ...]  # log.csv's, in order; INPUTS stands for the input names
+    #: Where the horizontal run sits; None: it has none (a depth run). A horizontal log is
+    #: its own (``horizontal_part`` with every column in place).
+    horizontal_part: HorizontalPart | None
+    #: The result's attribute whose wall time the log keeps as ``solve_ms`` (a 6-DOF run's
+    #: horizontal channel's); None: the whole controller call's.
+    solve_ms_attribute: str | None = None
+
+    def csv_columns(self, input_names: tuple[str, ...]) -> tuple[Column, ...]:
+        return tuple(
+            replace(column, names=input_names) if column.names == INPUTS else column
+            for column in self.columns
+        )
+
+
+# The fields with a row per sample (N + 1) and those with a row per command (N); a
+# diagnostic is per command. :meth:`SimLog.first` cuts by these lists, so a new field goes in
+# one of them (tests/test_session.py checks that every one is).
+PER_SAMPLE = ("t", "state", "reference", "environment", "clearance_m", "measured")
+PER_COMMAND = ("thrust", "solve_ms", "status")
+
+
 @dataclass
 class SimLog:
-    """Time-major record of one run (N samples, n thrusters, nx states of ``layout``)."""
+    """Time-major record of one run (N samples, n inputs, the state of ``format.layout``)."""
 
-    #: The plant state's names: the columns of ``state``.
-    layout: ClassVar[Layout] = HORIZONTAL
-    #: The reference's columns (what the controller is asked to follow, logged per row).
-    reference_names: ClassVar[tuple[str, ...]] = REFERENCE_NAMES
-    #: What the environment does at each row (``environment``'s columns): a horizontal
-    #: run's external force, a depth run's wave force, a 6-DOF run's water current.
-    environment_names: ClassVar[tuple[str, ...]] = DISTURBANCE_NAMES
-    #: What the controller's sensors measure (``measured``'s columns, the session's
-    #: measurement, in this order).
-    measured_names: ClassVar[tuple[str, ...]] = HORIZONTAL.names
-    #: The commands' names in log.csv: this prefix and the thruster's number from 1.
-    input_prefix: ClassVar[str] = "F"
-
+    format: LogFormat
     t: np.ndarray  # (N+1,) s
     state: np.ndarray  # (N+1, nx) true plant state
     reference: np.ndarray  # (N+1, nr) reference_names
     thrust: np.ndarray  # (N, n) applied over [t_k, t_k+1)
     solve_ms: np.ndarray  # (N,) wall time of the controller call
-    disturbance_estimate: np.ndarray  # (N, 3) what the controller assumed over [t_k, t_k+1)
     status: list[str]  # (N,) ControlStatus values
     environment: np.ndarray  # (N+1, nd) environment_names at t_k
     clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
@@ -99,36 +163,43 @@ class SimLog:
     # (N+1, m) what the sensors gave at t_k (the controller's input on rows 0..N-1); in
     # memory only for horizontal and 6-DOF runs, whose log.csv keeps the truth.
     measured: np.ndarray
-    backoff: np.ndarray  # (N, 2) BACKOFF_NAMES over [t_k, t_k+1)
-
-    # The fields with a row per sample (N + 1) and those with a row per command (N); the
-    # others (sample_time, initial_thrust) are the run's. :meth:`first` cuts by these lists,
-    # so a new field goes in one of them (tests/test_session.py checks that every one is).
-    PER_SAMPLE: ClassVar[tuple[str, ...]] = (
-        "t", "state", "reference", "environment", "clearance_m", "measured",
-    )  # fmt: skip
-    PER_COMMAND: ClassVar[tuple[str, ...]] = (
-        "thrust", "solve_ms", "disturbance_estimate", "status", "backoff",
-    )  # fmt: skip
+    # The format's diagnostics by field, (N, ...) each: e.g. ``disturbance_estimate`` (what
+    # the controller assumed over [t_k, t_k+1)), ``backoff``, a 6-DOF run's depth channel.
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    horizontal_inputs: int = 0  # how many of the inputs, from the first, are horizontal
 
     @classmethod
-    def allocate(cls, steps: int, n_thrusters: int, sample_time: float) -> SimLog:
-        nx = cls.layout.size
+    def allocate(
+        cls,
+        steps: int,
+        n_inputs: int,
+        sample_time: float,
+        format: LogFormat | None = None,
+        horizontal_inputs: int | None = None,
+    ) -> SimLog:
+        """A log for ``steps`` commands of ``n_inputs`` inputs (a horizontal run's unless
+        ``format`` says otherwise); ``horizontal_inputs``: all of them unless given."""
+        format = HORIZONTAL_LOG if format is None else format
         return cls(
+            format=format,
             t=sample_time * np.arange(steps + 1, dtype=float),
-            state=np.zeros((steps + 1, nx)),
-            reference=np.zeros((steps + 1, len(cls.reference_names))),
-            thrust=np.zeros((steps, n_thrusters)),
+            state=np.zeros((steps + 1, format.layout.size)),
+            reference=np.zeros((steps + 1, len(format.reference_names))),
+            thrust=np.zeros((steps, n_inputs)),
             solve_ms=np.zeros(steps),
-            disturbance_estimate=np.zeros((steps, len(ESTIMATE_NAMES))),
             status=[""] * steps,
-            environment=np.zeros((steps + 1, len(cls.environment_names))),
+            environment=np.zeros((steps + 1, len(format.environment_names))),
             clearance_m=np.full(steps + 1, math.inf),
             sample_time=sample_time,
-            initial_thrust=np.zeros(n_thrusters),
-            measured=np.zeros((steps + 1, len(cls.measured_names))),
-            backoff=np.zeros((steps, len(BACKOFF_NAMES))),
+            initial_thrust=np.zeros(n_inputs),
+            measured=np.zeros((steps + 1, len(format.measured_names))),
+            diagnostics={d.field: d.allocate(steps) for d in format.diagnostics},
+            horizontal_inputs=n_inputs if horizontal_inputs is None else horizontal_inputs,
         )
+
+    @property
+    def layout(self) -> Layout:
+        return self.format.layout
 
     @property
     def steps(self) -> int:
@@ -136,14 +207,17 @@ class SimLog:
 
     def first(self, rows: int) -> SimLog:
         """A copy of the log's first ``rows`` samples (and so ``rows - 1`` commands)."""
-        cut = {name: getattr(self, name)[:rows].copy() for name in self.PER_SAMPLE}
-        cut.update({name: getattr(self, name)[: rows - 1].copy() for name in self.PER_COMMAND})
+        cut: dict[str, Any] = {name: getattr(self, name)[:rows].copy() for name in PER_SAMPLE}
+        cut.update({name: getattr(self, name)[: rows - 1].copy() for name in PER_COMMAND})
+        cut["diagnostics"] = {
+            name: values[: rows - 1].copy() for name, values in self.diagnostics.items()
+        }
         return replace(self, **cut)
 
     @property
     def input_names(self) -> tuple[str, ...]:
         """The commands' names: the thrust columns of log.csv."""
-        return tuple(f"{self.input_prefix}{i + 1}" for i in range(self.n_thrusters))
+        return tuple(f"{self.format.input_prefix}{i + 1}" for i in range(self.n_thrusters))
 
     @property
     def n_thrusters(self) -> int:
@@ -151,34 +225,66 @@ class SimLog:
 
     def horizontal(self) -> SimLog:
         """The horizontal view: ``[x, y, psi, u, v, r]``, their reference and the horizontal
-        thrusters (what 3-DOF metrics and figures read); a horizontal log is its own."""
-        return self
+        inputs (what 3-DOF metrics and figures read); a horizontal log is its own."""
+        if self.format is HORIZONTAL_LOG:
+            return self
+        part = self.format.horizontal_part
+        if part is None:
+            raise TypeError(f"a {self.format.name} run has no horizontal path")
+        n = self.horizontal_inputs
+        return SimLog(
+            format=HORIZONTAL_LOG,
+            t=self.t,
+            state=self.state[:, part.state],
+            reference=self.reference[:, part.reference],
+            thrust=self.thrust[:, :n],
+            solve_ms=self.solve_ms,
+            status=self.status,
+            environment=np.zeros((len(self.t), len(HORIZONTAL_LOG.environment_names))),
+            clearance_m=self.clearance_m,
+            sample_time=self.sample_time,
+            initial_thrust=self.initial_thrust[:n],
+            measured=self.measured[:, part.measured],
+            diagnostics={d.field: self.diagnostics[d.field] for d in HORIZONTAL_LOG.diagnostics},
+            horizontal_inputs=n,
+        )
 
     def record_command(
         self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
     ) -> None:
         """Row k's command: the (checked) thrust, how it came, the controller call's wall
-        time and the diagnostics the log keeps of the controller's ``info``."""
+        time (or the format's channel's) and the diagnostics the format keeps."""
         self.thrust[k] = thrust
-        self.solve_ms[k] = solve_ms
+        attribute = self.format.solve_ms_attribute
+        self.solve_ms[k] = solve_ms if attribute is None else getattr(result, attribute)
         self.status[k] = str(result.status)
-        self.disturbance_estimate[k] = [result.info.get(name, 0.0) for name in ESTIMATE_NAMES]
-        self.backoff[k] = [result.info.get(name, 0.0) for name in BACKOFF_NAMES]
+        for diagnostic in self.format.diagnostics:
+            diagnostic.record(self.diagnostics[diagnostic.field], k, result)
+
+    def column(self, name: str) -> np.ndarray | list[str]:
+        """log.csv's column ``name`` (all rows; a per-command one has N), e.g. a depth run's
+        ``z_ref``; a KeyError naming the columns if there is none."""
+        for block in self.csv_columns():
+            if name in block.names and block.field is not None:
+                values = self._values(block.field)
+                if block.text:
+                    return values
+                if np.ndim(values) == 1:
+                    return values
+                held = np.arange(values.shape[1])  # the field's columns this block holds
+                held = held if block.part is None else held[block.part]
+                return values[:, held[block.names.index(name)]]
+        raise KeyError(f"no column {name!r} in this log ({', '.join(self.columns())})")
+
+    def _values(self, name: str) -> Any:
+        return self.diagnostics[name] if name in self.diagnostics else getattr(self, name)
+
+    def _per_command(self, name: str) -> bool:
+        return name in PER_COMMAND or name in self.diagnostics
 
     def csv_columns(self) -> tuple[Column, ...]:
         """log.csv's columns, in order, and the fields they hold."""
-        return (
-            Column(("t",), "t"),
-            Column(STATE_NAMES, "state"),
-            Column(REFERENCE_NAMES, "reference"),
-            Column(self.input_names, "thrust"),
-            Column(("solve_ms",), "solve_ms"),
-            Column(("status",), "status", text=True),
-            Column(DISTURBANCE_NAMES, "environment"),
-            Column(("clearance_m",), "clearance_m", empty_is_inf=True),
-            Column(ESTIMATE_NAMES, "disturbance_estimate", optional=True),
-            Column(BACKOFF_NAMES, "backoff", optional=True),
-        )
+        return self.format.csv_columns(self.input_names)
 
     def columns(self) -> list[str]:
         return [name for column in self.csv_columns() for name in column.names]
@@ -198,9 +304,9 @@ class SimLog:
         """Row k's cells of one block of columns."""
         if column.field is None:
             return [csv_number(0.0)] * len(column.names)
-        if final and column.field in self.PER_COMMAND:
+        if final and self._per_command(column.field):
             return [""] * len(column.names)
-        value = getattr(self, column.field)[k]
+        value = self._values(column.field)[k]
         if column.text:
             return [value]
         if np.ndim(value) == 0:
@@ -211,21 +317,26 @@ class SimLog:
 
     @classmethod
     def read_csv(
-        cls, path: Path, initial_thrust: np.ndarray | None = None, **run_fields: Any
+        cls,
+        path: Path,
+        initial_thrust: np.ndarray | None = None,
+        format: LogFormat | None = None,
+        horizontal_inputs: int | None = None,
     ) -> SimLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly); ``run_fields``:
-        what the kind's ``allocate`` takes beyond the sizes (a 6-DOF log's ``n_horizontal``)."""
+        """Load a log written by ``to_csv_text`` (values round-trip exactly), of a horizontal
+        run unless ``format`` says otherwise."""
+        format = HORIZONTAL_LOG if format is None else format
         rows = _csv_rows(path)
-        prefix = cls.input_prefix
+        prefix = format.input_prefix
         inputs = sum(name.startswith(prefix) and name[len(prefix) :].isdigit() for name in rows[0])
         steps = len(rows) - 1
         sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
-        log = cls.allocate(steps, inputs, sample_time, **run_fields)
+        log = cls.allocate(steps, inputs, sample_time, format, horizontal_inputs)
         for column in log.csv_columns():
             if column.field is None or (column.optional and column.names[0] not in rows[0]):
                 continue
-            values = getattr(log, column.field)
-            for k, row in enumerate(rows[:steps] if column.field in cls.PER_COMMAND else rows):
+            values = log._values(column.field)
+            for k, row in enumerate(rows[:steps] if log._per_command(column.field) else rows):
                 cells = [row[name] for name in column.names]
                 if column.text:
                     values[k] = cells[0]
@@ -241,149 +352,61 @@ class SimLog:
         return log
 
 
-@dataclass
-class DepthLog(SimLog):
-    """A depth run's log (``kind: depth``): true ``[z, w]``, the depth setpoint, the vertical
-    thrusts, the pressure sensor's reading and the wave force (docs/depth.md). Its log.csv
-    columns: ``t, z, w, z_ref, Fz1..Fzn, solve_ms, status, z_measured, wave_force_N``."""
+# What a horizontal controller's shell reports with every result (info keys).
+_SHELL_DIAGNOSTICS = (
+    Diagnostic("disturbance_estimate", ESTIMATE_NAMES),
+    Diagnostic("backoff", BACKOFF_NAMES),
+)
 
-    layout: ClassVar[Layout] = DEPTH
-    reference_names: ClassVar[tuple[str, ...]] = ("z_ref", "w_ref")  # log.csv keeps z_ref
-    environment_names: ClassVar[tuple[str, ...]] = ("wave_force_N",)
-    measured_names: ClassVar[tuple[str, ...]] = ("z",)  # the pressure sensor's depth
-    input_prefix: ClassVar[str] = "Fz"  # the vertical thrusters
+HORIZONTAL_LOG = LogFormat(
+    name="horizontal",
+    layout=HORIZONTAL,
+    reference_names=REFERENCE_NAMES,
+    environment_names=DISTURBANCE_NAMES,
+    measured_names=HORIZONTAL.names,
+    input_prefix="F",
+    diagnostics=_SHELL_DIAGNOSTICS,
+    columns=(
+        Column(("t",), "t"),
+        Column(STATE_NAMES, "state"),
+        Column(REFERENCE_NAMES, "reference"),
+        Column(INPUTS, "thrust"),
+        Column(("solve_ms",), "solve_ms"),
+        Column(("status",), "status", text=True),
+        Column(DISTURBANCE_NAMES, "environment"),
+        Column(("clearance_m",), "clearance_m", empty_is_inf=True),
+        Column(ESTIMATE_NAMES, "disturbance_estimate", optional=True),
+        Column(BACKOFF_NAMES, "backoff", optional=True),
+    ),
+    horizontal_part=HorizontalPart(
+        np.arange(HORIZONTAL.size), slice(0, len(REFERENCE_NAMES)), slice(0, HORIZONTAL.size)
+    ),
+)
 
-    def horizontal(self) -> SimLog:
-        raise TypeError("a depth run has no horizontal path")
+_DEPTH = DEPTH.index("z")
 
-    @property
-    def z_ref(self) -> np.ndarray:
-        """(N+1,) the depth setpoint (m, up)."""
-        return self.reference[:, _DEPTH]
-
-    @property
-    def z_measured(self) -> np.ndarray:
-        """(N+1,) the depth the controller saw (m, up)."""
-        return self.measured[:, 0]
-
-    @property
-    def wave_force(self) -> np.ndarray:
-        """(N+1,) the waves' vertical force on the vehicle at t_k (N, up)."""
-        return self.environment[:, 0]
-
-    def csv_columns(self) -> tuple[Column, ...]:
-        return (
-            Column(("t",), "t"),
-            Column(self.layout.names, "state"),
-            Column(("z_ref",), "reference", part=[_DEPTH]),
-            Column(self.input_names, "thrust"),
-            Column(("solve_ms",), "solve_ms"),
-            Column(("status",), "status", text=True),
-            Column(("z_measured",), "measured"),
-            Column(self.environment_names, "environment"),
-        )
-
-
-@dataclass
-class SixDofLog(SimLog):
-    """A 6-DOF run's log (``kind: six-dof``): the true 12-state, the horizontal reference with
-    the depth's, the water current at the vehicle, and both control channels' timing and
-    status. ``thrust`` has one column per ``six_dof`` thruster (the horizontal ones first);
-    ``solve_ms``, ``status`` and the diagnostics are the horizontal controller's.
-
-    log.csv: a horizontal log's columns (its ``dist_*`` are 0: the 6-DOF plant's environment
-    is the current, logged as ``current_*``), then ``z, phi, theta, w, p, q``, ``z_ref,
-    z_rate_ref``, ``current_north, current_east, current_down``, ``depth_solve_ms,
-    depth_status``.
-    """
-
-    layout: ClassVar[Layout] = SIX_DOF
-    reference_names: ClassVar[tuple[str, ...]] = (*REFERENCE_NAMES, *DEPTH_REFERENCE_NAMES)
-    environment_names: ClassVar[tuple[str, ...]] = CURRENT_NAMES
-    measured_names: ClassVar[tuple[str, ...]] = SIX_DOF_MEASUREMENT.names
-    PER_COMMAND: ClassVar[tuple[str, ...]] = (
-        *SimLog.PER_COMMAND, "depth_solve_ms", "depth_status", "saturated",
-    )  # fmt: skip
-
-    n_horizontal: int = 0  # thrust's first columns, the horizontal controller's (allocate's)
-    depth_solve_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,)
-    depth_status: list[str] = field(default_factory=list)  # (N,) the depth controller's
-    saturated: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (N,)
-    # (N,): how many thrusters' demand the mapping had to change (rate or force limit)
-
-    @classmethod
-    def allocate(
-        cls, steps: int, n_thrusters: int, sample_time: float, *, n_horizontal: int
-    ) -> SixDofLog:
-        log = super().allocate(steps, n_thrusters, sample_time)
-        log.n_horizontal = n_horizontal
-        log.depth_solve_ms = np.zeros(steps)
-        log.depth_status = [""] * steps
-        log.saturated = np.zeros(steps, dtype=int)
-        return log
-
-    @property
-    def depth(self) -> np.ndarray:
-        """(N+1,) the true depth z (m, down)."""
-        return self.state[:, SIX_DOF.index("z")]
-
-    @property
-    def depth_reference(self) -> np.ndarray:
-        """(N+1, 2) [z_ref, z_ref'] (NED: m, m/s)."""
-        return self.reference[:, _DEPTH_REFERENCE]
-
-    @property
-    def current_world(self) -> np.ndarray:
-        """(N+1, 3) the water velocity at the vehicle over [t_k, t_k+1) (world NED, m/s)."""
-        return self.environment
-
-    def record_command(
-        self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
-    ) -> None:
-        # The channels' own results (controllers/channels.py): each one's time, not the
-        # whole call's (which adds the mapping's).
-        super().record_command(k, result, thrust, result.horizontal_solve_ms)
-        self.depth_solve_ms[k] = result.depth_solve_ms
-        self.depth_status[k] = str(result.depth_status)
-        self.saturated[k] = result.saturated
-
-    def horizontal(self) -> SimLog:
-        """The horizontal view: ``[x, y, psi, u, v, r]``, their reference and the horizontal
-        thrusters (what the 3-DOF metrics and figures read, checked against the horizontal
-        controller's limits)."""
-        n = self.n_horizontal
-        return SimLog(
-            t=self.t,
-            state=self.state[:, HORIZONTAL_INDEX],
-            reference=self.reference[:, _HORIZONTAL_REFERENCE],
-            thrust=self.thrust[:, :n],
-            solve_ms=self.solve_ms,
-            disturbance_estimate=self.disturbance_estimate,
-            status=self.status,
-            environment=np.zeros((len(self.t), len(DISTURBANCE_NAMES))),
-            clearance_m=self.clearance_m,
-            sample_time=self.sample_time,
-            initial_thrust=self.initial_thrust[:n],
-            measured=self.measured[:, SIX_DOF_MEASUREMENT.span("x", "r")],
-            backoff=self.backoff,
-        )
-
-    def csv_columns(self) -> tuple[Column, ...]:
-        # A horizontal log's columns (every thruster), then the 6-DOF rest.
-        horizontal_part = {
-            "state": Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX),
-            "reference": Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE),
-            "environment": Column(DISTURBANCE_NAMES, None),  # no force: the current
-        }
-        return (
-            *(horizontal_part.get(column.field, column) for column in super().csv_columns()),
-            Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
-            Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
-            Column(CURRENT_NAMES, "environment"),
-            Column(("depth_solve_ms",), "depth_solve_ms"),
-            Column(("depth_status",), "depth_status", text=True),
-        )
-
+# A depth run (``kind: depth``, docs/depth.md): true ``[z, w]``, the depth setpoint, the
+# vertical thrusts, the pressure sensor's reading and the wave force.
+DEPTH_LOG = LogFormat(
+    name="depth",
+    layout=DEPTH,
+    reference_names=("z_ref", "w_ref"),  # log.csv keeps z_ref
+    environment_names=("wave_force_N",),
+    measured_names=("z",),  # the pressure sensor's depth
+    input_prefix="Fz",  # the vertical thrusters
+    diagnostics=(),
+    columns=(
+        Column(("t",), "t"),
+        Column(DEPTH.names, "state"),
+        Column(("z_ref",), "reference", part=[_DEPTH]),
+        Column(INPUTS, "thrust"),
+        Column(("solve_ms",), "solve_ms"),
+        Column(("status",), "status", text=True),
+        Column(("z_measured",), "measured"),
+        Column(("wave_force_N",), "environment"),
+    ),
+    horizontal_part=None,
+)
 
 # The 6-DOF state's columns beyond the horizontal ones, in log.csv's order.
 _SIX_DOF_EXTRA = ("z", "phi", "theta", "w", "p", "q")
@@ -391,7 +414,47 @@ _SIX_DOF_EXTRA_INDEX = np.array([SIX_DOF.index(name) for name in _SIX_DOF_EXTRA]
 # Where the horizontal reference and the depth's sit in a 6-DOF log's reference.
 _HORIZONTAL_REFERENCE = slice(0, len(REFERENCE_NAMES))
 _DEPTH_REFERENCE = slice(len(REFERENCE_NAMES), len(REFERENCE_NAMES) + len(DEPTH_REFERENCE_NAMES))
-_DEPTH = DEPTH.index("z")
+
+# A 6-DOF run (``kind: six-dof``): the true 12-state, the horizontal reference with the
+# depth's, the water current at the vehicle, and both control channels' timing and status
+# (controllers/channels.py, ChannelResult). Its inputs are every ``six_dof`` thruster, the
+# horizontal ones first; ``solve_ms``, ``status`` and the shell's diagnostics are the
+# horizontal controller's. log.csv: a horizontal log's columns (its ``dist_*`` are 0: the
+# 6-DOF plant's environment is the current, logged as ``current_*``), then ``z, phi, theta,
+# w, p, q``, ``z_ref, z_rate_ref``, ``current_north, current_east, current_down``,
+# ``depth_solve_ms, depth_status``.
+SIX_DOF_LOG = LogFormat(
+    name="six-dof",
+    layout=SIX_DOF,
+    reference_names=(*REFERENCE_NAMES, *DEPTH_REFERENCE_NAMES),
+    environment_names=CURRENT_NAMES,
+    measured_names=SIX_DOF_MEASUREMENT.names,
+    input_prefix="F",
+    diagnostics=(
+        *_SHELL_DIAGNOSTICS,
+        Diagnostic("depth_solve_ms", ("depth_solve_ms",), "depth_solve_ms"),
+        Diagnostic("depth_status", ("depth_status",), "depth_status", text=True),
+        # how many thrusters' demand the mapping had to change (rate or force limit)
+        Diagnostic("saturated", ("saturated",), "saturated", dtype=int),
+    ),
+    columns=(
+        Column(("t",), "t"),
+        Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX),
+        Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE),
+        *HORIZONTAL_LOG.columns[3:6],  # the inputs, solve_ms, status
+        Column(DISTURBANCE_NAMES, None),  # no force: the current
+        *HORIZONTAL_LOG.columns[7:],  # clearance, the shell's diagnostics
+        Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
+        Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
+        Column(CURRENT_NAMES, "environment"),
+        Column(("depth_solve_ms",), "depth_solve_ms"),
+        Column(("depth_status",), "depth_status", text=True),
+    ),
+    horizontal_part=HorizontalPart(
+        HORIZONTAL_INDEX, _HORIZONTAL_REFERENCE, SIX_DOF_MEASUREMENT.span("x", "r")
+    ),
+    solve_ms_attribute="horizontal_solve_ms",  # the channel's own time, not the mapping's
+)
 
 
 class LiveLog:

@@ -53,10 +53,10 @@ def closed_loop(
     initial_thrust: np.ndarray | None = None,
     on_step: Callable[[int, int], None] | None = None,
 ) -> SimLog:
-    """Run ``controller`` against ``plant`` for ``duration`` seconds; the log is the plant's
-    kind (``plant.log_type``: a horizontal :class:`SimLog`, a depth :class:`DepthLog`; a
-    6-DOF run's log needs its horizontal thruster count, so it goes through
-    experiments/run.py's RunSession).
+    """Run ``controller`` against ``plant`` for ``duration`` seconds; the log is in the
+    plant's format (``plant.log_format``: a horizontal or a depth run's; a 6-DOF run's log
+    needs its horizontal thruster count, so it goes through experiments/run.py's
+    RunSession).
 
     The controller sees the sensor's measurement every ``controller.sample_time``;
     its command is applied unaltered and held until the next sample, so the log
@@ -75,7 +75,7 @@ def closed_loop(
     session = Session(
         controller,
         reference,
-        plant.log_type.allocate(steps, plant.n_thrusters, sample_time),
+        SimLog.allocate(steps, plant.n_thrusters, sample_time, plant.log_format),
         initial_state=initial_state,
         initial_thrust=initial_thrust,
         obstacles=obstacles,

@@ -19,7 +19,7 @@ from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.references import DepthStepConfig
-from auvmpc.sim.log import DepthLog, SimLog
+from auvmpc.sim.log import SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 
 __all__ = [
@@ -290,18 +290,18 @@ def compute_six_dof_metrics(
 
     Parameters
     ----------
-    log : auvmpc.sim.log.SixDofLog
+    log : auvmpc.sim.log.SimLog
+        A 6-DOF run's (``SIX_DOF_LOG``).
     limits : VehicleParams
         The nominal vehicle, with ``six_dof`` and ``heave`` sections.
     """
-    from auvmpc.controllers.channels import ThrustMapping
-
     metrics = compute_metrics(log.horizontal(), limits, transient_s, obstacle_margin_m)
-    mapping = ThrustMapping(limits, log.sample_time)
-    every_thruster = actuation_metrics(log, (mapping.lower, mapping.upper), mapping.rate_limit)
+    bounds = limits.six_dof_actuators.limits
+    every_thruster = actuation_metrics(log, (bounds.lower, bounds.upper), bounds.rate)
     steady = log.t >= transient_s - 1e-9
-    depth_error = log.depth - log.depth_reference[:, 0]
+    depth_error = log.column("z") - log.column("z_ref")
     roll, pitch = (np.abs(log.state[:, SIX_DOF.index(name)]) for name in ("phi", "theta"))
+    depth_solve_ms = log.diagnostics["depth_solve_ms"]
     metrics.update(
         {
             **_pick(
@@ -312,7 +312,7 @@ def compute_six_dof_metrics(
                 "max_abs_thrust_rate_N_per_s",
                 "thrust_effort_N2s",
             ),
-            "saturated_thrust_commands": int(log.saturated.sum()),
+            "saturated_thrust_commands": int(log.diagnostics["saturated"].sum()),
             "rms_depth_error_m": _rms(depth_error),
             "max_depth_error_m": float(np.abs(depth_error).max()),
             "depth_rms_error_after_transient_m": _rms(depth_error[steady]),
@@ -321,9 +321,11 @@ def compute_six_dof_metrics(
             else None,
             "max_abs_roll_rad": float(roll.max()),
             "max_abs_pitch_rad": float(pitch.max()),
-            "depth_solve_ms_median": _percentile(log.depth_solve_ms, 50),
-            "depth_solve_ms_max": float(log.depth_solve_ms.max()) if log.steps else 0.0,
-            "depth_fallback_steps": sum(s == ControlStatus.FALLBACK for s in log.depth_status),
+            "depth_solve_ms_median": _percentile(depth_solve_ms, 50),
+            "depth_solve_ms_max": float(depth_solve_ms.max()) if log.steps else 0.0,
+            "depth_fallback_steps": sum(
+                s == ControlStatus.FALLBACK for s in log.diagnostics["depth_status"]
+            ),
         }
     )
     trouble = []
@@ -349,7 +351,7 @@ def tightening_metrics(log: SimLog) -> dict[str, float]:
     """What the robust tightening (ocp/tightening.py) took, all zero for a nominal controller:
     the largest and the mean (over the samples with obstacle rows) obstacle back-off, and the
     largest and mean fraction of a thruster's range given up."""
-    obstacle, thrust = log.backoff[:, 0], log.backoff[:, 1]
+    obstacle, thrust = log.diagnostics["backoff"].T
     with_rows = obstacle[obstacle > 0.0]
     return {
         "max_obstacle_backoff_m": float(obstacle.max(initial=0.0)),
@@ -370,7 +372,7 @@ STEP_METRIC_KEYS = (
 
 
 def compute_depth_metrics(
-    log: DepthLog, step: DepthStepConfig, limits: HeaveParams
+    log: SimLog, step: DepthStepConfig, limits: HeaveParams
 ) -> dict[str, float | int | None]:
     """Step-response metrics of the true depth (docs/depth.md), then the actuation and solver
     metrics every run has, against the vertical thrusters' limits in ``limits``."""
@@ -381,7 +383,7 @@ def compute_depth_metrics(
     progress = (z_after - step.initial_depth_m) / change  # 0 before, 1 at the target
     error = np.abs(z_after - step.final_depth_m)
     steady = log.t >= log.t[-1] - STEADY_WINDOW_S - 1e-9
-    steady_error = np.abs(z[steady] - log.z_ref[steady])
+    steady_error = np.abs(z[steady] - log.column("z_ref")[steady])
     common = actuation_metrics(log, limits.thrust_limits, limits.thrust_rate_limit)
     metrics = {
         "rise_time_s": _rise_time(t_after, progress),

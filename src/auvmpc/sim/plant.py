@@ -39,7 +39,7 @@ from auvmpc.models.six_dof import (
 )
 from auvmpc.models.vehicle import HeaveParams, VehicleParams, body_from_world, dynamics
 from auvmpc.native import NativeFunction, native_function
-from auvmpc.sim.log import DepthLog, SimLog, SixDofLog
+from auvmpc.sim.log import DEPTH_LOG, HORIZONTAL_LOG, SIX_DOF_LOG, LogFormat
 
 __all__ = [
     "HeavePlant",
@@ -61,7 +61,7 @@ _SIX_DOF_DEPTH = SIX_DOF.index("z")  # NED, down (m)
 class Plant(Protocol):
     """What the closed loop integrates: one held-thrust sample at a time, in its environment."""
 
-    log_type: type[SimLog]  # its state layout, logged columns and CSV form
+    log_format: LogFormat  # its state layout, logged columns and CSV form
     n_thrusters: int
     sample_time: float  # s, the sample :meth:`step` integrates over
 
@@ -82,7 +82,7 @@ def substeps_for(sample_time: float, max_step: float) -> int:
 class HorizontalPlant:
     """The 3-DOF vehicle under a :class:`WorldDisturbance` (force, moment and water current)."""
 
-    log_type = SimLog
+    log_format = HORIZONTAL_LOG
 
     def __init__(
         self,
@@ -108,7 +108,7 @@ class HorizontalPlant:
 class HeavePlant:
     """The heave model (depth experiment) under the surface waves, or in calm water."""
 
-    log_type = DepthLog
+    log_format = DEPTH_LOG
 
     def __init__(
         self,
@@ -142,7 +142,7 @@ class SixDofPlant:
     """The 6-DOF vehicle in the water current (or still water); its environment, logged at
     each sample, is the water velocity at the vehicle (world NED, m/s)."""
 
-    log_type = SixDofLog
+    log_format = SIX_DOF_LOG
 
     def __init__(
         self,
@@ -162,7 +162,7 @@ class SixDofPlant:
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
         """The water velocity at the vehicle (world NED, m/s), held over [t, t + sample)."""
         if self.current is None:
-            return np.zeros(len(SixDofLog.environment_names))
+            return np.zeros(len(SIX_DOF_LOG.environment_names))
         return self.current.at(t, state[_SIX_DOF_DEPTH], depth_rate(state))[0]
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:

@@ -98,7 +98,7 @@ class Session:
         self.n_inputs = log.n_thrusters
         self.input_names = log.input_names
         self.state_names = log.layout.names
-        self.measurement_names = log.measured_names
+        self.measurement_names = log.format.measured_names
         self.k = 0  # samples stepped so far
         self.finished = False  # the final state row is in
         self.closed = False  # filed as a run: nothing more may be stepped
@@ -107,7 +107,7 @@ class Session:
         # The measured position, where the obstacle sensor looks from (by the measurement's
         # own names: they need not be the state's).
         self._measured_position = (
-            None if self.position is None else Layout(log.measured_names).position
+            None if self.position is None else Layout(log.format.measured_names).position
         )
         previous = (
             np.zeros(self.n_inputs) if initial_thrust is None else np.asarray(initial_thrust, float)
@@ -217,7 +217,7 @@ class Session:
         naming the first that is wrong."""
         log = self.log
         t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
-        names = log.measured_names
+        names = log.format.measured_names
         measured = _finite_vector("measurement", measurement, len(names), names)
         if truth is None and names != log.layout.names:
             raise ConfigError(
@@ -229,8 +229,8 @@ class Session:
             truth = Truth(
                 _finite_vector("truth.state", truth.state, log.layout.size, log.layout.names),
                 _finite_vector(
-                    "truth.environment", truth.environment, len(log.environment_names),
-                    log.environment_names,
+                    "truth.environment", truth.environment, len(log.format.environment_names),
+                    log.format.environment_names,
                 ),
             )  # fmt: skip
         return t, measured, truth
