@@ -40,7 +40,7 @@ from auvmpc.scenario import (
     scenario_to_dict,
 )
 from auvmpc.scenario.loader import SCENARIO_KINDS
-from auvmpc.sim.log import DEPTH_LOG, SIX_DOF_LOG, SimLog
+from auvmpc.sim.log import LogFormat, SimLog
 from auvmpc.sim.loop import Sensor
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
 from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
@@ -163,7 +163,12 @@ class RunKind(ABC):
 
     name: ClassVar[str]
     result_type: ClassVar[type[Finished]]
-    has_horizontal: ClassVar[bool]  # a horizontal path, to animate and compare
+    log_format: ClassVar[LogFormat]  # what its log holds (its plant's)
+
+    @property
+    def has_horizontal(self) -> bool:
+        """Whether its runs have a horizontal path, to animate and compare."""
+        return self.log_format.horizontal_part is not None
 
     @property
     def scenario_type(self) -> type:
@@ -219,7 +224,7 @@ class HorizontalKind(RunKind):
 
     name = "horizontal"
     result_type = RunResult
-    has_horizontal = True
+    log_format = HorizontalPlant.log_format
     measure = staticmethod(compute_metrics)  # (log, model, transient_s, obstacle_margin)
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
@@ -238,7 +243,12 @@ class HorizontalKind(RunKind):
         return SessionStart(
             controller,
             make_reference(scenario.reference, resolved.base_dir),
-            SimLog.allocate(_steps(scenario), resolved.model.n_thrusters, _sample_time(scenario)),
+            SimLog.allocate(
+                _steps(scenario),
+                resolved.model.n_thrusters,
+                _sample_time(scenario),
+                self.log_format,
+            ),
             scenario.initial_state,
             None if given is None else np.array(given),
             **self._surroundings(scenario),
@@ -280,7 +290,7 @@ class HorizontalKind(RunKind):
         return run_figures(log, scenario.obstacles, radius, model, title)
 
     def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        log = SimLog.read_csv(Path(run_dir) / "log.csv")
+        log = SimLog.read_csv(Path(run_dir) / "log.csv", format=self.log_format)
         # (a 6-DOF run's log.csv read as a horizontal one has its vertical thrusters too)
         log.initial_thrust = padded(info["scenario"].get("initial_thrust"), log.n_thrusters)
         return log
@@ -292,6 +302,7 @@ class SixDofKind(HorizontalKind):
 
     name = "six-dof"
     result_type = SixDofRunResult
+    log_format = SixDofPlant.log_format
     measure = staticmethod(compute_six_dof_metrics)
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
@@ -311,7 +322,7 @@ class SixDofKind(HorizontalKind):
             ReferenceWithDepth(resolved.reference),
             SimLog.allocate(
                 _steps(scenario), model.six_dof.n_thrusters, _sample_time(scenario),
-                SIX_DOF_LOG, horizontal_inputs=model.n_thrusters,
+                self.log_format, horizontal_inputs=model.n_thrusters,
             ),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
             padded(scenario.initial_thrust, model.six_dof.n_thrusters),
@@ -351,7 +362,7 @@ class SixDofKind(HorizontalKind):
         model = VehicleParams.model_validate(info["model"])
         initial = padded(info["scenario"].get("initial_thrust"), model.six_dof.n_thrusters)
         path = Path(run_dir) / "log.csv"
-        return SimLog.read_csv(path, initial, SIX_DOF_LOG, horizontal_inputs=model.n_thrusters)
+        return SimLog.read_csv(path, initial, self.log_format, model.n_thrusters)
 
 
 class DepthKind(RunKind):
@@ -360,7 +371,7 @@ class DepthKind(RunKind):
 
     name = "depth"
     result_type = DepthRunResult
-    has_horizontal = False
+    log_format = HeavePlant.log_format
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
         """Child 0 of the scenario seed is the waves', child 1 the sensor's."""
@@ -375,7 +386,7 @@ class DepthKind(RunKind):
         scenario = resolved.scenario
         reference = DepthStep(scenario.reference, scenario.controller.preview)
         thrusters = resolved.heave_plant.thruster_count
-        log = SimLog.allocate(_steps(scenario), thrusters, _sample_time(scenario), DEPTH_LOG)
+        log = SimLog.allocate(_steps(scenario), thrusters, _sample_time(scenario), self.log_format)
         return SessionStart(controller, reference, log, scenario.start_state())
 
     def plant(self, resolved) -> tuple[Plant, Sensor]:
@@ -403,7 +414,7 @@ class DepthKind(RunKind):
         return {"depth": figure_depth(log, plant.heave, title=title)}
 
     def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        return SimLog.read_csv(Path(run_dir) / "log.csv", format=DEPTH_LOG)
+        return SimLog.read_csv(Path(run_dir) / "log.csv", format=self.log_format)
 
 
 KINDS: dict[str, RunKind] = {
