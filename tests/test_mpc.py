@@ -27,15 +27,10 @@ import scipy.linalg
 from auvmpc.controllers.base import ControlStatus, Observation, ObstacleState
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
 from auvmpc.controllers.ltv import LtvMpc, linearised_rollout
-from auvmpc.controllers.mpc import (
-    PaperMpc,
-    disturbance_matrix,
-    input_matrix,
-    rk4_discretize,
-    sdc_matrix,
-)
+from auvmpc.controllers.mpc import PaperMpc
 from auvmpc.experiments.run import simulate
 from auvmpc.models.integrators import rk4, rk4_step
+from auvmpc.models.sdc import disturbance_matrix, input_matrix, rk4_discretize, sdc_matrix
 from auvmpc.models.vehicle import VehicleParams, dynamics, load_vehicle
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
 from auvmpc.scenario import load_scenario

@@ -129,7 +129,7 @@ def test_the_frozen_heading_model_cannot_move_an_underactuated_vehicle_sideways(
     # Why the paper's mpc refuses: its SDC pair (A(x), B) on a straight (r = 0) has a
     # controllability matrix of rank 4 of 6 without sway thrust (sway and the lateral
     # position are out of reach), rank 6 with the fully actuated vehicle.
-    from auvmpc.controllers.mpc import input_matrix, sdc_matrix
+    from auvmpc.models.sdc import input_matrix, sdc_matrix
 
     state = np.array([0.0, 0.0, 0.3, 0.5, 0.0, 0.0])
 

@@ -16,6 +16,7 @@ from auvmpc.controllers.base import FLOAT_BYTES, MemoryNeed
 from auvmpc.controllers.config import ControllerConfig, QpStructure
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.layout import PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
@@ -107,5 +108,5 @@ class LtvMpc(LinearMpc):
         nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, 6)
         G = None
         if jac_d:
-            G = np.asarray(jac_d[0]).reshape(NX, ny, 3).transpose(1, 0, 2)
+            G = np.asarray(jac_d[0]).reshape(NX, ny, PLANAR_FORCE.size).transpose(1, 0, 2)
         return AffinePrediction(A=A, B=B, c=c, nominal=nominal, G=G)

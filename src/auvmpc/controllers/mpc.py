@@ -36,19 +36,12 @@ from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
+from auvmpc.models.sdc import disturbance_matrix, input_matrix, rk4_discretize, sdc_matrix
 from auvmpc.models.vehicle import VehicleParams, body_from_world, steady_speed
 from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
-__all__ = [
-    "AffinePrediction",
-    "LinearMpc",
-    "PaperMpc",
-    "disturbance_matrix",
-    "input_matrix",
-    "rk4_discretize",
-    "sdc_matrix",
-]
+__all__ = ["AffinePrediction", "LinearMpc", "PaperMpc"]
 
 NX = HORIZONTAL.size
 # Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
@@ -263,57 +256,6 @@ def _clamp_towards(vectors: np.ndarray, side: np.ndarray, max_angle: float) -> n
     return np.where(too_far[:, None], clamped, safe)
 
 
-def sdc_matrix(state: np.ndarray, params: VehicleParams) -> np.ndarray:
-    """A_c(x) with A_c(x) x = f(x, 0): the paper's state-dependent-coefficient form.
-
-    Rows 1-2 hold the rotation, row 3 psi' = r, rows 4-6 the damping and Coriolis
-    terms with the coupling velocities frozen (one factorisation among many; this
-    one makes A_c(x) x exact).
-    """
-    _, _, psi, u, v, r = state
-    p = params
-    A = np.zeros((NX, NX))
-    A[0, 3], A[0, 4] = math.cos(psi), -math.sin(psi)
-    A[1, 3], A[1, 4] = math.sin(psi), math.cos(psi)
-    A[2, 5] = 1.0
-    A[3, 3] = (p.Xu + p.Xuu * abs(u)) / p.m11
-    A[3, 4] = p.m22 * r / p.m11
-    A[4, 3] = -p.m11 * r / p.m22
-    A[4, 4] = (p.Yv + p.Yvv * abs(v)) / p.m22
-    A[5, 3] = (p.m11 - p.m22) * v / p.Iz
-    A[5, 5] = (p.Nr + p.Nrr * abs(r)) / p.Iz
-    return A
-
-
-def input_matrix(params: VehicleParams) -> np.ndarray:
-    """B_c (6, n): thrust enters the velocity rows through M^-1 T."""
-    B = np.zeros((NX, params.n_thrusters))
-    B[3:] = np.diag([1.0 / params.m11, 1.0 / params.m22, 1.0 / params.Iz]) @ params.T
-    return B
-
-
-def disturbance_matrix(params: VehicleParams) -> np.ndarray:
-    """G_c (6, 3): a body-frame force [d_u, d_v, d_r] enters the velocity rows through M^-1."""
-    G = np.zeros((NX, 3))
-    G[3:] = np.diag([1.0 / params.m11, 1.0 / params.m22, 1.0 / params.Iz])
-    return G
-
-
-def rk4_discretize(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact result of one RK4 step on x' = A x + B u with u held (Ad, Bd).
-
-    RK4 applied to a linear system equals the 4th-order Taylor polynomial of the
-    matrix exponential: Ad = sum_{k<=4} (A dt)^k / k!, Bd = sum_{k<=3} A^k dt^(k+1)/(k+1)! B.
-    """
-    identity = np.eye(A.shape[0])
-    Ah = A * dt
-    Ah2 = Ah @ Ah
-    Ah3 = Ah2 @ Ah
-    Ad = identity + Ah + Ah2 / 2.0 + Ah3 / 6.0 + Ah3 @ Ah / 24.0
-    Bd = dt * (identity + Ah / 2.0 + Ah2 / 6.0 + Ah3 / 24.0) @ B
-    return Ad, Bd
-
-
 class PaperMpc(LinearMpc):
     """The paper's controller: SDC matrices refreshed at the current state every sample."""
 
@@ -382,7 +324,7 @@ class PaperMpc(LinearMpc):
             heading = state[HORIZONTAL.heading]
             cos, sin = math.cos(heading), math.sin(heading)
             world_to_body = np.array([[cos, sin, 0.0], [-sin, cos, 0.0], [0.0, 0.0, 1.0]])
-            G = np.broadcast_to(Bd[:, n:] @ world_to_body, (ny, NX, 3))
+            G = np.broadcast_to(Bd[:, n:] @ world_to_body, (ny, NX, PLANAR_FORCE.size))
         return AffinePrediction(
             A=np.broadcast_to(Ad, (ny, NX, NX)),
             B=np.broadcast_to(Bd[:, :n], (ny, NX, n)),

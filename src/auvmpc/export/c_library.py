@@ -39,6 +39,7 @@ from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.estimation import covariance_bounds
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.models.discrete import horizontal_model
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.native import compiler
 from auvmpc.references import make_reference
 from auvmpc.solvers.blasfeo_target import (
@@ -52,6 +53,8 @@ from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
 from auvmpc.solvers.multiple_shooting import (
     _PARKED_OBSTACLE_M,
     MAX_OBSTACLES,
+    ND,
+    SLOT_FIELDS,
     MultipleShootingProgram,
 )
 from auvmpc.solvers.sparse_rti import stage_qp
@@ -77,7 +80,7 @@ _DRIVER = Path(__file__).parents[1] / "solvers" / "hpipm_ocp_step.c"
 _COPIED = ("auvmpc_controller.h", "auvmpc_controller.c", "replay.c", "README.md")
 _DATA = "replay_data.txt"
 _RECORD = "export.json"
-_NX = 6
+_NX = HORIZONTAL.size
 
 
 def exported_config(config: ControllerConfig) -> ControllerConfig:
@@ -101,9 +104,10 @@ def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
     nz, nv = _NX + n, n + (1 if slots else 0)
     iterates = 3 * ((N + 1) * _NX + N * n)  # guess, next guess, iterate
     shell = n * (1 + N)  # previous command, fallback plan
-    sample = _NX + 3 + (N + 1) * _NX + 6 * S + N * _NX + N  # state ... weights, movable
+    # state, disturbance, reference, obstacle slots with their used flags, weights, movable
+    sample = _NX + ND + (N + 1) * _NX + (SLOT_FIELDS + 1) * S + N * _NX + N
     step = (N + 1) * n + (N + 1) * nz + N * nv + N  # P, dz, dv, slack
-    estimator = 9 + 9 * 9  # estimate, covariance
+    estimator = (_NX + ND) * (1 + _NX + ND)  # estimate, covariance
     doubles = iterates + shell + sample + step + estimator
     return 8 * doubles
 
