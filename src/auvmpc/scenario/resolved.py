@@ -10,7 +10,9 @@ from typing import Any
 import numpy as np
 
 from auvmpc.errors import ConfigError, FieldError
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import resolve_heave
+from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
 from auvmpc.models.six_dof import plant_step_length
 from auvmpc.models.vehicle import (
     VehicleParams,
@@ -45,6 +47,15 @@ NOISE_MARGIN_SIGMAS = 3.0
 
 class ResolvedScenario:
     """A scenario plus what its names point at: the nominal model and the simulated plant."""
+
+    #: The state its (horizontal) controller predicts; a horizontal path to check.
+    controlled_layout: Layout = HORIZONTAL
+    has_horizontal_path = True
+
+    @property
+    def controlled_inputs(self) -> ActuatorSet:
+        """The inputs its ``controller`` commands (the nominal model's)."""
+        return self.model.actuators
 
     def __init__(self, scenario: Scenario, base_dir: Path) -> None:
         self.given = scenario  # as written: what overrides apply to
@@ -196,6 +207,13 @@ def load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> Vehi
 
 class ResolvedDepthScenario:
     """A depth scenario (``kind: depth``) and its vehicle."""
+
+    controlled_layout: Layout = DEPTH
+    has_horizontal_path = False
+
+    @property
+    def controlled_inputs(self) -> ActuatorSet:
+        return self.heave_model.actuators
 
     def __init__(self, scenario: DepthScenario, base_dir: Path) -> None:
         self.scenario = scenario

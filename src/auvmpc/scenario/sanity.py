@@ -49,7 +49,7 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.registry import class_of
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
@@ -107,12 +107,7 @@ def check_memory(
     config = scenario.controller
     budget = _MEMORY_SHARE * (available_memory_bytes() if available is None else available)
     steps = scenario.duration / config.sample_time
-    n = (
-        resolved.model.heave.thruster_count
-        if isinstance(resolved, ResolvedDepthScenario)
-        else resolved.model.n_thrusters
-    )
-    nx = (DEPTH if isinstance(resolved, ResolvedDepthScenario) else HORIZONTAL).size
+    n, nx = resolved.controlled_inputs.size, resolved.controlled_layout.size
     # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
     log_bytes = steps * (FLOAT_BYTES * (3 * nx + n + 4) + 64)
     if log_bytes > budget:
@@ -136,7 +131,7 @@ def check_memory(
 def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
     """All checks of the module docstring; returns the warnings, raises the errors."""
     check_memory(resolved)
-    if isinstance(resolved, ResolvedDepthScenario):
+    if not resolved.has_horizontal_path:
         return list(resolved.notes)
     return (
         resolved.notes
