@@ -248,7 +248,8 @@ def test_every_log_field_is_cut_by_first():
 
     from auvmpc.sim.log import PER_COMMAND, PER_SAMPLE, SIX_DOF_LOG
 
-    run_fields = {"format", "sample_time", "initial_thrust", "diagnostics", "horizontal_inputs"}
+    run_fields = {"format", "sample_time", "initial_thrust", "diagnostics", "horizontal_inputs",
+                  "input_names"}  # fmt: skip
     assert {f.name for f in fields(SimLog)} == set(PER_SAMPLE) | set(PER_COMMAND) | run_fields
     log = SimLog.allocate(10, 8, 0.5, SIX_DOF_LOG, horizontal_inputs=4)
     cut = log.first(4)

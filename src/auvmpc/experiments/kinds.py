@@ -245,7 +245,7 @@ class HorizontalKind(RunKind):
             make_reference(scenario.reference, resolved.base_dir),
             SimLog.allocate(
                 _steps(scenario),
-                resolved.model.n_thrusters,
+                resolved.model.actuators.layout.names,
                 _sample_time(scenario),
                 self.log_format,
             ),
@@ -321,7 +321,7 @@ class SixDofKind(HorizontalKind):
             HorizontalAndDepth(controller, depth, model, scenario.depth_controller.preview),
             ReferenceWithDepth(resolved.reference),
             SimLog.allocate(
-                _steps(scenario), model.six_dof.n_thrusters, _sample_time(scenario),
+                _steps(scenario), model.six_dof_actuators.layout.names, _sample_time(scenario),
                 self.log_format, horizontal_inputs=model.n_thrusters,
             ),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
@@ -385,8 +385,8 @@ class DepthKind(RunKind):
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario = resolved.scenario
         reference = DepthStep(scenario.reference, scenario.controller.preview)
-        thrusters = resolved.heave_plant.thruster_count
-        log = SimLog.allocate(_steps(scenario), thrusters, _sample_time(scenario), self.log_format)
+        inputs = resolved.heave_plant.actuators.layout.names
+        log = SimLog.allocate(_steps(scenario), inputs, _sample_time(scenario), self.log_format)
         return SessionStart(controller, reference, log, scenario.start_state())
 
     def plant(self, resolved) -> tuple[Plant, Sensor]:

@@ -27,9 +27,11 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run_folder import RunTables, read_run_tables
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["TOPICS", "export_rosbag2"]
 
@@ -215,15 +217,16 @@ def _disturbance(row: pd.Series, suffix: str) -> tuple[list[float], list[float]]
 
 
 def _thruster_geometry(tables: RunTables) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
-    """Per thruster column: unit force direction and moment per newton in the body frame."""
-    plant = tables.info.get("plant") or {}
-    geometry = {}
-    for i, thruster in enumerate(plant.get("thrusters") or ()):
-        px, py = thruster["position"]
-        a = math.radians(thruster["angle_deg"])
-        c, s = math.cos(a), math.sin(a)
-        geometry[f"F{i + 1}"] = ((c, s, 0.0), (0.0, 0.0, px * s - py * c))
-    return geometry
+    """Per horizontal thruster column: the force and the moment one newton makes in the body
+    frame (its wrench, models/actuators); none where run.json holds no valid plant."""
+    try:
+        plant = VehicleParams.model_validate(tables.info.get("plant"))
+    except ValidationError:
+        return {}
+    return {
+        actuator.name: (tuple(actuator.column[:3]), tuple(actuator.column[3:]))
+        for actuator in plant.actuators.actuators
+    }
 
 
 def _value(row: pd.Series, name: str) -> float:

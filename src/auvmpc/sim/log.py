@@ -121,7 +121,9 @@ class LogFormat:
     environment_names: tuple[str, ...]
     #: What the controller's sensors measure (the session's measurement, in this order).
     measured_names: tuple[str, ...]
-    input_prefix: str  # the inputs' names: this prefix and the input's number from 1
+    #: What a log read without its inputs' names calls them: this prefix and the input's
+    #: number from 1 (the thrusters' names: models/actuators).
+    input_prefix: str
     diagnostics: tuple[Diagnostic, ...]
     columns: tuple[Column, ...]  # log.csv's, in order; INPUTS stands for the input names
     #: Where the horizontal run sits; None: it has none (a depth run). A horizontal log is
@@ -167,19 +169,25 @@ class SimLog:
     # the controller assumed over [t_k, t_k+1)), ``backoff``, a 6-DOF run's depth channel.
     diagnostics: dict[str, Any] = field(default_factory=dict)
     horizontal_inputs: int = 0  # how many of the inputs, from the first, are horizontal
+    input_names: tuple[str, ...] = ()  # the commands' names: the thrust columns of log.csv
 
     @classmethod
     def allocate(
         cls,
         steps: int,
-        n_inputs: int,
+        inputs: int | Sequence[str],
         sample_time: float,
         format: LogFormat | None = None,
         horizontal_inputs: int | None = None,
     ) -> SimLog:
-        """A log for ``steps`` commands of ``n_inputs`` inputs (a horizontal run's unless
-        ``format`` says otherwise); ``horizontal_inputs``: all of them unless given."""
+        """A log for ``steps`` commands of the ``inputs`` (their names, in order: an
+        ActuatorSet's; or their number, named by the format's prefix), a horizontal run's
+        unless ``format`` says otherwise; ``horizontal_inputs``: all of them unless given."""
         format = HORIZONTAL_LOG if format is None else format
+        if isinstance(inputs, int):
+            inputs = [f"{format.input_prefix}{i + 1}" for i in range(inputs)]
+        names = tuple(inputs)
+        n_inputs = len(names)
         return cls(
             format=format,
             t=sample_time * np.arange(steps + 1, dtype=float),
@@ -195,6 +203,7 @@ class SimLog:
             measured=np.zeros((steps + 1, len(format.measured_names))),
             diagnostics={d.field: d.allocate(steps) for d in format.diagnostics},
             horizontal_inputs=n_inputs if horizontal_inputs is None else horizontal_inputs,
+            input_names=names,
         )
 
     @property
@@ -213,11 +222,6 @@ class SimLog:
             name: values[: rows - 1].copy() for name, values in self.diagnostics.items()
         }
         return replace(self, **cut)
-
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        """The commands' names: the thrust columns of log.csv."""
-        return tuple(f"{self.format.input_prefix}{i + 1}" for i in range(self.n_thrusters))
 
     @property
     def n_thrusters(self) -> int:
@@ -247,6 +251,7 @@ class SimLog:
             measured=self.measured[:, part.measured],
             diagnostics={d.field: self.diagnostics[d.field] for d in HORIZONTAL_LOG.diagnostics},
             horizontal_inputs=n,
+            input_names=self.input_names[:n],
         )
 
     def record_command(
@@ -322,13 +327,17 @@ class SimLog:
         initial_thrust: np.ndarray | None = None,
         format: LogFormat | None = None,
         horizontal_inputs: int | None = None,
+        input_names: Sequence[str] | None = None,
     ) -> SimLog:
         """Load a log written by ``to_csv_text`` (values round-trip exactly), of a horizontal
-        run unless ``format`` says otherwise."""
+        run unless ``format`` says otherwise; its inputs are ``input_names`` or, without
+        them, the columns named by the format's prefix and a number."""
         format = HORIZONTAL_LOG if format is None else format
         rows = _csv_rows(path)
         prefix = format.input_prefix
-        inputs = sum(name.startswith(prefix) and name[len(prefix) :].isdigit() for name in rows[0])
+        inputs = input_names or [
+            name for name in rows[0] if name.startswith(prefix) and name[len(prefix) :].isdigit()
+        ]
         steps = len(rows) - 1
         sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
         log = cls.allocate(steps, inputs, sample_time, format, horizontal_inputs)

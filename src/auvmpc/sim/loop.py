@@ -75,7 +75,7 @@ def closed_loop(
     session = Session(
         controller,
         reference,
-        SimLog.allocate(steps, plant.n_thrusters, sample_time, plant.log_format),
+        SimLog.allocate(steps, plant.inputs.layout.names, sample_time, plant.log_format),
         initial_state=initial_state,
         initial_thrust=initial_thrust,
         obstacles=obstacles,

@@ -27,6 +27,7 @@ import numpy as np
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
 from auvmpc.environment.waves import WaveField, morison_inertia
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
 from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
@@ -62,7 +63,7 @@ class Plant(Protocol):
     """What the closed loop integrates: one held-thrust sample at a time, in its environment."""
 
     log_format: LogFormat  # its state layout, logged columns and CSV form
-    n_thrusters: int
+    inputs: ActuatorSet  # what ``step``'s command drives, in order (names, limits)
     sample_time: float  # s, the sample :meth:`step` integrates over
 
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
@@ -92,7 +93,7 @@ class HorizontalPlant:
         max_step: float,
     ) -> None:
         self.vehicle, self.disturbance, self.sample_time = vehicle, disturbance, sample_time
-        self.n_thrusters = vehicle.n_thrusters
+        self.inputs = vehicle.actuators
         self.stepper = PlantStepper(vehicle, sample_time, substeps_for(sample_time, max_step))
 
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
@@ -119,7 +120,7 @@ class HeavePlant:
         max_step: float,
     ) -> None:
         self.heave, self.waves, self.sample_time = heave, waves, sample_time
-        self.n_thrusters = heave.thruster_count
+        self.inputs = heave.actuators
         self.substeps = substeps_for(sample_time, max_step)
         # Froude-Krylov plus added mass: the water around the body accelerates with the wave.
         self.inertia = morison_inertia(vehicle, heave)
@@ -153,7 +154,7 @@ class SixDofPlant:
     ) -> None:
         self.model = six_dof_model(vehicle)
         self.current, self.sample_time = current, sample_time
-        self.n_thrusters = vehicle.six_dof.n_thrusters
+        self.inputs = vehicle.six_dof_actuators
         self.substeps = substeps_for(sample_time, max_step)
         # A current that changes with depth is looked up at every RK4 stage; a uniform one is
         # held over the sample (the compiled RK4 step).
