@@ -14,8 +14,8 @@ import auvmpc.solvers.compiled_qp_step as compiled_qp_step
 from auvmpc.controllers.base import ObstacleState
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
 from auvmpc.models.vehicle import load_vehicle
+from auvmpc.ocp.multiple_shooting import MultipleShootingProgram
 from auvmpc.solvers.hpipm import hpipm_settings
-from auvmpc.solvers.multiple_shooting import MultipleShootingProgram
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration, stage_qp
 
 pytestmark = pytest.mark.skipif(

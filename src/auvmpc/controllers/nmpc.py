@@ -75,9 +75,7 @@ from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
-from auvmpc.solvers.ipopt import IpoptSolver
-from auvmpc.solvers.multiple_shooting import (
+from auvmpc.ocp.multiple_shooting import (
     MAX_OBSTACLES,
     ND,
     NX,
@@ -85,6 +83,8 @@ from auvmpc.solvers.multiple_shooting import (
     MultipleShootingProgram,
     Sample,
 )
+from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
+from auvmpc.solvers.ipopt import IpoptSolver
 from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]

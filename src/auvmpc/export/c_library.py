@@ -41,6 +41,13 @@ from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_f
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.native import compiler
+from auvmpc.ocp.multiple_shooting import (
+    _PARKED_OBSTACLE_M,
+    MAX_OBSTACLES,
+    ND,
+    SLOT_FIELDS,
+    MultipleShootingProgram,
+)
 from auvmpc.references import make_reference
 from auvmpc.solvers.blasfeo_target import (
     LIBRARY,
@@ -50,13 +57,6 @@ from auvmpc.solvers.blasfeo_target import (
 )
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
-from auvmpc.solvers.multiple_shooting import (
-    _PARKED_OBSTACLE_M,
-    MAX_OBSTACLES,
-    ND,
-    SLOT_FIELDS,
-    MultipleShootingProgram,
-)
 from auvmpc.solvers.sparse_rti import stage_qp
 
 __all__ = [

@@ -22,8 +22,8 @@ import numpy as np
 
 from auvmpc import native
 from auvmpc.native import compiler
+from auvmpc.ocp.multiple_shooting import ND, NX, SLOT_FIELDS
 from auvmpc.solvers.blasfeo_target import runtime_blasfeo
-from auvmpc.solvers.multiple_shooting import ND, NX, SLOT_FIELDS
 
 if TYPE_CHECKING:  # sparse_rti imports this module
     from auvmpc.solvers.sparse_rti import StageQp

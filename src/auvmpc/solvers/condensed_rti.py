@@ -11,16 +11,16 @@ import time
 import numpy as np
 
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.ocp.tracking import ThrustPenalty
-from auvmpc.solvers.condensed_qp import soft_constrained_qp
-from auvmpc.solvers.dense_qp import make_qp_solver
-from auvmpc.solvers.multiple_shooting import (
+from auvmpc.ocp.multiple_shooting import (
     NX,
     Iterate,
     MultipleShootingProgram,
     Sample,
     Solution,
 )
+from auvmpc.ocp.tracking import ThrustPenalty
+from auvmpc.solvers.condensed_qp import soft_constrained_qp
+from auvmpc.solvers.dense_qp import make_qp_solver
 
 __all__ = ["CondensedRealTimeIteration"]
 

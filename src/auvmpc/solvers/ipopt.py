@@ -7,7 +7,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from auvmpc.solvers.multiple_shooting import NX, Iterate, MultipleShootingProgram, Sample, Solution
+from auvmpc.ocp.multiple_shooting import NX, Iterate, MultipleShootingProgram, Sample, Solution
 
 __all__ = ["IpoptSolver"]
 

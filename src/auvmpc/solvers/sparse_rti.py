@@ -46,10 +46,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.layout import HORIZONTAL
-from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
-from auvmpc.solvers.compiled_qp_step import compiled_qp_step
-from auvmpc.solvers.hpipm import hpipm_settings, hpipm_solver, slack_scale
-from auvmpc.solvers.multiple_shooting import (
+from auvmpc.ocp.multiple_shooting import (
     DISTANCE_SMOOTHING_M2,
     ND,
     NX,
@@ -58,6 +55,9 @@ from auvmpc.solvers.multiple_shooting import (
     MultipleShootingProgram,
     Solution,
 )
+from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
+from auvmpc.solvers.compiled_qp_step import compiled_qp_step
+from auvmpc.solvers.hpipm import hpipm_settings, hpipm_solver, slack_scale
 
 __all__ = ["CasadiQpStep", "SparseRealTimeIteration", "StageQp", "stage_qp"]
 

@@ -23,7 +23,7 @@ from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 
-if TYPE_CHECKING:  # read, never imported at run time: solvers sit below controllers
+if TYPE_CHECKING:  # read, never imported at run time: ocp sits below controllers
     from auvmpc.controllers.config import ControllerConfig
     from auvmpc.environment.obstacles import ObstacleState
 
