@@ -84,7 +84,7 @@ class LtvMpc(LinearMpc):
         local. The offsets c_n make the affine model exact at every node.
         """
         ny, n = self.horizon, self.model.n_thrusters
-        forces = np.tile(np.reshape(disturbance, (3, 1)), (1, ny))
+        forces = np.tile(np.reshape(disturbance, (PLANAR_FORCE.size, 1)), (1, ny))
         nodes = self.linearisation_nodes
         rollout, steps = self._rollout, self._steps
         if self.tightening is not None:  # the same, with the Jacobians in the disturbance

@@ -293,7 +293,7 @@ class PaperMpc(LinearMpc):
         """
         if not self.config.rollout_check or not observation.obstacles:
             return None
-        forces = np.tile(np.reshape(disturbance, (3, 1)), (1, self.horizon))
+        forces = np.tile(np.reshape(disturbance, (PLANAR_FORCE.size, 1)), (1, self.horizon))
         rollout = np.asarray(self._rollout(state, plan.T, forces)).T[:, HORIZONTAL.position]
         steps = np.arange(1, self.horizon + 1)
         errors, entered = [], False

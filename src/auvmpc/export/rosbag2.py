@@ -31,9 +31,12 @@ from pydantic import ValidationError
 
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run_folder import RunTables, read_run_tables
+from auvmpc.models.actuators import WRENCH
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["TOPICS", "export_rosbag2"]
+
+_FORCE, _MOMENT = WRENCH.span("X", "Z"), WRENCH.span("K", "N")
 
 WORLD_FRAME = "world"
 BODY_FRAME = "base_link"
@@ -224,7 +227,7 @@ def _thruster_geometry(tables: RunTables) -> dict[str, tuple[tuple[float, ...], 
     except ValidationError:
         return {}
     return {
-        actuator.name: (tuple(actuator.column[:3]), tuple(actuator.column[3:]))
+        actuator.name: (tuple(actuator.column[_FORCE]), tuple(actuator.column[_MOMENT]))
         for actuator in plant.actuators.actuators
     }
 

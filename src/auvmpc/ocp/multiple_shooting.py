@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import horizontal_model
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, Layout
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT, ThrustPenalty
 
@@ -33,7 +33,10 @@ NX, ND = HORIZONTAL.size, PLANAR_FORCE.size  # state [x, y, psi, u, v, r], force
 # Obstacle slots in the program (built once): the nearest this many visible obstacles count.
 MAX_OBSTACLES = 8
 # Per slot: centre x, y now (m), velocity x, y (m/s), reach = radius + vehicle radius + margin.
-SLOT_FIELDS = 5
+SLOT = Layout(names=("x", "y", "vx", "vy", "reach"))
+SLOT_FIELDS = SLOT.size
+SLOT_CENTRE, SLOT_VELOCITY, SLOT_REACH = SLOT.position, SLOT.span("vx", "vy"), SLOT.index("reach")
+_POSITION = HORIZONTAL.position
 # Smooths the distance at an obstacle's centre, sqrt(d^2 + eps) (m^2): differentiable
 # everywhere, and the constraint moves by at most sqrt(eps) = 1 mm (only at the centre).
 DISTANCE_SMOOTHING_M2 = 1e-6
@@ -130,9 +133,9 @@ class MultipleShootingProgram:
         clearances = []
         for i in range(1, ny + 1):
             for o in range(n_slots):
-                centre = slots[0:2, o] + (i * config.sample_time) * slots[2:4, o]
-                distance = ca.sqrt(ca.sumsqr(X[0:2, i] - centre) + DISTANCE_SMOOTHING_M2)
-                clearances.append(distance - slots[4, o] + slack[o, i - 1])
+                centre = slots[SLOT_CENTRE, o] + (i * config.sample_time) * slots[SLOT_VELOCITY, o]
+                distance = ca.sqrt(ca.sumsqr(X[_POSITION, i] - centre) + DISTANCE_SMOOTHING_M2)
+                clearances.append(distance - slots[SLOT_REACH, o] + slack[o, i - 1])
         g = ca.vertcat(*gaps, *changes, *clearances)
 
         Q, S, R = np.diag(ocp.stage_weight), np.diag(ocp.terminal_weight), np.diag(ocp.input_weight)
@@ -216,7 +219,7 @@ class MultipleShootingProgram:
     ) -> Sample:
         """The sample's data; the nearest obstacles fill the slots, the rest are parked."""
         slots = np.zeros((self.n_slots, SLOT_FIELDS))
-        slots[:, 0:2] = state[HORIZONTAL.position] + _PARKED_OBSTACLE_M
+        slots[:, SLOT_CENTRE] = state[_POSITION] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
         nearest = sorted(obstacles, key=lambda o: math.dist(o.center, state[HORIZONTAL.position]))
         extra = self.ocp.keep_out_extra
@@ -279,7 +282,8 @@ class MultipleShootingProgram:
     def clearances(self, states: np.ndarray, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """Distance minus reach (ny, slots) at steps 1..ny, and its gradient in p (ny, slots, 2)."""
         steps = self.sample_time * np.arange(1, self.horizon + 1)
-        centres = sample.slots[None, :, 0:2] + steps[:, None, None] * sample.slots[None, :, 2:4]
-        offset = states[1:, None, :2] - centres
+        slots = sample.slots
+        centres = slots[None, :, SLOT_CENTRE] + steps[:, None, None] * slots[None, :, SLOT_VELOCITY]
+        offset = states[1:, None, _POSITION] - centres
         distance = np.sqrt(np.einsum("nok,nok->no", offset, offset) + DISTANCE_SMOOTHING_M2)
-        return distance - sample.slots[None, :, 4], offset / distance[:, :, None]
+        return distance - slots[None, :, SLOT_REACH], offset / distance[:, :, None]

@@ -50,7 +50,10 @@ from auvmpc.ocp.multiple_shooting import (
     DISTANCE_SMOOTHING_M2,
     ND,
     NX,
+    SLOT_CENTRE,
     SLOT_FIELDS,
+    SLOT_REACH,
+    SLOT_VELOCITY,
     Iterate,
     MultipleShootingProgram,
     Solution,
@@ -71,6 +74,7 @@ _STEP_REGULARISATION = 1e-9
 _OBSTACLE_RANGE_M = 5.0
 _SOLVED, _NOT_FINITE, _EVALUATION_FAILED = 0, -1, -2
 _HEADING = HORIZONTAL.index("psi")
+_POSITION = HORIZONTAL.position
 
 
 class SparseRealTimeIteration:
@@ -265,13 +269,14 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     t = step_index * program.sample_time
     C_rows, D_rows, lower, upper = [], [], [], []
     for o in range(S):
-        offset = X_next[0:2] - (slots[0:2, o] + t * slots[2:4, o])
+        offset = X_next[_POSITION] - (slots[SLOT_CENTRE, o] + t * slots[SLOT_VELOCITY, o])
         distance = ca.sqrt(ca.sumsqr(offset) + DISTANCE_SMOOTHING_M2)
         normal = (offset / distance).T
-        C_rows.append(normal @ A[0:2, :])
-        D_rows.append(ca.horzcat(normal @ B[0:2, :n], ca.SX(1, 1) + 1.0 / sigma))
-        near = ca.logic_and(used[o] > 0.5, distance - slots[4, o] < _OBSTACLE_RANGE_M)
-        lower.append(ca.if_else(near, slots[4, o] - distance - normal @ gap[0:2], -ca.inf))
+        C_rows.append(normal @ A[_POSITION, :])
+        D_rows.append(ca.horzcat(normal @ B[_POSITION, :n], ca.SX(1, 1) + 1.0 / sigma))
+        reach = slots[SLOT_REACH, o]
+        near = ca.logic_and(used[o] > 0.5, distance - reach < _OBSTACLE_RANGE_M)
+        lower.append(ca.if_else(near, reach - distance - normal @ gap[_POSITION], -ca.inf))
         upper.append(ca.inf)
     C = ca.vertcat(*C_rows) if S else ca.SX(0, nz)
     D = ca.vertcat(*D_rows) if S else ca.SX(0, nv)
