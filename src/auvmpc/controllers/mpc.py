@@ -32,6 +32,7 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.controllers.config import ControllerConfig
 from auvmpc.controllers.incremental import IncrementalMpc, Tightened
+from auvmpc.controllers.shell import BACKOFF_KEYS
 from auvmpc.errors import ConfigError
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.discrete import horizontal_model
@@ -128,14 +129,8 @@ class LinearMpc(IncrementalMpc):
         )
         rows = SoftRows(soft.steps, soft.coefficients, soft.lower + backoffs.rows)
         given_up = 2.0 * backoffs.thrust / (ocp.input_upper - ocp.input_lower)
-        return (
-            rows,
-            box,
-            {
-                "obstacle_backoff_m": float(backoffs.rows.max(initial=0.0)),
-                "thrust_backoff_fraction": float(given_up.max(initial=0.0)),
-            },
-        )
+        took = (float(backoffs.rows.max(initial=0.0)), float(given_up.max(initial=0.0)))
+        return rows, box, dict(zip(BACKOFF_KEYS, took, strict=True))
 
     def tracked_reference(
         self, state: np.ndarray, disturbance: np.ndarray, reference: np.ndarray

@@ -38,7 +38,10 @@ if TYPE_CHECKING:
     from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 
 __all__ = [
+    "BACKOFF_KEYS",
+    "ESTIMATE_KEYS",
     "INFO_KEYS",
+    "LOGGED_INFO",
     "PLAN_FALLBACK_STEPS",
     "Proposal",
     "SPIN_ANGLE_PER_SAMPLE_RAD",
@@ -52,15 +55,22 @@ SLACK_ACTIVE = 1e-6
 # The projection moving the command by less than this (N) is round-off, not saturation.
 _SATURATION_N = 1e-6
 
+# The world-frame force and moment the prediction used (N, N, N m); zero without an estimator.
+ESTIMATE_KEYS = ("dist_X_hat", "dist_Y_hat", "dist_N_hat")
+# What the robust tightening took (ocp/tightening.py), in a back end's ``details``: the largest
+# obstacle back-off (m) and the largest fraction of a thruster's range given up; zero (absent)
+# for a nominal controller.
+BACKOFF_KEYS = ("obstacle_backoff_m", "thrust_backoff_fraction")
+# What a run's log keeps of every shelled controller's ``info``, by log field (sim/log.py).
+LOGGED_INFO = {"disturbance_estimate": ESTIMATE_KEYS, "backoff": BACKOFF_KEYS}
+
 INFO_KEYS = (
     "solver_iterations",  # QP iterations (summed over SQP passes) or IPOPT iterations
     "max_slack",  # largest slack of the soft constraints (m for obstacles)
     "solve_ms",  # the back end's own solve time
     "relaxed",  # 1 if a soft constraint was relaxed
     "fallback",  # 1 if no optimiser's proposal was applied (the plan's move or the feedback)
-    "dist_X_hat",  # the world-frame force and moment the prediction used (N, N, N m);
-    "dist_Y_hat",  # zero without an estimator
-    "dist_N_hat",
+    *ESTIMATE_KEYS,
     "recovery",  # 1 if the shell's stabilising feedback was applied
     "spinning",  # 1 when the shell judged the vehicle to spin (spin_limit) at this sample
 )
@@ -219,7 +229,7 @@ class ShelledController(Controller):
                 "solve_ms": 1e3 * proposal.solve_time_s,
                 "relaxed": float(relaxed),
                 "fallback": float(fell_back),
-                **dict(zip(INFO_KEYS[5:8], map(float, disturbance), strict=True)),
+                **dict(zip(ESTIMATE_KEYS, map(float, disturbance), strict=True)),
                 "recovery": float(recovered),
                 "spinning": float(spinning),
                 **proposal.details,

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from auvmpc.controllers.shell import BACKOFF_KEYS, ESTIMATE_KEYS, LOGGED_INFO
 from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
 
@@ -46,13 +47,9 @@ __all__ = [
 STATE_NAMES = HORIZONTAL.names
 REFERENCE_NAMES = tuple(f"{name}_ref" for name in STATE_NAMES)
 DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
-# The world force and moment the controller's prediction used at sample k (its estimate with
-# offset-free tracking, zero without), the shell's ``info`` keys.
-ESTIMATE_NAMES = ("dist_X_hat", "dist_Y_hat", "dist_N_hat")
-# What the robust tightening took at sample k (ocp/tightening.py; zero for a nominal
-# controller): the largest obstacle back-off (m) and the largest fraction of a thruster's
-# range given up, the shell's ``info`` keys.
-BACKOFF_NAMES = ("obstacle_backoff_m", "thrust_backoff_fraction")
+# What the controller's prediction assumed at sample k and what the robust tightening took:
+# the shell's ``info`` keys (controllers/shell.py), logged under these names.
+ESTIMATE_NAMES, BACKOFF_NAMES = ESTIMATE_KEYS, BACKOFF_KEYS
 # A 6-DOF run: the depth reference (NED, m and m/s) and the water velocity at the vehicle
 # (world NED, m/s).
 DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
@@ -361,11 +358,8 @@ class SimLog:
         return log
 
 
-# What a horizontal controller's shell reports with every result (info keys).
-_SHELL_DIAGNOSTICS = (
-    Diagnostic("disturbance_estimate", ESTIMATE_NAMES),
-    Diagnostic("backoff", BACKOFF_NAMES),
-)
+# What the shell declares a log keeps of every result (controllers/shell.py, LOGGED_INFO).
+_SHELL_DIAGNOSTICS = tuple(Diagnostic(field, keys) for field, keys in LOGGED_INFO.items())
 
 HORIZONTAL_LOG = LogFormat(
     name="horizontal",
