@@ -45,9 +45,9 @@ class Actuator(Protocol):
 class ActuatorLimits:
     """Hard limits of a set of actuators: command box and rate, per actuator."""
 
-    lower: float | np.ndarray  # N
-    upper: float | np.ndarray  # N
-    rate: float | np.ndarray  # N/s
+    lower: float | np.ndarray  # in the actuators' own units (N for a thruster)
+    upper: float | np.ndarray
+    rate: float | np.ndarray  # per second
 
     def box(self, previous: np.ndarray, sample_time: float) -> tuple[np.ndarray, np.ndarray]:
         """Per-actuator [lower, upper] reachable in one sample under both hard limits."""
