@@ -47,16 +47,17 @@ def main(out: Path) -> auvmpc.api.RunResult:
     print("states:", session.state_names, "inputs:", session.input_names)
     f = equations_of_motion(scenario.plant)  # the simulated vehicle of the scenario
     state = session.initial_state
+    calm = np.zeros(len(session.environment_names))  # this simulator has no current or force
     steps = round(session.duration / session.sample_time)
     for k in range(steps):
         t = k * session.sample_time
         # The true state is known here (a simulator): hand it over for the log and metrics.
-        result = session.step(t, state, truth=Truth(state, np.zeros(3)))
+        result = session.step(t, state, truth=Truth(state, calm))
         held = solve_ivp(
             f, (t, t + session.sample_time), state, args=(result.u,), rtol=1e-9, atol=1e-9
         )
         state = held.y[:, -1]
-    session.finish(steps * session.sample_time, state, truth=Truth(state, np.zeros(3)))
+    session.finish(steps * session.sample_time, state, truth=Truth(state, calm))
     run = session.close(out / "own-simulator-run", figures=False)
     rms = run.metrics["rms_position_error_m"]
     print(f"RMS position error {rms:.4f} m, fallbacks {run.metrics['fallback_steps']}")

@@ -183,7 +183,7 @@ def _stepped_twice(session):
         (lambda s: s.step("soon", s.initial_state), "t"),
         (lambda s: _stepped_twice(s).step(0.25, s.initial_state), "t"),
         (
-            lambda s: s.step(0.0, s.initial_state, truth=Truth(np.zeros(5), np.zeros(3))),
+            lambda s: s.step(0.0, s.initial_state, truth=Truth(np.zeros(5), np.zeros(5))),
             "truth.state",
         ),  # fmt: skip
         (lambda s: s.step(0.0, s.initial_state, detections=[{"x": 1}]), "detections"),

@@ -198,3 +198,23 @@ def test_every_kind_of_log_reads_back_to_the_same_file_and_fields(tmp_path, name
             np.asarray(written)[..., part] if np.ndim(written) > 1 else written,
             err_msg=str(block.names),
         )
+
+
+def test_a_horizontal_run_logs_its_water_current(tmp_path):
+    """issue 30: a water current set in a horizontal scenario is in log.csv (current_north,
+    current_east, world m/s) beside the current force, and reads back; the 6-DOF run's
+    horizontal view carries its current's north and east parts the same way."""
+    resolved = load_scenario(
+        "paper-ideal",
+        ["duration=3", "disturbance.water_current={velocity_m_per_s: [0.2, -0.1, 0.0]}"],
+    )
+    log = simulate(resolved).log
+    np.testing.assert_array_equal(log.column("current_north"), 0.2)
+    np.testing.assert_array_equal(log.column("current_east"), -0.1)
+    path = tmp_path / "log.csv"
+    path.write_text(log.to_csv_text())
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[-2:] == ["current_north", "current_east"]
+    np.testing.assert_array_equal(SimLog.read_csv(path).column("current_east"), -0.1)
+    six_dof = simulate(load_scenario("bluerov2-helix", ["duration=2"])).log
+    np.testing.assert_array_equal(six_dof.horizontal().column("current_north"), 0.2)

@@ -29,7 +29,7 @@ from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.sim.log import SimLog
+from auvmpc.sim.log import HORIZONTAL_CURRENT_NAMES, SimLog
 from auvmpc.sim.metrics import LIMIT_TOLERANCE_N, heading_error, position_error, thrust_increments
 
 __all__ = [
@@ -155,7 +155,7 @@ def figure_trajectory(
             label=label,
             zorder=5,
         )
-    _finish_trajectory_axes(ax, log.environment)
+    _finish_trajectory_axes(ax, log)
     return figure
 
 
@@ -749,32 +749,35 @@ def _annotate_below(
     )
 
 
-def _finish_trajectory_axes(ax, disturbance_world: np.ndarray) -> None:
-    """Equal axes in metres, grid, the current's arrow and the legend of a trajectory plot."""
+def _finish_trajectory_axes(ax, log: SimLog) -> None:
+    """Equal axes in metres, grid, the current's arrows and the legend of a trajectory plot."""
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(True, alpha=0.4)
-    _draw_current_arrow(ax, disturbance_world)
+    force = np.column_stack([log.column("dist_X"), log.column("dist_Y")])
+    water = np.column_stack([log.column(name) for name in HORIZONTAL_CURRENT_NAMES])
+    _draw_current_arrow(ax, force, (0.1, 0.9), "current force, {mean}{size:.3g} N")
+    _draw_current_arrow(ax, water, (0.1, 0.8), "water current, {mean}{size:.3g} m/s")
     ax.legend(loc="best", fontsize="small", framealpha=0.85)
 
 
-def _draw_current_arrow(ax: Axes, disturbance_world: np.ndarray) -> None:
-    """The mean world-frame current force as an arrow in the top-left corner, with its size.
+def _draw_current_arrow(ax: Axes, vectors: np.ndarray, corner, label: str) -> None:
+    """The mean of world-frame ``vectors`` (k, 2) as an arrow at ``corner`` (axes fraction),
+    labelled with its size (``label``'s ``{size}``; ``{mean}`` says "mean " if it varies).
 
-    The arrow's direction is the force's (axes have equal aspect); its length is fixed.
-    Nothing is drawn for a run without a current.
+    The arrow's direction is the mean's (axes have equal aspect); its length is fixed.
+    Nothing is drawn where the mean is zero.
     """
-    if not len(disturbance_world):
+    if not len(vectors):
         return
-    force = disturbance_world[:, :2]
-    mean = force.mean(axis=0)
+    mean = vectors.mean(axis=0)
     magnitude = float(np.hypot(*mean))
     if magnitude < 1e-9:
         return
-    varies = float(np.ptp(np.hypot(force[:, 0], force[:, 1]))) > 1e-6 * max(1.0, magnitude)
+    varies = float(np.ptp(np.hypot(vectors[:, 0], vectors[:, 1]))) > 1e-6 * max(1.0, magnitude)
     direction = mean / magnitude
-    centre, half = np.array([0.1, 0.9]), 0.05
+    centre, half = np.array(corner), 0.05
     ax.annotate(
         "",
         xy=tuple(centre + half * direction),
@@ -783,9 +786,9 @@ def _draw_current_arrow(ax: Axes, disturbance_world: np.ndarray) -> None:
         arrowprops={"arrowstyle": "-|>", "color": CURRENT_COLOR, "linewidth": 2.0},
         zorder=6,
     )
-    label = f"current force, {'mean ' if varies else ''}{magnitude:.3g} N (arrow: direction)"
+    text = label.format(mean="mean " if varies else "", size=magnitude) + " (arrow: direction)"
     ax.plot([], [], color=CURRENT_COLOR, marker=r"$\rightarrow$", markersize=12, linestyle="none",
-            label=label)  # fmt: skip
+            label=text)  # fmt: skip
 
 
 def _draw_vehicle(
@@ -881,7 +884,7 @@ def figure_compare_trajectory(
             markersize=8, linestyle="none", label="start", zorder=5)  # fmt: skip
     ax.plot([], [], marker="s", color="white", markeredgecolor="black", linestyle="none",
             label="end of each run")  # fmt: skip
-    _finish_trajectory_axes(ax, first.environment)
+    _finish_trajectory_axes(ax, first)
     return figure
 
 

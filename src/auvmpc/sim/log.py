@@ -50,10 +50,12 @@ DISTURBANCE_NAMES = ("dist_X", "dist_Y", "dist_N")
 # What the controller's prediction assumed at sample k and what the robust tightening took:
 # the shell's ``info`` keys (controllers/shell.py), logged under these names.
 ESTIMATE_NAMES, BACKOFF_NAMES = ESTIMATE_KEYS, BACKOFF_KEYS
-# A 6-DOF run: the depth reference (NED, m and m/s) and the water velocity at the vehicle
-# (world NED, m/s).
-DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
+# The water velocity at the vehicle (world NED, m/s): a 6-DOF run's three components, a
+# horizontal run's first two (world x north, y east); and a 6-DOF run's depth reference
+# (NED, m and m/s).
 CURRENT_NAMES = ("current_north", "current_east", "current_down")
+HORIZONTAL_CURRENT_NAMES = CURRENT_NAMES[:2]
+DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
 # Stands for the log's input names in a format's columns (they depend on the vehicle).
 INPUTS = ("<inputs>",)
 
@@ -241,7 +243,7 @@ class SimLog:
             thrust=self.thrust[:, :n],
             solve_ms=self.solve_ms,
             status=self.status,
-            environment=np.zeros((len(self.t), len(HORIZONTAL_LOG.environment_names))),
+            environment=self._horizontal_environment(),
             clearance_m=self.clearance_m,
             sample_time=self.sample_time,
             initial_thrust=self.initial_thrust[:n],
@@ -250,6 +252,16 @@ class SimLog:
             horizontal_inputs=n,
             input_names=self.input_names[:n],
         )
+
+    def _horizontal_environment(self) -> np.ndarray:
+        """The horizontal view's environment: no force, the water velocity's north and east
+        components where this log has them (a 6-DOF run's current)."""
+        environment = np.zeros((len(self.t), len(HORIZONTAL_LOG.environment_names)))
+        names = self.format.environment_names
+        if all(name in names for name in HORIZONTAL_CURRENT_NAMES):
+            columns = [names.index(name) for name in HORIZONTAL_CURRENT_NAMES]
+            environment[:, _WATER] = self.environment[:, columns]
+        return environment
 
     def record_command(
         self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
@@ -361,11 +373,15 @@ class SimLog:
 # What the shell declares a log keeps of every result (controllers/shell.py, LOGGED_INFO).
 _SHELL_DIAGNOSTICS = tuple(Diagnostic(field, keys) for field, keys in LOGGED_INFO.items())
 
+# A horizontal run's environment: the world force and moment, then the water velocity.
+_FORCE = slice(0, len(DISTURBANCE_NAMES))
+_WATER = slice(len(DISTURBANCE_NAMES), len(DISTURBANCE_NAMES) + len(HORIZONTAL_CURRENT_NAMES))
+
 HORIZONTAL_LOG = LogFormat(
     name="horizontal",
     layout=HORIZONTAL,
     reference_names=REFERENCE_NAMES,
-    environment_names=DISTURBANCE_NAMES,
+    environment_names=(*DISTURBANCE_NAMES, *HORIZONTAL_CURRENT_NAMES),
     measured_names=HORIZONTAL.names,
     input_prefix="F",
     diagnostics=_SHELL_DIAGNOSTICS,
@@ -376,10 +392,11 @@ HORIZONTAL_LOG = LogFormat(
         Column(INPUTS, "thrust"),
         Column(("solve_ms",), "solve_ms"),
         Column(("status",), "status", text=True),
-        Column(DISTURBANCE_NAMES, "environment"),
+        Column(DISTURBANCE_NAMES, "environment", part=_FORCE),
         Column(("clearance_m",), "clearance_m", empty_is_inf=True),
         Column(ESTIMATE_NAMES, "disturbance_estimate", optional=True),
         Column(BACKOFF_NAMES, "backoff", optional=True),
+        Column(HORIZONTAL_CURRENT_NAMES, "environment", part=_WATER, optional=True),
     ),
     horizontal_part=HorizontalPart(
         np.arange(HORIZONTAL.size), slice(0, len(REFERENCE_NAMES)), slice(0, HORIZONTAL.size)
@@ -445,8 +462,8 @@ SIX_DOF_LOG = LogFormat(
         Column(STATE_NAMES, "state", part=HORIZONTAL_INDEX),
         Column(REFERENCE_NAMES, "reference", part=_HORIZONTAL_REFERENCE),
         *HORIZONTAL_LOG.columns[3:6],  # the inputs, solve_ms, status
-        Column(DISTURBANCE_NAMES, None),  # no force: the current
-        *HORIZONTAL_LOG.columns[7:],  # clearance, the shell's diagnostics
+        Column(DISTURBANCE_NAMES, None),  # no force: the current, below
+        *HORIZONTAL_LOG.columns[7:10],  # clearance, the shell's diagnostics
         Column(_SIX_DOF_EXTRA, "state", part=_SIX_DOF_EXTRA_INDEX),
         Column(DEPTH_REFERENCE_NAMES, "reference", part=_DEPTH_REFERENCE),
         Column(CURRENT_NAMES, "environment"),

@@ -97,8 +97,12 @@ class HorizontalPlant:
         self.stepper = PlantStepper(vehicle, sample_time, substeps_for(sample_time, max_step))
 
     def environment(self, t: float, state: np.ndarray) -> np.ndarray:
-        """World force and moment [X, Y, N] (N, N, N m)."""
-        return self.disturbance.force_world(t)
+        """World force and moment [X, Y, N] (N, N, N m), then the water velocity [north,
+        east] (m/s, zero without a water current)."""
+        water = self.disturbance.water_velocity_world(t)
+        return np.concatenate(
+            [self.disturbance.force_world(t), _STILL_WATER if water is None else water]
+        )
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
         following = self.stepper(state, thrust, t0, self.disturbance)

@@ -99,6 +99,8 @@ class Session:
         self.input_names = log.input_names
         self.state_names = log.layout.names
         self.measurement_names = log.format.measured_names
+        # What Truth.environment holds, in order (the log's environment columns).
+        self.environment_names = log.format.environment_names
         self.k = 0  # samples stepped so far
         self.finished = False  # the final state row is in
         self.closed = False  # filed as a run: nothing more may be stepped
