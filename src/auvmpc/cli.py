@@ -460,11 +460,31 @@ def scenarios() -> None:
 
 @app.command()
 def vehicles() -> None:
-    """List the built-in vehicle presets."""
+    """List the built-in vehicle presets: mass, size, thrusters, the models each has."""
     from auvmpc.models.vehicle import load_vehicle, preset_names
 
+    table = Table(title="vehicle presets (a scenario names one with vehicle: NAME)")
+    for column in ("name", "mass kg", "size m (L x W x H)", "thrusters", "DOF", "description"):
+        table.add_column(column, overflow="fold")
     for name in preset_names():
-        console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
+        vehicle = load_vehicle(name)
+        size = vehicle.size
+        vertical = vehicle.heave.thruster_count if vehicle.heave is not None else 0
+        thrusters = f"{vehicle.n_thrusters}" + (f" + {vertical} vertical" if vertical else "")
+        models = (
+            ["3-DOF"]
+            + (["depth"] if vehicle.heave else [])
+            + (["6-DOF"] if vehicle.six_dof else [])
+        )
+        table.add_row(
+            name,
+            f"{vehicle.mass:g}",
+            "-" if size is None else f"{size.length:g} x {size.width:g} x {size.height:g}",
+            thrusters,
+            ", ".join(models),
+            vehicle.description,
+        )
+    console.print(table)
 
 
 FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
