@@ -574,8 +574,8 @@ def vehicle_new(
     from auvmpc.models.from_size import HullShape, estimate_vehicle, vehicle_file_text
     from auvmpc.models.vehicle import VehicleSize, load_vehicle
 
-    if not name.strip():
-        raise ConfigError("NAME", name, "must not be empty")
+    if not name.strip() or not name.isprintable():
+        raise ConfigError("NAME", name, "must be one printable line")
     for value, option in ((mass, "--mass"), (length, "--length"), (width, "--width"),
                           (height, "--height"), (top_speed, "--top-speed"),
                           (water_density, "--water-density")):  # fmt: skip

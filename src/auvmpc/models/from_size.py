@@ -42,9 +42,10 @@ sway drag is 3.5 times this box's), meant to be replaced by identified ones.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
@@ -182,7 +183,6 @@ class SizeEstimate:
     top_speed_given: bool
     shape: HullShape
     water_density: float
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 def estimate_vehicle(
@@ -372,9 +372,9 @@ def vehicle_file_text(estimate: SizeEstimate) -> str:
         "# of about two. Next step: fit them to logs of the real vehicle with `auvmpc identify`",
         "# (a later feature); until then compare a run with the vehicle and adjust.",
         f"# Water density {estimate.water_density:g} kg/m3; shape {estimate.shape.value}.",
-        f"name: {p.name}",
-        f'description: "{p.description}"',
-        f'source: "{p.source}"',
+        f"name: {json.dumps(p.name)}",  # a JSON string is a YAML string, quotes escaped
+        f"description: {json.dumps(p.description)}",
+        f"source: {json.dumps(p.source)}",
         f"estimated: [{', '.join(p.estimated)}]",
         f"mass: {_number(p.mass)}            # kg, given",
         f"size: {{length: {_number(size.length)}, width: {_number(size.width)}, "
