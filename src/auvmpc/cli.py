@@ -460,11 +460,156 @@ def scenarios() -> None:
 
 @app.command()
 def vehicles() -> None:
-    """List the built-in vehicle presets."""
+    """List the built-in vehicle presets: mass, size, thrusters, the models each has."""
     from auvmpc.models.vehicle import load_vehicle, preset_names
 
+    table = Table(title="vehicle presets (a scenario names one with vehicle: NAME)")
+    for column in ("name", "mass kg", "size m (L x W x H)", "thrusters", "DOF", "description"):
+        table.add_column(column, overflow="fold")
     for name in preset_names():
-        console.print(f"{name:<22} {load_vehicle(name).description}", highlight=False)
+        vehicle = load_vehicle(name)
+        size = vehicle.size
+        vertical = vehicle.heave.thruster_count if vehicle.heave is not None else 0
+        thrusters = f"{vehicle.n_thrusters}" + (f" + {vertical} vertical" if vertical else "")
+        models = (
+            ["3-DOF"]
+            + (["depth"] if vehicle.heave else [])
+            + (["6-DOF"] if vehicle.six_dof else [])
+        )
+        table.add_row(
+            name,
+            f"{vehicle.mass:g}",
+            "-" if size is None else f"{size.length:g} x {size.width:g} x {size.height:g}",
+            thrusters,
+            ", ".join(models),
+            vehicle.description,
+        )
+    console.print(table)
+
+
+vehicle_app = typer.Typer(no_args_is_help=True, help="Write vehicle files.")
+app.add_typer(vehicle_app, name="vehicle")
+
+
+def _numbers(text: str, count: int, option: str, form: str) -> tuple[float, ...]:
+    """``count`` finite numbers separated by commas, or a one-line ConfigError naming
+    ``option``."""
+    import math
+
+    parts = text.split(",")
+    try:
+        values = tuple(float(part) for part in parts)
+    except ValueError:
+        values = ()
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise ConfigError(option, text, f"need {form}")
+    return values
+
+
+def _positive(value: float | None, option: str) -> None:
+    import math
+
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ConfigError(option, value, "must be a finite number > 0")
+
+
+@vehicle_app.command("new")
+def vehicle_new(
+    name: Annotated[str, typer.Argument(help="the vehicle's short identifier")],
+    mass: Annotated[float, typer.Option("--mass", help="rigid-body mass (kg)")],
+    length: Annotated[float, typer.Option("--length", help="envelope along x, forward (m)")],
+    width: Annotated[float, typer.Option("--width", help="envelope along y, starboard (m)")],
+    height: Annotated[float, typer.Option("--height", help="envelope along z, down (m)")],
+    thruster: Annotated[
+        list[str],
+        typer.Option(
+            "--thruster",
+            help="X,Y,ANGLE_DEG of a horizontal thruster (m, m, deg from +x towards +y), "
+            "repeated; e.g. --thruster=0.156,0.111,-45",
+        ),
+    ],
+    thrust_limits: Annotated[
+        str, typer.Option("--thrust-limits", help="LOW,HIGH per thruster (N), e.g. -40,51")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="vehicle file to write (.yaml)")],
+    thrust_rate_limit: Annotated[
+        float | None,
+        typer.Option(
+            "--thrust-rate-limit",
+            help="per thruster |dF/dt| (N/s); default: the full range in one second (marked "
+            "estimated)",
+        ),
+    ] = None,
+    top_speed: Annotated[
+        float | None,
+        typer.Option(
+            "--top-speed",
+            help="top speed (m/s) for the skin friction; default: where the full surge "
+            "thrust meets the estimated drag",
+        ),
+    ] = None,
+    shape: Annotated[
+        str, typer.Option("--shape", help="box (open-frame ROV) | ellipsoid (streamlined hull)")
+    ] = "box",
+    six_dof: Annotated[
+        bool, typer.Option("--six-dof", help="add a six_dof section (needs vertical thrusters)")
+    ] = False,
+    vertical_thruster: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--vertical-thruster",
+            help="X,Y of a thruster pushing up (m), repeated: adds a heave section",
+        ),
+    ] = None,
+    water_density: Annotated[
+        float, typer.Option("--water-density", help="kg/m3: 1000 fresh, 1025 sea water")
+    ] = 1000.0,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="replace an existing --out file")
+    ] = False,
+) -> None:
+    """Write a vehicle file with first estimates of its model from the mass and size
+    (added mass, inertia, damping: docs/vehicles.md); it loads as-is."""
+    from auvmpc.experiments.outputs import atomic_write_text, check_output_file
+    from auvmpc.models.from_size import HullShape, estimate_vehicle, vehicle_file_text
+    from auvmpc.models.vehicle import VehicleSize, load_vehicle
+
+    if not name.strip() or not name.isprintable():
+        raise ConfigError("NAME", name, "must be one printable line")
+    for value, option in ((mass, "--mass"), (length, "--length"), (width, "--width"),
+                          (height, "--height"), (top_speed, "--top-speed"),
+                          (water_density, "--water-density")):  # fmt: skip
+        _positive(value, option)
+    _positive(thrust_rate_limit, "--thrust-rate-limit")
+    shapes = [member.value for member in HullShape]
+    if shape not in shapes:
+        raise ConfigError("--shape", shape, f"one of {shapes}")
+    form = "X,Y,ANGLE_DEG (m, m, deg), e.g. 0.156,0.111,-45"
+    planar = [_numbers(text, 3, "--thruster", form) for text in thruster]
+    if len(planar) < 2:
+        raise ConfigError("--thruster", thruster, "need at least two horizontal thrusters")
+    low, high = _numbers(thrust_limits, 2, "--thrust-limits", "LOW,HIGH (N), e.g. -40.2,51.5")
+    if not low < high:
+        raise ConfigError("--thrust-limits", thrust_limits, "need LOW < HIGH")
+    vertical = [_numbers(text, 2, "--vertical-thruster", "X,Y (m), e.g. 0.12,-0.218")
+                for text in vertical_thruster or ()]  # fmt: skip
+    if out.suffix not in (".yaml", ".yml"):
+        raise ConfigError("--out", str(out), "a vehicle file ends in .yaml or .yml")
+    target = check_output_file(out, overwrite=overwrite, option="--out")
+    estimate = estimate_vehicle(
+        name, mass, VehicleSize(length=length, width=width, height=height), planar,
+        (low, high), thrust_rate_limit, shape=HullShape(shape), top_speed=top_speed,
+        vertical_thrusters=vertical, six_dof=six_dof, water_density=water_density,
+    )  # fmt: skip
+    text = vehicle_file_text(estimate)
+    atomic_write_text(target, text)
+    load_vehicle(target)  # what was written loads as-is
+    console.print(
+        f"wrote {out}: {len(estimate.params.estimated)} estimated fields "
+        f"({', '.join(estimate.params.estimated)}); next: check them against a run of the "
+        "real vehicle, later `auvmpc identify`",
+        highlight=False,
+    )
 
 
 FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]

@@ -41,6 +41,7 @@ __all__ = [
     "STATE_NAMES",
     "Thruster",
     "VehicleParams",
+    "VehicleSize",
     "allocation_matrix",
     "allocation_rank",
     "check_plant_scale",
@@ -113,6 +114,17 @@ class HeaveParams(StrictModel):
         ))  # fmt: skip
 
 
+class VehicleSize(StrictModel):
+    """The hull's outer envelope: the smallest box round the vehicle, body axes (m).
+
+    Optional in a vehicle file and read by nothing that simulates or controls: it documents
+    the vehicle and is what ``auvmpc vehicle new`` estimates a model from."""
+
+    length: PositiveFloat = Field(description="along x, forward (m)")
+    width: PositiveFloat = Field(description="along y, starboard (m)")
+    height: PositiveFloat = Field(description="along z, down (m)")
+
+
 class VehicleParams(StrictModel):
     """Everything the 3-DOF model needs, validated and immutable.
 
@@ -126,6 +138,11 @@ class VehicleParams(StrictModel):
         default=(), description="fields whose values are estimates, not published data"
     )
     mass: PositiveFloat = Field(description="rigid-body mass (kg)")
+    size: VehicleSize | None = Field(
+        default=None,
+        description="outer envelope {length, width, height} (m), if known; documentation "
+        "only: no model or controller reads it",
+    )
     m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
     m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")
     Iz_rb: PositiveFloat = Field(description="rigid-body yaw inertia (kg m2)")

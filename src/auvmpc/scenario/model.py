@@ -45,8 +45,16 @@ DEFAULT_PLANT_STEP_S = 0.05
 class PlantConfig(StrictModel):
     """How the simulated vehicle differs from the controller's model, and how it is integrated."""
 
+    vehicle: str | dict[str, Any] | None = Field(
+        default=None,
+        description="the simulated vehicle when it is not the controller's model (preset "
+        "name, vehicle file path or inline mapping, as the scenario's vehicle), e.g. a "
+        "published file as the plant and your estimate as the model; it needs as many "
+        "horizontal thrusters; omitted: the scenario's vehicle. Horizontal scenarios only",
+    )
     scale: dict[str, Annotated[float, Field(gt=0)]] = Field(
-        default_factory=dict, description="factor per vehicle field, e.g. {Iz_rb: 0.75}"
+        default_factory=dict,
+        description="factor per vehicle field, e.g. {Iz_rb: 0.75}, on the plant's vehicle",
     )
     max_step: Annotated[float, Field(gt=0, le=0.5)] | None = Field(
         default=None,

@@ -62,9 +62,10 @@ class ResolvedScenario:
         self.scenario = scenario  # below: with what the vehicle decides filled in
         self.base_dir = base_dir
         self.model: VehicleParams = load_vehicle_relative(scenario.vehicle, base_dir)
-        check_plant_scale(scenario.plant.scale)
-        self.plant: VehicleParams = scaled(self.model, scenario.plant.scale)
         n = self.model.n_thrusters
+        check_plant_scale(scenario.plant.scale)
+        self.plant: VehicleParams = scaled(_plant_vehicle(self.model, scenario, base_dir),
+                                           scenario.plant.scale)  # fmt: skip
         weights = scenario.controller.R
         if weights is not None and len(weights) not in (1, n):
             raise ConfigError(
@@ -125,6 +126,13 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 dict(scenario.plant.scale),
                 "not supported on the 6-DOF plant (it simulates the vehicle's six_dof section "
                 "as given; give a vehicle file with other values instead)",
+            )
+        if scenario.plant.vehicle is not None:
+            raise ConfigError(
+                "plant.vehicle",
+                scenario.plant.vehicle if isinstance(scenario.plant.vehicle, str) else "mapping",
+                "not supported on the 6-DOF plant yet (it simulates the vehicle's six_dof "
+                "section); horizontal scenarios only",
             )
         # The vehicle's fitness for the 6-DOF plant first: it decides whether anything else
         # about the scenario (e.g. a weight per thruster) can matter.
@@ -198,11 +206,30 @@ class ResolvedSixDofScenario(ResolvedScenario):
         )
 
 
-def load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> VehicleParams:
+def _plant_vehicle(model: VehicleParams, scenario: Scenario, base_dir: Path) -> VehicleParams:
+    """The vehicle the plant simulates: ``plant.vehicle`` if given (as many horizontal
+    thrusters as the model: the controller commands the plant's thrusters), else the model."""
+    given = scenario.plant.vehicle
+    if given is None:
+        return model
+    plant = load_vehicle_relative(given, base_dir, field="plant.vehicle")
+    if plant.n_thrusters != model.n_thrusters:
+        raise ConfigError(
+            "plant.vehicle",
+            plant.name,
+            f"has {plant.n_thrusters} horizontal thrusters, the controller's model "
+            f"({model.name}) {model.n_thrusters}: the plant takes the controller's commands",
+        )
+    return plant
+
+
+def load_vehicle_relative(
+    vehicle: str | dict[str, Any], base_dir: Path, field: str = "vehicle"
+) -> VehicleParams:
     """A vehicle named by a scenario; a file path is relative to the scenario's folder."""
     if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
         vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
-    return load_vehicle(vehicle)
+    return load_vehicle(vehicle, field)
 
 
 class ResolvedDepthScenario:
