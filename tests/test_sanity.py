@@ -121,13 +121,19 @@ def test_a_turn_too_tight_for_its_speed_is_a_warning(vehicle, speed, radius):
     ), warnings
 
 
+def _besides_the_mission_end(warnings: list[str]) -> list[str]:
+    """The warnings other than a path ending before or after the run (tested on its own)."""
+    ends = ("reference: the path ends at", "duration: ")
+    return [warning for warning in warnings if not warning.startswith(ends)]
+
+
 def test_a_corner_sharper_than_the_rate_limit_allows_is_a_warning():
     resolved = load_scenario(
         "paper-ideal",
         ["reference={type: waypoints, points: [[0, 0], [20, 0], [20, 20]], speed: 1.0}"],
     )
     # paper-ideal flies the paper's mpc: the corner is also said of it (tested below)
-    (corner, warning) = preflight(resolved)
+    (corner, warning) = _besides_the_mission_end(preflight(resolved))
     assert corner.startswith("controller.type: mpc on a path with 1 corner:")
     assert warning.startswith("vehicle.thrust_rate_limit: the reference's thrust needs change")
     assert "thrust_rate_limit x sample_time = 2.5 N" in warning
@@ -139,11 +145,11 @@ def test_a_depth_the_planar_plant_cannot_follow_is_a_warning():
     lawnmower = "reference={type: lawnmower, leg_length: 10, spacing: 4, legs: 2, speed: 0.5"
     nmpc = ["duration=40", "controller.type=nmpc"]  # not the corner warning of paper's mpc
     changing = load_scenario("paper-ideal", [*nmpc, f"{lawnmower}, depths_m: [1, 3]}}"])
-    (warning,) = preflight(changing)
+    (warning,) = _besides_the_mission_end(preflight(changing))
     assert warning.startswith("reference: its depth changes (1 to 3 m)")
     assert "kind: six-dof" in warning
     constant = load_scenario("paper-ideal", [*nmpc, f"{lawnmower}, depths_m: [2]}}"])
-    assert preflight(constant) == []
+    assert _besides_the_mission_end(preflight(constant)) == []
     assert preflight(load_scenario("bluerov2-helix")) == []  # 6-DOF: the depth is tracked
 
 
@@ -362,3 +368,19 @@ def test_fewer_sqp_steps_than_an_agile_vehicle_needs_are_warned():
     # the paper's vehicle needs one step: the paper runs are not warned
     paper = load_scenario("paper-ideal", ["controller.type=nmpc"])
     assert not [w for w in preflight(paper) if w.startswith("controller.linearisation")]
+
+
+@pytest.mark.parametrize(
+    ("duration", "says"),
+    [(200, "before the run's duration 200 s"), (60, "ends the run before the path does")],
+)
+def test_a_path_that_ends_before_or_after_the_run_is_warned_with_both_times(duration, says):
+    """issue 30: a lawnmower that ends before the duration held still without a word."""
+    from auvmpc.references import make_reference
+    from auvmpc.scenario.sanity import preflight
+
+    lawnmower = "{type: lawnmower, leg_length: 20, spacing: 4, legs: 4, speed: 0.5}"
+    resolved = load_scenario("paper-ideal", [f"reference={lawnmower}", f"duration={duration}"])
+    end = make_reference(resolved.scenario.reference, resolved.base_dir).end_time
+    warnings = [w for w in preflight(resolved) if says in w]
+    assert len(warnings) == 1 and f"{end:.4g} s" in warnings[0]

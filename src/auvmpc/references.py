@@ -185,7 +185,15 @@ class LawnmowerConfig(StrictModel):
     type: Literal["lawnmower"] = Field("lawnmower", description="Reference type: lawnmower (3-D).")
     start: Point = Field((0.0, 0.0), description="Start of the first leg [x, y], m.")
     heading_deg: float = Field(0.0, description="Direction of the first leg, deg from world +x.")
-    leg_length: float = Field(20.0, gt=0.0, description="Length of each leg, m.")
+    leg_length: float = Field(
+        20.0,
+        gt=0.0,
+        description="Distance between the two ends of each leg (its waypoints), m. The "
+        "half-circle turns (radius spacing / 2) begin spacing / 2 before an end, so the "
+        "straight part of a leg between two turns is leg_length - spacing. The pattern "
+        "ends when the last leg does; a longer run holds its end point (a pre-run warning "
+        "gives both times).",
+    )
     spacing: float = Field(
         4.0, gt=0.0, description="Distance between legs (twice the turn radius), m."
     )

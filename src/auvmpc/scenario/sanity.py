@@ -333,6 +333,23 @@ def feasible_forces(params: VehicleParams, tau: np.ndarray) -> np.ndarray:
     return result
 
 
+def _check_mission_end(end: float | None, duration: float, sample_time: float) -> list[str]:
+    """A reference that ends (waypoints, a lawnmower) more than half a sample before the run
+    does, or after it: the vehicle holds the end point, or never gets there (issue 30: a
+    200 s survey ended at 177.5 s and held still without a word)."""
+    if end is None or abs(end - duration) <= 0.5 * sample_time:
+        return []
+    if end < duration:
+        return [
+            f"reference: the path ends at t = {end:.4g} s, {duration - end:.4g} s before the "
+            f"run's duration {duration:g} s; the vehicle is asked to hold the end point after it"
+        ]
+    return [
+        f"duration: {duration:g} s ends the run before the path does (at t = {end:.4g} s, "
+        f"{100.0 * duration / end:.0f} % of the way)"
+    ]
+
+
 def _check_reference(resolved: ResolvedScenario) -> list[str]:
     from auvmpc.references import make_reference
 
@@ -343,7 +360,7 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     t = sample_time * np.arange(steps + 1)
     reference = make_reference(scenario.reference, resolved.base_dir)
     states = reference.states(t)
-    warnings: list[str] = []
+    warnings = _check_mission_end(reference.end_time, scenario.duration, sample_time)
     if reference.has_depth and not isinstance(resolved, ResolvedSixDofScenario):
         depths = reference.depths(t)[:, 0]
         if np.ptp(depths) > 0.0:
