@@ -11,6 +11,9 @@ import pytest
 
 from auvmpc.experiments.campaign import run_campaign
 from tests.test_cli import run_cli
+from tests.test_safe_yaml import billion_laughs
+
+SCENARIO = "name: s\nduration: 10\nreference: {type: circle}\n"
 
 
 def _one_error_line(stderr: str) -> str:
@@ -32,6 +35,14 @@ def files(tmp_path):
     (tmp_path / "vehicle.yaml").write_text(
         "name: twice\nmass: 1\nmass: 2\n"
     )  # a duplicate key in a vehicle file
+    bomb = "  " + billion_laughs().replace("\n", "\n  ")
+    (tmp_path / "bomb1.yaml").write_text(
+        f"{SCENARIO}initial_state: [0, 0, 0, 0, 0, 0]\ndescription:\n{bomb}"
+    )
+    (tmp_path / "bomb2.yaml").write_text(f"{SCENARIO}initial_state:\n{bomb}")
+    (tmp_path / "bomb3.yaml").write_text(f"name: v\nmass:\n{bomb}")
+    (tmp_path / "deep.yaml").write_text(f"{SCENARIO}description: {'[' * 100_000}")
+    (tmp_path / "campaign.yaml").write_text("name: c\nruns: 2\nruns: 3\n")
     return tmp_path
 
 
@@ -49,6 +60,41 @@ CASES = [
         ("run", "paper-ideal", "--set", "vehicle={d}/vehicle.yaml"),
         "vehicle: not valid YAML at line 3: duplicate key 'mass'",
         "vehicle.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/bomb1.yaml"),
+        "scenario: refused at line 11: holds more than 100000 values with its aliases expanded",
+        "bomb1.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/bomb2.yaml"),
+        "scenario: refused at line 10: holds more than 100000 values with its aliases expanded",
+        "bomb2.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "vehicle={d}/bomb3.yaml"),
+        "vehicle: refused at line 8: holds more than 100000 values",
+        "bomb3.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/deep.yaml"),
+        "scenario: refused at line 4: nested more than 50 levels deep",
+        "deep.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "description=" + "[" * 1000),
+        "description: value is refused: nested more than 50 levels deep",
+        "[[[",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "duration=1.0e+400"),
+        "duration: input should be a finite number",
+        "inf",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "seed=" + "9" * 5000),
+        "seed: value is refused: an integer of 5000 digits (at most 400)",
+        "999",
     ),  # fmt: skip
     (
         ("run", "paper-ideal", "--set", "controller={{type: mpc, type: baseline}}"),
@@ -137,6 +183,17 @@ def test_each_bad_input_is_one_line_naming_field_and_value(
     assert line.startswith(f"error: {expected}"), line
     assert value in line.rsplit("(got ", 1)[1], line
     assert sorted(p.name for p in files.iterdir()) == before  # nothing written
+
+
+def test_a_campaign_file_goes_through_the_same_loader(monkeypatch, capsys, files):
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "campaign", str(files / "campaign.yaml"), "--out", str(files / "c")
+    )
+    assert code == 2
+    assert _one_error_line(stderr).startswith(
+        "error: campaign: not valid YAML at line 3: duplicate key 'runs'"
+    )
+    assert not (files / "c").exists()
 
 
 def test_index_beyond_the_campaign_is_refused(monkeypatch, capsys, tmp_path):

@@ -30,12 +30,13 @@ import casadi as ca
 import numpy as np
 from pydantic import AfterValidator, Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
+from auvmpc.config import StrictModel
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.models.actuators import WRENCH, ActuatorSet, FixedThruster
 from auvmpc.models.actuators.thruster import planar_direction, thrust_column
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.six_dof_params import SixDofParams
+from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
     "STATE_NAMES",
