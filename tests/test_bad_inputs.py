@@ -43,6 +43,11 @@ def files(tmp_path):
     (tmp_path / "bomb3.yaml").write_text(f"name: v\nmass:\n{bomb}")
     (tmp_path / "deep.yaml").write_text(f"{SCENARIO}description: {'[' * 100_000}")
     (tmp_path / "campaign.yaml").write_text("name: c\nruns: 2\nruns: 3\n")
+    (tmp_path / "steps.csv").write_text("t,x,y\n0,0,0\n1e-300,1,0\n2e-300,2,1\n1,3,3\n")
+    (tmp_path / "csv.yaml").write_text(
+        "name: c\nduration: 10\nreference: {type: csv, path: steps.csv}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
     return tmp_path
 
 
@@ -85,6 +90,11 @@ CASES = [
         ("run", "paper-ideal", "--set", "description=" + "[" * 1000),
         "description: value is refused: nested more than 50 levels deep",
         "[[[",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/csv.yaml"),
+        "reference.path:3: t must be at least 1e-06 s after the row before (previous t = 0.0)",
+        "1e-300",
     ),  # fmt: skip
     (
         ("run", "paper-ideal", "--set", "duration=1.0e+400"),
