@@ -7,8 +7,9 @@ from collections.abc import Mapping
 from importlib import resources
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from auvmpc.errors import FieldError, unknown_key
 from auvmpc.safe_yaml import load_yaml
 
 __all__ = [
@@ -32,6 +33,18 @@ class StrictModel(BaseModel):
         allow_inf_nan=False,
         validate_default=True,
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys_only(cls, data: Any) -> Any:
+        """An unknown key is named before any field is checked, with the nearest known one:
+        ``duraton: 200`` would otherwise read ``duration: field required`` and hide the
+        typo (``extra="forbid"`` reports it after the fields)."""
+        if isinstance(data, dict):
+            for key, value in data.items():
+                if key not in cls.model_fields:
+                    raise FieldError(str(key), value, unknown_key(key, cls.model_fields))
+        return data
 
     def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False):
         """pydantic's copy, without the values derived from the old fields: a

@@ -596,6 +596,7 @@ def preset_names() -> list[str]:
 
 def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:
     """Vehicle from a preset name, a YAML file path, or an inline mapping."""
+    source = ""  # a file the user wrote, named in its errors
     if isinstance(spec, Mapping):
         data = dict(spec)
     else:
@@ -606,10 +607,11 @@ def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -
             if not Path(name).exists():
                 raise ConfigError(field, name, "vehicle file not found")
             text = read_text_file(name, field, "vehicle file")
+            source = f"vehicle file {name}"
         else:
             raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
         data = read_yaml_mapping(text, field, name, "vehicle fields")
     try:
         return VehicleParams.model_validate(data)
     except ValidationError as error:
-        raise format_validation_error(error, field) from None
+        raise format_validation_error(error, field, source) from None
