@@ -120,6 +120,11 @@ CASES = [
         "inf",
     ),  # fmt: skip
     (
+        ("run", "paper-ideal", "--set", "duration=1e400"),  # YAML 1.1 reads it as text
+        "duration: input should be a finite number",
+        "1e400",
+    ),  # fmt: skip
+    (
         ("run", "paper-ideal", "--set", "seed=" + "9" * 5000),
         "seed: value is refused: an integer of 5000 digits (at most 400)",
         "999",

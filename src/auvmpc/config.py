@@ -40,7 +40,7 @@ class StrictModel(BaseModel):
         """An unknown key is named before any field is checked, with the nearest known one:
         ``duraton: 200`` would otherwise read ``duration: field required`` and hide the
         typo (``extra="forbid"`` reports it after the fields)."""
-        if isinstance(data, dict):
+        if isinstance(data, Mapping):
             for key, value in data.items():
                 if key not in cls.model_fields:
                     raise FieldError(str(key), value, unknown_key(key, cls.model_fields))
