@@ -359,8 +359,9 @@ class CsvConfig(_PlanarPathConfig):
         min_length=1,
         description=(
             "CSV file with header columns t, x, y (s, m, m; other columns ignored), t strictly "
-            "increasing and used as simulation time as is, at least 4 rows. A relative path is "
-            "relative to the scenario file's folder."
+            "increasing (rows at least 1 us apart) and used as simulation time as is, at least "
+            "4 rows, |t| <= 1e9 s, |x|, |y| <= 1e7 m. A relative path is relative to the "
+            "scenario file's folder."
         ),
     )
 
