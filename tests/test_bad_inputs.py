@@ -11,6 +11,9 @@ import pytest
 
 from auvmpc.experiments.campaign import run_campaign
 from tests.test_cli import run_cli
+from tests.test_safe_yaml import billion_laughs
+
+SCENARIO = "name: s\nduration: 10\nreference: {type: circle}\n"
 
 
 def _one_error_line(stderr: str) -> str:
@@ -32,6 +35,22 @@ def files(tmp_path):
     (tmp_path / "vehicle.yaml").write_text(
         "name: twice\nmass: 1\nmass: 2\n"
     )  # a duplicate key in a vehicle file
+    bomb = "  " + billion_laughs().replace("\n", "\n  ")
+    (tmp_path / "bomb1.yaml").write_text(
+        f"{SCENARIO}initial_state: [0, 0, 0, 0, 0, 0]\ndescription:\n{bomb}"
+    )
+    (tmp_path / "bomb2.yaml").write_text(f"{SCENARIO}initial_state:\n{bomb}")
+    (tmp_path / "bomb3.yaml").write_text(f"name: v\nmass:\n{bomb}")
+    (tmp_path / "deep.yaml").write_text(f"{SCENARIO}description: {'[' * 100_000}")
+    (tmp_path / "campaign.yaml").write_text("name: c\nruns: 2\nruns: 3\n")
+    (tmp_path / "typo.yaml").write_text(
+        "name: t\nduraton: 200\nreference: {type: circle}\ninitial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    (tmp_path / "steps.csv").write_text("t,x,y\n0,0,0\n1e-300,1,0\n2e-300,2,1\n1,3,3\n")
+    (tmp_path / "csv.yaml").write_text(
+        "name: c\nduration: 10\nreference: {type: csv, path: steps.csv}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
     return tmp_path
 
 
@@ -49,6 +68,66 @@ CASES = [
         ("run", "paper-ideal", "--set", "vehicle={d}/vehicle.yaml"),
         "vehicle: not valid YAML at line 3: duplicate key 'mass'",
         "vehicle.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/bomb1.yaml"),
+        "scenario: refused at line 11: holds more than 100000 values with its aliases expanded",
+        "bomb1.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/bomb2.yaml"),
+        "scenario: refused at line 10: holds more than 100000 values with its aliases expanded",
+        "bomb2.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "vehicle={d}/bomb3.yaml"),
+        "vehicle: refused at line 8: holds more than 100000 values",
+        "bomb3.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/deep.yaml"),
+        "scenario: refused at line 4: nested more than 50 levels deep",
+        "deep.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "description=" + "[" * 1000),
+        "description: value is refused: nested more than 50 levels deep",
+        "[[[",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/csv.yaml"),
+        "reference.path:3: t must be at least 1e-06 s after the row before (previous t = 0.0)",
+        "1e-300",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/typo.yaml"),
+        "duraton: unknown key, did you mean duration? (got 200)",
+        "200",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "controller.sample_tim=0.5"),
+        "controller.sample_tim: unknown key, did you mean sample_time? (got 0.5)",
+        "0.5",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "reference.colour=1"),
+        "reference.paper-oval.colour: unknown key (got 1)",  # nothing near: no guess
+        "1",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "duration=1.0e+400"),
+        "duration: input should be a finite number",
+        "inf",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "duration=1e400"),  # YAML 1.1 reads it as text
+        "duration: input should be a finite number",
+        "1e400",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "seed=" + "9" * 5000),
+        "seed: value is refused: an integer of 5000 digits (at most 400)",
+        "999",
     ),  # fmt: skip
     (
         ("run", "paper-ideal", "--set", "controller={{type: mpc, type: baseline}}"),
@@ -137,6 +216,35 @@ def test_each_bad_input_is_one_line_naming_field_and_value(
     assert line.startswith(f"error: {expected}"), line
     assert value in line.rsplit("(got ", 1)[1], line
     assert sorted(p.name for p in files.iterdir()) == before  # nothing written
+
+
+@pytest.mark.parametrize(
+    ("vehicle", "expected"),
+    [
+        ("name: v\nmas: 16.5\n", "vehicle.mas: unknown key, did you mean mass? (vehicle file "),
+        ("name: v\n", "vehicle.mass: field required (vehicle file "),
+    ],
+)
+def test_a_vehicle_error_names_the_vehicle_file(monkeypatch, capsys, tmp_path, vehicle, expected):
+    (tmp_path / "own.yaml").write_text(vehicle)
+    (tmp_path / "s.yaml").write_text(
+        "name: s\nduration: 10\nvehicle: own.yaml\nreference: {type: circle}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    code, _, stderr = run_cli(monkeypatch, capsys, "run", str(tmp_path / "s.yaml"))
+    assert code == 2
+    assert _one_error_line(stderr).startswith(f"error: {expected}{tmp_path / 'own.yaml'})")
+
+
+def test_a_campaign_file_goes_through_the_same_loader(monkeypatch, capsys, files):
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "campaign", str(files / "campaign.yaml"), "--out", str(files / "c")
+    )
+    assert code == 2
+    assert _one_error_line(stderr).startswith(
+        "error: campaign: not valid YAML at line 3: duplicate key 'runs'"
+    )
+    assert not (files / "c").exists()
 
 
 def test_index_beyond_the_campaign_is_refused(monkeypatch, capsys, tmp_path):

@@ -124,7 +124,7 @@ def test_unstable_gains_are_rejected():
 
 
 def test_unknown_keys_and_bad_sample_time_are_rejected(jmse):
-    with pytest.raises(ValidationError, match="extra"):
+    with pytest.raises(ValidationError, match="alongkd: unknown key, did you mean along_kd"):
         BaselineConfig.model_validate({"along_kp": 1.0, "alongkd": 2.0})
     with pytest.raises(ValueError, match="sample_time"):
         BaselineController(jmse, 0.0, BaselineConfig())

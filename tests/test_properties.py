@@ -5,7 +5,8 @@ Properties:
 - a document broken on purpose (unknown key, wrong type, out-of-range number, duplicate
   key, missing field) is rejected with a ConfigError: one line naming the broken field;
 - any document, broken or not, is either accepted or rejected with one such line: never
-  another exception, never a traceback;
+  another exception, never a traceback; so is any YAML text with anchors, aliases (alias
+  bombs, cycles), merge keys and deep nesting (issue 28: refused by the loader itself);
 - through ``auvmpc run``: exit 0 with a run folder, or exit 2 (1 for a run that breaks
   down) with one line on stderr and no folder.
 
@@ -27,6 +28,7 @@ from hypothesis import strategies as st
 
 from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import load_vehicle
+from auvmpc.safe_yaml import MAX_YAML_DEPTH, load_yaml
 from auvmpc.scenario import load_scenario
 from auvmpc.scenario.sanity import preflight
 from tests.test_cli import run_cli
@@ -40,6 +42,7 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
 LOADER_EXAMPLES = 130  # per loader test below (4 of them)
+YAML_EXAMPLES = 100
 CLI_EXAMPLES = 40
 GENERATED: dict[str, int] = {}
 RAN: list[str] = []  # generated documents that ran through the CLI
@@ -276,6 +279,80 @@ def test_a_damaged_file_is_one_line(folder, document, which, garbage, kind):
         load_scenario(path)
     line = _one_line(raised.value)
     assert kind == "truncated" or line.startswith("scenario: ")  # a cut may still parse
+
+
+# Scalars a YAML document may hold, from plain to hostile.
+YAML_SCALARS = st.sampled_from(
+    [
+        "1", "-0.5", "1.0e+400", "1e400", ".nan", "-.inf", "0x1F", "1_000", "9" * 450,
+        "2024-01-01", "2024-13-45", "~", "yes", "x", "'q'", '"\\u00e9"', "!!binary aGk=",
+        "!!binary x", "!!int x", "!!float y", "!!python/name:os.system", "!!set {a}",
+    ]
+)  # fmt: skip
+
+
+@st.composite
+def yaml_documents(draw) -> str:
+    """Flow-style YAML text: nested sequences and mappings, an anchor on any node, aliases
+    to any anchor so far (undefined, or one still open: a cycle), alias bombs of any width
+    and length, merge and duplicate keys, runs of brackets deeper than the loader's limit."""
+    anchors: list[str] = []  # the anchored nodes so far, in order
+
+    def node(depth: int) -> str:
+        kinds = ["scalar", "alias", "aliases", "sequence", "mapping", "deep", "bomb"]
+        kind = draw(st.sampled_from(kinds if depth < 3 else kinds[:3]))
+        # the latest anchor first (it may still be open: a cycle), then older, then none
+        alias = f"*a{len(anchors) - 1 - draw(st.integers(0, len(anchors)))}"
+        if kind == "alias":
+            return alias
+        if kind == "aliases":  # anchored in turn, a chain of these is a bomb
+            anchors.append(f"&a{len(anchors)} ")
+            return f"{anchors[-1]}[{', '.join([alias] * draw(st.integers(1, 9)))}]"
+        if kind == "bomb":  # lists of aliases, each to the list before: width^links values
+            width, links = draw(st.integers(1, 9)), []
+            for _ in range(draw(st.integers(1, 9))):
+                item = f"*a{len(anchors) - 1}" if links else draw(YAML_SCALARS)
+                links.append(f"&a{len(anchors)} [{', '.join([item] * width)}]")
+                anchors.append(links[-1])
+            return f"[{', '.join(links)}]"
+        anchor = ""
+        if draw(st.booleans()):
+            anchor = f"&a{len(anchors)} "
+            anchors.append(anchor)
+        if kind == "scalar":
+            return anchor + draw(YAML_SCALARS)
+        if kind == "deep":
+            levels = draw(st.integers(1, 2 * MAX_YAML_DEPTH))
+            return anchor + "[" * levels + node(depth + 1) + "]" * levels
+        items = [node(depth + 1) for _ in range(draw(st.integers(0, 4)))]
+        if kind == "sequence":
+            return anchor + "[" + ", ".join(items) + "]"
+        keys = [draw(st.sampled_from(["a", "b", "<<", "radius", "1"])) for _ in items]
+        return anchor + "{" + ", ".join(f"{k}: {v}" for k, v in zip(keys, items, strict=True)) + "}"
+
+    return node(0)
+
+
+@settings(settings.get_profile("auvmpc"), max_examples=YAML_EXAMPLES)
+@given(
+    document=yaml_documents(),
+    field=st.sampled_from(["description", "initial_state", "reference", "vehicle"]),
+)
+def test_any_yaml_is_read_or_refused_in_one_line(folder, document, field):
+    """Issue 28: an alias bomb, a cycle or deep nesting is refused by the loader itself,
+    and whatever it reads is validated into one line: never a traceback or a hang."""
+    _count("yaml")
+    try:
+        load_yaml(document)
+    except yaml.YAMLError:
+        pass
+    path = folder / "aliased.yaml"
+    base = {key: value for key, value in SCENARIO.items() if key != field}
+    path.write_text(f"{_dump(base)}{field}: {document}\n")
+    try:
+        load_scenario(path)
+    except ConfigError as error:
+        _one_line(error)
 
 
 @settings(settings.get_profile("auvmpc"), max_examples=CLI_EXAMPLES)

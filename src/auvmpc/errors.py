@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "FieldError", "RunFailed", "format_validation_error"]
+import difflib
+from collections.abc import Iterable
+
+__all__ = ["ConfigError", "FieldError", "RunFailed", "format_validation_error", "unknown_key"]
 
 
 class ConfigError(ValueError):
@@ -37,8 +40,16 @@ def _short(value: object, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def format_validation_error(error, prefix: str = "") -> ConfigError:
-    """Turn a pydantic ValidationError into a ConfigError naming the first bad field."""
+def unknown_key(key: object, known: Iterable[str]) -> str:
+    """The reason for an unknown key, with the nearest known one if one is near:
+    ``unknown key, did you mean duration?``."""
+    near = difflib.get_close_matches(str(key), list(known), n=1)
+    return f"unknown key, did you mean {near[0]}?" if near else "unknown key"
+
+
+def format_validation_error(error, prefix: str = "", source: str = "") -> ConfigError:
+    """Turn a pydantic ValidationError into a ConfigError naming the first bad field, and
+    the file it comes from if ``source`` names one."""
     first = error.errors()[0]
     location = ".".join(str(part) for part in first["loc"] if part != "__root__")
     reason = first["msg"]
@@ -50,4 +61,5 @@ def format_validation_error(error, prefix: str = "") -> ConfigError:
     field = ".".join(part for part in (prefix, location) if part) or "<root>"
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
-    return ConfigError(field, value, reason[0].lower() + reason[1:] if reason else "invalid")
+    reason = reason[0].lower() + reason[1:] if reason else "invalid"
+    return ConfigError(field, value, f"{reason} ({source})" if source else reason)

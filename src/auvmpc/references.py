@@ -98,6 +98,11 @@ _TABLE_SAMPLES_PER_INTERVAL = 16
 _CSV_FIELD = "reference.path"
 _CSV_COLUMNS = ("t", "x", "y")
 _CSV_MIN_ROWS = 4
+# Beyond these the spline's speed and acceleration overflow float64 (a NaN reference or a
+# traceback): |t| up to 30 years, |x|, |y| up to 1e7 m (UTM northings fit), rows at least
+# 1 us apart (a 1 MHz track is no vehicle's).
+_CSV_LIMITS = {"t": (1e9, "s"), "x": (1e7, "m"), "y": (1e7, "m")}
+_CSV_MIN_STEP_S = 1e-6
 
 
 # --------------------------------------------------------------------------------------------
@@ -362,8 +367,9 @@ class CsvConfig(_PlanarPathConfig):
         min_length=1,
         description=(
             "CSV file with header columns t, x, y (s, m, m; other columns ignored), t strictly "
-            "increasing and used as simulation time as is, at least 4 rows. A relative path is "
-            "relative to the scenario file's folder."
+            "increasing (rows at least 1 us apart) and used as simulation time as is, at least "
+            "4 rows, |t| <= 1e9 s, |x|, |y| <= 1e7 m. A relative path is relative to the "
+            "scenario file's folder."
         ),
     )
 
@@ -1036,7 +1042,8 @@ def load_track_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     ConfigError
         Field ``reference.path`` for file-level problems (missing, unreadable, no header,
         missing column, too few rows), ``reference.path:<line>`` for a bad row (not a number,
-        not finite, wrong field count, t not increasing), with the offending value.
+        not finite, beyond the limits above, wrong field count, t not increasing or rows
+        under 1 us apart), with the offending value.
     """
     where = str(path)
     try:
@@ -1080,13 +1087,17 @@ def load_track_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
                 raise ConfigError(field, text, f"column '{name}' is not a number") from None
             if not math.isfinite(value):
                 raise ConfigError(field, text, f"column '{name}' is not finite")
+            limit, unit = _CSV_LIMITS[name]
+            if abs(value) > limit:
+                raise ConfigError(field, text, f"column '{name}' is beyond +-{limit:g} {unit}")
             values[i, j] = value
-        if i > 0 and values[i, 0] <= values[i - 1, 0]:
-            raise ConfigError(
-                field,
-                values[i, 0],
-                f"t must be strictly increasing (previous t = {values[i - 1, 0]})",
+        if i > 0 and values[i, 0] - values[i - 1, 0] < _CSV_MIN_STEP_S:
+            rule = (
+                "t must be strictly increasing"
+                if values[i, 0] <= values[i - 1, 0]
+                else f"t must be at least {_CSV_MIN_STEP_S:g} s after the row before"
             )
+            raise ConfigError(field, values[i, 0], f"{rule} (previous t = {values[i - 1, 0]})")
     if values.shape[0] < _CSV_MIN_ROWS:
         raise ConfigError(
             _CSV_FIELD, where, f"needs at least {_CSV_MIN_ROWS} data rows, found {values.shape[0]}"

@@ -30,12 +30,13 @@ import casadi as ca
 import numpy as np
 from pydantic import AfterValidator, Field, ValidationError, model_validator
 
-from auvmpc.config import StrictModel, read_text_file, read_yaml_mapping
+from auvmpc.config import StrictModel
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.models.actuators import WRENCH, ActuatorSet, FixedThruster
 from auvmpc.models.actuators.thruster import planar_direction, thrust_column
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.six_dof_params import SixDofParams
+from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
     "STATE_NAMES",
@@ -612,6 +613,7 @@ def preset_names() -> list[str]:
 
 def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:
     """Vehicle from a preset name, a YAML file path, or an inline mapping."""
+    source = ""  # a file the user wrote, named in its errors
     if isinstance(spec, Mapping):
         data = dict(spec)
     else:
@@ -622,10 +624,11 @@ def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -
             if not Path(name).exists():
                 raise ConfigError(field, name, "vehicle file not found")
             text = read_text_file(name, field, "vehicle file")
+            source = f"vehicle file {name}"
         else:
             raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
         data = read_yaml_mapping(text, field, name, "vehicle fields")
     try:
         return VehicleParams.model_validate(data)
     except ValidationError as error:
-        raise format_validation_error(error, field) from None
+        raise format_validation_error(error, field, source) from None

@@ -10,13 +10,9 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from auvmpc.config import (
-    builtin_descriptions,
-    load_yaml,
-    read_text_file,
-    read_yaml_mapping,
-)
+from auvmpc.config import builtin_descriptions
 from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.safe_yaml import load_yaml, read_text_file, read_yaml_mapping, yaml_problem
 from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import Scenario, SixDofScenario
 from auvmpc.scenario.resolved import (
@@ -136,9 +132,7 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     try:
         value = load_yaml(raw_value)
     except yaml.YAMLError as error:
-        problem = str(getattr(error, "problem", "") or "")
-        detail = f": {problem}" if problem.startswith("duplicate key") else ""
-        raise ConfigError(path, raw_value, f"value is not valid YAML{detail}") from None
+        raise ConfigError(path, raw_value, f"value is {yaml_problem(error, line=False)}") from None
     keys = path.split(".")
     node: Any = data
     for depth, key in enumerate(keys):

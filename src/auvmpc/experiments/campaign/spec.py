@@ -21,12 +21,13 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from auvmpc.config import StrictModel, builtin_descriptions, read_text_file, read_yaml_mapping
+from auvmpc.config import StrictModel, builtin_descriptions
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.experiments.campaign.criterion import (
     _is_number,
     parse_criterion,
 )
+from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 from auvmpc.scenario import (
     ResolvedScenario,
     apply_override,

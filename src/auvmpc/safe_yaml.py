@@ -1,0 +1,189 @@
+"""The one YAML loader for everything auvmpc reads: scenario, vehicle and campaign files,
+the presets and ``--set`` values.
+
+PyYAML's safe loader with limits checked while the document is composed, before any of it
+is built: a 1 kB "billion laughs" alias bomb expands to 10^9 values and a file of ten
+thousand ``[`` ends in a RecursionError, so both are refused from the node graph alone. A
+key given twice is refused too (keeping the last one hides a typo or a merge mistake).
+Every refusal is a ``yaml.YAMLError`` that :func:`yaml_problem` says in a few words.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from yaml.constructor import ConstructorError, SafeConstructor
+from yaml.events import AliasEvent
+
+from auvmpc.errors import ConfigError
+
+__all__ = [
+    "MAX_YAML_BYTES",
+    "MAX_YAML_DEPTH",
+    "MAX_YAML_VALUES",
+    "YamlLimit",
+    "load_yaml",
+    "read_text_file",
+    "read_yaml_mapping",
+    "yaml_problem",
+]
+
+# The largest preset is 3 kB; PyYAML reads about 200 kB/s, so 512 kB is under 3 s of
+# parsing. A long track belongs in a CSV file (reference type csv).
+MAX_YAML_BYTES = 512 * 1024
+# Values in a document with its aliases expanded: about what 512 kB of YAML holds at 5
+# bytes a value; a bomb's billions are refused at the first alias that passes it.
+MAX_YAML_VALUES = 100_000
+# Settings nest about 6 deep; Python's recursion limit ends near 330 in PyYAML's composer.
+MAX_YAML_DEPTH = 50
+# More digits than any float holds (1.8e308): no setting needs such an integer, and past
+# 4300 Python refuses to read it at all.
+MAX_INT_DIGITS = 400
+
+
+class YamlLimit(yaml.MarkedYAMLError):
+    """A document refused for its size, nesting or aliases, not for its syntax."""
+
+
+class _SafeLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` counting, while composing, the nesting depth and the values the
+    document holds with each alias expanded (an alias counts as its anchor's values)."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._values = 0
+        self._anchor_values: dict[yaml.Node, int] = {}  # finished anchored nodes only
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, AliasEvent):
+            node = self.anchors.get(event.anchor)
+            if node is not None:  # an undefined alias: PyYAML's own error
+                if node not in self._anchor_values:
+                    raise YamlLimit(
+                        None, None, f"alias *{event.anchor} inside its own anchor (a cycle)",
+                        event.start_mark,
+                    )  # fmt: skip
+                self._count(self._anchor_values[node], event)
+            return super().compose_node(parent, index)
+        if self._depth >= MAX_YAML_DEPTH:
+            raise YamlLimit(
+                None, None, f"nested more than {MAX_YAML_DEPTH} levels deep", event.start_mark
+            )
+        before = self._values
+        self._count(1, event)
+        self._depth += 1
+        node = super().compose_node(parent, index)
+        self._depth -= 1
+        if event.anchor is not None:
+            self._anchor_values[node] = self._values - before
+        return node
+
+    def _count(self, values: int, event) -> None:
+        self._values += values
+        if self._values > MAX_YAML_VALUES:
+            raise YamlLimit(
+                None, None,
+                f"holds more than {MAX_YAML_VALUES} values with its aliases expanded",
+                event.start_mark,
+            )  # fmt: skip
+
+    def construct_object(self, node, deep=False):
+        # A scalar PyYAML resolves but Python cannot build (a timestamp 2024-13-45).
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, OverflowError) as error:
+            kind = node.tag.rsplit(":", 1)[-1]
+            raise ConstructorError(
+                None, None, f"{node.value!r} is not a valid {kind} ({error})", node.start_mark
+            ) from None
+
+
+def _unique_mapping(loader: _SafeLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: set = set()
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = loader.construct_object(key_node, deep=deep)
+        try:
+            duplicate = key in seen
+        except TypeError:  # unhashable key: the base constructor reports it
+            break
+        if duplicate:
+            raise ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return SafeConstructor.construct_mapping(loader, node, deep=deep)
+
+
+def _bounded_int(loader: _SafeLoader, node: yaml.ScalarNode) -> int:
+    digits = sum(character.isdigit() for character in node.value)
+    if digits > MAX_INT_DIGITS:
+        raise YamlLimit(
+            None, None, f"an integer of {digits} digits (at most {MAX_INT_DIGITS})",
+            node.start_mark,
+        )  # fmt: skip
+    return SafeConstructor.construct_yaml_int(loader, node)
+
+
+_SafeLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+_SafeLoader.add_constructor("tag:yaml.org,2002:int", _bounded_int)
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load`` within the limits above, refusing duplicate keys; raises
+    ``yaml.YAMLError`` (a :class:`YamlLimit` for a limit)."""
+    if len(text) > MAX_YAML_BYTES:
+        raise YamlLimit(None, None, f"{len(text)} characters, more than {MAX_YAML_BYTES}")
+    return yaml.load(text, Loader=_SafeLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
+def yaml_problem(error: yaml.YAMLError, line: bool = True) -> str:
+    """What is wrong in a few words: ``not valid YAML at line 4: duplicate key 'a'``,
+    ``refused at line 2: nested more than 50 levels deep``."""
+    mark = getattr(error, "problem_mark", None)
+    where = f" at line {mark.line + 1}" if line and mark is not None else ""
+    problem = getattr(error, "problem", None)
+    detail = f": {problem}" if problem else ""
+    lead = "refused" if isinstance(error, YamlLimit) else "not valid YAML"
+    return f"{lead}{where}{detail}"
+
+
+def read_text_file(path: str | Path, field: str, what: str) -> str:
+    """The text of a user's file; a folder, a missing file, a binary or huge file is a
+    one-line :class:`ConfigError` naming ``field``."""
+    file = Path(path)
+    if file.is_dir():
+        raise ConfigError(field, str(path), f"is a folder, not a {what}")
+    if not file.is_file():
+        raise ConfigError(field, str(path), f"no such {what}")
+    try:
+        size = file.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise ConfigError(
+                field, str(path), f"is {size} bytes, more than a {what} may be ({MAX_YAML_BYTES})"
+            )
+        data = file.read_bytes()
+    except OSError as error:
+        raise ConfigError(field, str(path), f"cannot be read ({error.strerror})") from None
+    if b"\x00" in data:
+        raise ConfigError(field, str(path), f"is a binary file, not a {what} (YAML text)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ConfigError(
+            field, str(path), f"is not UTF-8 text (byte {error.start}); a {what} is YAML text"
+        ) from None
+
+
+def read_yaml_mapping(text: str, field: str, origin: str, what: str = "fields") -> dict[str, Any]:
+    """Parse a YAML document that must be a mapping; errors name ``field`` and ``origin``."""
+    try:
+        data = load_yaml(text)
+    except yaml.YAMLError as error:
+        raise ConfigError(field, origin, yaml_problem(error)) from None
+    if not isinstance(data, dict):
+        raise ConfigError(field, origin, f"expected a mapping of {what}")
+    return data
