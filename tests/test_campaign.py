@@ -383,13 +383,13 @@ def test_rerunning_a_finished_campaign_runs_nothing(reference, small_file):
     pd.testing.assert_frame_equal(load_results(out), frame)
 
 
-def _campaign_folder(out: Path) -> Path:
+def campaign_folder(out: Path) -> Path:
     """A campaign folder as a first run starts it: auvmpc's marker, store and lock listed."""
     return prepare_campaign_folder(out, overwrite=False, files=(RESULTS_FILE, LOCK_FILE))
 
 
 def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
-    out = _campaign_folder(tmp_path / "out")
+    out = campaign_folder(tmp_path / "out")
     campaign.store._Store(out, load_campaign(small_file)).close()  # as a first run leaves it
     other = write_campaign(tmp_path, with_changes(seed=99))
     with pytest.raises(ConfigError, match=r"^--out: holds another campaign"):
@@ -397,7 +397,7 @@ def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
 
 
 def test_one_coordinator_per_folder(tmp_path, small_file):
-    out = _campaign_folder(tmp_path / "out")
+    out = campaign_folder(tmp_path / "out")
     with campaign.store._exclusive(out):
         with pytest.raises(ConfigError, match=r"^--out: another campaign process is writing here"):
             run_campaign(small_file, out, workers=1)

@@ -118,7 +118,7 @@ def test_os_errors_on_the_output_are_one_line_naming_the_path(monkeypatch, capsy
 
 def test_a_name_too_long_and_a_parent_that_is_a_file_are_one_line(monkeypatch, capsys, tmp_path):
     run = ("run", "paper-ideal", *SHORT, "--out")
-    _refused(monkeypatch, capsys, *run, str(tmp_path / ("n" * 300)), fragment="name too long")
+    _refused(monkeypatch, capsys, *run, str(tmp_path / ("n" * 300)), fragment="too long for a")
     (tmp_path / "file").write_text("mine")
     _refused(monkeypatch, capsys, *run, str(tmp_path / "file" / "r"), fragment="is a file")
     assert (tmp_path / "file").read_text() == "mine"
@@ -227,10 +227,9 @@ def test_campaign_never_writes_into_a_users_database_or_report(
 
 
 def test_campaign_overwrite_keeps_a_file_the_user_added(monkeypatch, capsys, tmp_path):
-    from auvmpc.experiments.campaign.spec import LOCK_FILE, RESULTS_FILE
-    from auvmpc.experiments.outputs import prepare_campaign_folder
+    from tests.test_campaign import campaign_folder
 
-    out = prepare_campaign_folder(tmp_path / "c", overwrite=False, files=(RESULTS_FILE, LOCK_FILE))
+    out = campaign_folder(tmp_path / "c")
     (out / "report.md").write_text("mine")
     before = _snapshot(out)
     _refused(monkeypatch, capsys, *CAMPAIGN, str(out), "--overwrite", fragment="report.md")

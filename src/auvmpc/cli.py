@@ -283,7 +283,7 @@ def bench(
         rows_to_json,
         run_benchmark,
     )
-    from auvmpc.experiments.outputs import atomic_write_text, check_output_file
+    from auvmpc.experiments.outputs import check_output_file, write_named_file
 
     if json_file is not None:
         check_output_file(json_file, overwrite=overwrite, option="--json")
@@ -300,7 +300,7 @@ def bench(
         )
     console.print(format_table(rows, machine_info()))
     if json_file is not None:
-        atomic_write_text(json_file, rows_to_json(rows))
+        write_named_file(json_file, rows_to_json(rows), option="--json")
         console.print(f"wrote {json_file}")
 
 

@@ -59,6 +59,7 @@ __all__ = [
     "prepare_campaign_folder",
     "require_own_folder",
     "staged_folder",
+    "write_named_file",
 ]
 
 MARKER = ".auvmpc-output.json"
@@ -200,11 +201,7 @@ def _absolute(path: Path, option: str) -> Path:
     path = Path(os.path.abspath(Path(path).expanduser()))
     if path.parent == path:
         raise ConfigError(option, str(path), "is the filesystem root; name a folder to write")
-    size = len(path.name.encode("utf-8", "surrogateescape"))
-    if size > MAX_NAME_BYTES:
-        raise ConfigError(
-            option, str(path), f"name too long ({size} bytes, at most {MAX_NAME_BYTES})"
-        )
+    folder_name(path.name, option)
     for ancestor in path.parents:
         if ancestor.exists():
             if not ancestor.is_dir():
@@ -310,6 +307,13 @@ def check_output_file(path: Path | str, *, overwrite: bool, option: str) -> Path
         if target.exists() and not overwrite:
             raise ConfigError(option, str(path), "exists; add --overwrite to replace it")
     return target
+
+
+def write_named_file(path: Path | str, text: str, *, option: str) -> None:
+    """Write the file the user named (checked first with :func:`check_output_file`)
+    atomically; an operating-system error is one line naming it."""
+    with _os_errors(option, str(path)):
+        atomic_write_text(path, text)
 
 
 def _write_marker(folder: Path, kind: OutputKind, files: Iterable[str]) -> None:
