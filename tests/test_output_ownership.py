@@ -116,6 +116,20 @@ def test_os_errors_on_the_output_are_one_line_naming_the_path(monkeypatch, capsy
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_read_only_run_folder_is_one_line_for_animate(monkeypatch, capsys, run_folder):
+    """Read-only (simulated: the tests may run as root, whom permissions do not stop)."""
+    import tempfile
+
+    def read_only(*args, dir=None, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system", str(dir))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    before = _snapshot(run_folder)
+    _refused(monkeypatch, capsys, "animate", str(run_folder),
+             fragment=f"cannot write {run_folder}: Read-only file system")  # fmt: skip
+    assert _snapshot(run_folder) == before
+
+
 def test_a_name_too_long_and_a_parent_that_is_a_file_are_one_line(monkeypatch, capsys, tmp_path):
     run = ("run", "paper-ideal", *SHORT, "--out")
     _refused(monkeypatch, capsys, *run, str(tmp_path / ("n" * 300)), fragment="too long for a")
@@ -150,12 +164,22 @@ def _reproduction(folder):
 @pytest.mark.parametrize("overwrite", [(), ("--overwrite",)], ids=["plain", "overwrite"])
 def test_reproduce_never_deletes_a_users_file_in_runs(monkeypatch, capsys, tmp_path, overwrite):
     out = _reproduction(tmp_path / "paper")
+    check_output_folder(out, OutputKind.REPRODUCE, overwrite=True)  # all of it auvmpc's
     (out / "runs" / "run1.txt").write_text("mine")
     before = _snapshot(out)
     fragment = "runs/run1.txt" if overwrite else "add --overwrite"
     _refused(monkeypatch, capsys, "reproduce", "--no-sweep", "--no-figures", "--out", str(out),
              *overwrite, fragment=fragment)  # fmt: skip
     assert _snapshot(out) == before
+
+
+def test_a_file_added_to_a_run_of_a_reproduction_is_listed_by_that_run(tmp_path):
+    from auvmpc.experiments.outputs import adding
+
+    out = _reproduction(tmp_path / "paper")
+    with adding(out / "runs" / "paper-ideal--mpc", ["animation.gif"], "RUN_DIR") as run:
+        (run / "animation.gif").write_bytes(b"GIF89a")
+    check_output_folder(out, OutputKind.REPRODUCE, overwrite=True)  # the run's marker lists it
 
 
 def test_reproduce_refuses_a_folder_that_only_looks_like_one(monkeypatch, capsys, tmp_path):
