@@ -126,8 +126,28 @@ def test_a_read_only_run_folder_is_one_line_for_animate(monkeypatch, capsys, run
     monkeypatch.setattr(tempfile, "mkstemp", read_only)
     before = _snapshot(run_folder)
     _refused(monkeypatch, capsys, "animate", str(run_folder),
-             fragment=f"cannot write {run_folder}: Read-only file system")  # fmt: skip
+             fragment=f"cannot write {run_folder / MARKER}: Read-only file system")  # fmt: skip
     assert _snapshot(run_folder) == before
+
+
+def test_a_full_disk_under_the_campaign_store_is_one_line(tmp_path):
+    """SQLite's own codes for a refused write (FULL, IOERR, READONLY...) become the line;
+    others (a busy database) stay what they are."""
+    from auvmpc.errors import ConfigError
+    from auvmpc.experiments.campaign.store import _storage_errors
+
+    def failure(message, code):
+        error = sqlite3.OperationalError(message)
+        error.sqlite_errorcode = code  # as SQLite sets it
+        return error
+
+    path = tmp_path / "results.sqlite"
+    with pytest.raises(ConfigError, match=rf"^--out: cannot write {path}: database or disk"):
+        with _storage_errors(path):
+            raise failure("database or disk is full", 13)
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        with _storage_errors(path):
+            raise failure("database is locked", 5)
 
 
 def test_a_name_too_long_and_a_parent_that_is_a_file_are_one_line(monkeypatch, capsys, tmp_path):

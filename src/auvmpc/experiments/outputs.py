@@ -49,12 +49,14 @@ __all__ = [
     "OutputKind",
     "adding",
     "atomic_write_text",
+    "cannot_write",
     "claim",
     "check_output_file",
     "check_output_folder",
     "folder_name",
     "mark_folder",
     "new_entry",
+    "output_errors",
     "own_kind",
     "prepare_campaign_folder",
     "require_own_folder",
@@ -93,7 +95,9 @@ _NOUN = {
 
 
 @contextlib.contextmanager
-def _os_errors(option: str, shown: str, staging: Path | None = None, target: Path | None = None):
+def output_errors(
+    option: str, shown: str, staging: Path | None = None, target: Path | None = None
+) -> Iterator[None]:
     """Operating-system errors on the output as one line naming the path (a staging
     path shown as the path it stands for)."""
     try:
@@ -104,8 +108,12 @@ def _os_errors(option: str, shown: str, staging: Path | None = None, target: Pat
             if not str(where).startswith(str(target.parent)):
                 raise  # not the output's (e.g. a preset read while the block computes)
             where = str(where).replace(str(staging), str(target))
-        reason = error.strerror or type(error).__name__
-        raise ConfigError(option, shown, f"cannot write {where}: {reason}") from None
+        raise cannot_write(option, shown, where, error.strerror or type(error).__name__) from None
+
+
+def cannot_write(option: str, shown: str, where: Path | str, reason: str) -> ConfigError:
+    """The one line for output that the system refuses to take (also a database's)."""
+    return ConfigError(option, shown, f"cannot write {where}: {reason}")
 
 
 def folder_name(text: str, field: str) -> str:
@@ -234,7 +242,7 @@ def check_output_folder(
         not list.
     """
     shown = str(path)
-    with _os_errors(option, shown):
+    with output_errors(option, shown):
         target = _absolute(Path(path), option)
         if target.is_symlink():
             raise ConfigError(option, shown, "is a symbolic link; name the folder itself")
@@ -300,7 +308,7 @@ def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
 def check_output_file(path: Path | str, *, overwrite: bool, option: str) -> Path:
     """A file the user names to write: its folder must exist as a folder; an existing file
     needs ``overwrite``; a folder is refused."""
-    with _os_errors(option, str(path)):
+    with output_errors(option, str(path)):
         target = _absolute(Path(path), option)
         if target.is_dir():
             raise ConfigError(option, str(path), "is a folder; name a file")
@@ -312,7 +320,7 @@ def check_output_file(path: Path | str, *, overwrite: bool, option: str) -> Path
 def write_named_file(path: Path | str, text: str, *, option: str) -> None:
     """Write the file the user named (checked first with :func:`check_output_file`)
     atomically; an operating-system error is one line naming it."""
-    with _os_errors(option, str(path)):
+    with output_errors(option, str(path)):
         atomic_write_text(path, text)
 
 
@@ -347,7 +355,7 @@ def claim(folder: Path | str, names: Iterable[str], option: str) -> OutputKind:
     folder = Path(folder)
     names = list(names)
     shown = str(folder)
-    with _os_errors(option, shown):
+    with output_errors(option, shown):
         for name in names:
             folder_name(name, option)
         marker = _marker(folder)
@@ -379,12 +387,12 @@ def adding(folder: Path | str, names: Iterable[str], option: str) -> Iterator[Pa
     before = _listed(_marker(folder) or {}) or set()
     kind = claim(folder, names, option)
     try:
-        with _os_errors(option, str(folder)):
+        with output_errors(option, str(folder)):
             yield folder
     finally:
         entries = [folder / n for n in names if (folder / n).exists()]
         kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
-        with _os_errors(option, str(folder)):
+        with output_errors(option, str(folder)):
             _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
 
 
@@ -394,13 +402,13 @@ def new_entry(path: Path | str, option: str) -> Iterator[Path]:
     that folder (:func:`adding`, so an own earlier one is replaced); elsewhere it must not
     exist. Yields ``path``."""
     shown = str(path)
-    with _os_errors(option, shown):
+    with output_errors(option, shown):
         target = _absolute(Path(path), option)
     if own_kind(target.parent) is not None:
         with adding(target.parent, [target.name], option):
             yield Path(path)
         return
-    with _os_errors(option, shown):
+    with output_errors(option, shown):
         if target.exists() or target.is_symlink():
             raise ConfigError(option, shown, "exists; remove it or choose another name")
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -459,7 +467,7 @@ def staged_folder(
     target = check_output_folder(path, kind, overwrite=overwrite, option=option)
     staging = _staging_name(target)
     try:
-        with _os_errors(option, str(path), staging, target):
+        with output_errors(option, str(path), staging, target):
             target.parent.mkdir(parents=True, exist_ok=True)
             clean_stale_partials(target.parent, target.name)
             staging.mkdir()
@@ -498,7 +506,7 @@ def prepare_campaign_folder(
     """
     target = check_output_folder(path, OutputKind.CAMPAIGN, overwrite=overwrite, resume=True)
     shown = str(path)
-    with _os_errors(option, shown, target=target):
+    with output_errors(option, shown, target=target):
         if overwrite and own_kind(target) is OutputKind.CAMPAIGN:
             check_output_folder(path, OutputKind.CAMPAIGN, overwrite=True, option=option)
             retired = _staging_name(target)
@@ -529,7 +537,12 @@ def atomic_write_text(path: Path | str, text: str) -> None:
     the user creates, not the private mode of a temporary file.
     """
     path = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        handle, temporary = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
+        )
+    except OSError as error:  # name the file meant, not the temporary one
+        raise OSError(error.errno, error.strerror, str(path)) from None
     try:
         os.fchmod(handle, 0o666 & ~_umask())
         with os.fdopen(handle, "w") as stream:
@@ -537,6 +550,9 @@ def atomic_write_text(path: Path | str, text: str) -> None:
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temporary, path)
+    except OSError as error:
+        Path(temporary).unlink(missing_ok=True)
+        raise OSError(error.errno, error.strerror, str(path)) from None
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
