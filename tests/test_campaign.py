@@ -32,6 +32,8 @@ from auvmpc.experiments.campaign import (
     scenario_for_run,
     validate_campaign,
 )
+from auvmpc.experiments.campaign.spec import LOCK_FILE, RESULTS_FILE
+from auvmpc.experiments.outputs import prepare_campaign_folder
 from auvmpc.experiments.run import simulate
 from auvmpc.scenario import load_scenario
 
@@ -381,9 +383,13 @@ def test_rerunning_a_finished_campaign_runs_nothing(reference, small_file):
     pd.testing.assert_frame_equal(load_results(out), frame)
 
 
+def campaign_folder(out: Path) -> Path:
+    """A campaign folder as a first run starts it: auvmpc's marker, store and lock listed."""
+    return prepare_campaign_folder(out, overwrite=False, files=(RESULTS_FILE, LOCK_FILE))
+
+
 def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
-    out = tmp_path / "out"
-    out.mkdir()
+    out = campaign_folder(tmp_path / "out")
     campaign.store._Store(out, load_campaign(small_file)).close()  # as a first run leaves it
     other = write_campaign(tmp_path, with_changes(seed=99))
     with pytest.raises(ConfigError, match=r"^--out: holds another campaign"):
@@ -391,8 +397,7 @@ def test_a_folder_holding_another_campaign_is_refused(small_file, tmp_path):
 
 
 def test_one_coordinator_per_folder(tmp_path, small_file):
-    out = tmp_path / "out"
-    out.mkdir()
+    out = campaign_folder(tmp_path / "out")
     with campaign.store._exclusive(out):
         with pytest.raises(ConfigError, match=r"^--out: another campaign process is writing here"):
             run_campaign(small_file, out, workers=1)

@@ -174,7 +174,7 @@ def test_compare_never_replaces_a_folder_it_did_not_write(monkeypatch, capsys, t
     (out / "notes.txt").write_text("keep")
     code, _, err = run_cli(monkeypatch, capsys, "compare", *map(str, two_runs), "--out", str(out))
     assert code == 2
-    assert "--out: exists and was not written by compare" in err
+    assert "--out: holds files auvmpc did not write" in err
     assert (out / "notes.txt").read_text() == "keep" and len(list(out.iterdir())) == 1
 
 

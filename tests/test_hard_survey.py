@@ -27,7 +27,7 @@ from auvmpc.experiments.campaign import (
 from auvmpc.experiments.campaign import __main__ as campaign_main
 from auvmpc.experiments.survey_cases import CASE_KINDS, YARDSTICK, make_case
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
-from tests.test_campaign import write_campaign
+from tests.test_campaign import campaign_folder, write_campaign
 from tests.test_cli import run_cli
 
 SHORT = ["duration=12", "transient_s=4"]
@@ -175,8 +175,7 @@ def test_a_controller_label_is_another_campaign_for_the_tested_runs_only(cases_f
     assert run_overrides(labelled, 1, yardstick=True) == run_overrides(plain, 1, yardstick=True)
     tested = scenario_for_run(labelled, 1).scenario.controller
     assert (tested.type, tested.control_horizon) == ("ltv-mpc", 30)
-    out = tmp_path / "out"
-    out.mkdir()
+    out = campaign_folder(tmp_path / "out")
     campaign.store._Store(out, plain).close()  # the folder of the campaign without a label
     with pytest.raises(ConfigError, match=r"^--out: holds another campaign"):
         run_campaign(labelled, out, workers=1)

@@ -16,6 +16,7 @@ from scipy.integrate import solve_ivp
 
 from auvmpc.controllers.channels import ThrustMapping
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.outputs import MARKER
 from auvmpc.experiments.reproduce import velocity_errors
 from auvmpc.experiments.run import read_planar_run, redraw, simulate, write_run
 from auvmpc.models import six_dof
@@ -105,7 +106,7 @@ def test_same_seed_same_bits():
 def test_redraw_a_six_dof_run(short_run, tmp_path):
     folder = tmp_path / "copy"
     folder.mkdir()
-    for name in ("log.csv", "run.json"):
+    for name in ("log.csv", "run.json", MARKER):  # a copy keeps the marker: still auvmpc's
         (folder / name).write_bytes((short_run / name).read_bytes())
     redraw(folder)
     for stem in ("trajectory_3d", "tracking_errors", "depth_attitude", "trajectory", "thrusts"):

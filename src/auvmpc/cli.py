@@ -141,7 +141,7 @@ def run(
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
     from auvmpc.api import controller_overrides
-    from auvmpc.experiments.outputs import OutputKind, check_output_folder
+    from auvmpc.experiments.outputs import OutputKind, check_output_folder, folder_name
     from auvmpc.experiments.run import simulate, write_run
     from auvmpc.scenario import load_scenario
 
@@ -163,7 +163,7 @@ def run(
         if yardstick:
             raise ConfigError("--yardstick", True, "only with --from-campaign")
         resolved = load_scenario(scenario, overrides)
-    name = resolved.scenario.name
+    name = folder_name(resolved.scenario.name, "name")  # a label and a folder, never a path
     if from_campaign is not None:
         name = f"{name}-run{index}{'-yardstick' if yardstick else ''}"
     label = f"{name}-{controller or resolved.scenario.controller.type}"
@@ -283,7 +283,7 @@ def bench(
         rows_to_json,
         run_benchmark,
     )
-    from auvmpc.experiments.outputs import atomic_write_text, check_output_file
+    from auvmpc.experiments.outputs import check_output_file, write_named_file
 
     if json_file is not None:
         check_output_file(json_file, overwrite=overwrite, option="--json")
@@ -300,7 +300,7 @@ def bench(
         )
     console.print(format_table(rows, machine_info()))
     if json_file is not None:
-        atomic_write_text(json_file, rows_to_json(rows))
+        write_named_file(json_file, rows_to_json(rows), option="--json")
         console.print(f"wrote {json_file}")
 
 
@@ -632,18 +632,14 @@ def plot(
     dpi: Dpi = 120,
 ) -> None:
     """Re-draw the figures of a saved run from its log.csv and run.json."""
-    from auvmpc.experiments.outputs import OutputKind, record_written, require_own_folder
+    from auvmpc.experiments.outputs import OutputKind, require_own_folder
     from auvmpc.experiments.run import redraw
 
     require_own_folder(run_dir, OutputKind.RUN, "RUN_DIR")
     if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
         raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
     check_figure_options(fmt, dpi)
-    before = {entry.name for entry in run_dir.iterdir()}
     redraw(run_dir, fmt, dpi)
-    record_written(
-        run_dir, OutputKind.RUN, [e.name for e in run_dir.iterdir() if e.name not in before]
-    )
     console.print(f"redrew figures in {run_dir} ({fmt})")
 
 
@@ -683,18 +679,17 @@ def animate(
     """Animate a run: vehicle, thrust arrows, reference and horizon, obstacles, clock."""
 
     from auvmpc.animation import AnimationSettings, animate_run
+    from auvmpc.experiments.outputs import new_entry
     from auvmpc.experiments.run import read_planar_run
 
     _, scenario, model, log = read_planar_run(run_dir, "animate")
     settings = AnimationSettings(fps=fps, speed=speed, dpi=dpi)
     if out is None:
-        out = run_dir / "animation.gif"  # auvmpc's own file in its own folder: replaced
-    elif out.exists():
-        raise ConfigError("--out", str(out), "exists; remove it or choose another file")
-    with progress_bar() as progress:
+        out = run_dir / "animation.gif"
+    with new_entry(out, "--out") as target, progress_bar() as progress:
         task = progress.add_task("frames", total=None)
         animate_run(
-            log, scenario, model, out, settings,
+            log, scenario, model, target, settings,
             on_frame=lambda done, total: progress.update(task, completed=done, total=total),
         )  # fmt: skip
     console.print(f"wrote {out}")

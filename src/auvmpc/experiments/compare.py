@@ -9,9 +9,6 @@ those differ between the runs), or by explicit labels.
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -19,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.outputs import MARKER, OutputKind, check_output_folder, staged_folder
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import Scenario
 from auvmpc.sim.log import SimLog
@@ -31,7 +29,7 @@ __all__ = [
     "metrics_markdown",
 ]
 
-MARKER_FILE = "comparison.json"  # marks a folder written by compare, which it may rewrite
+RECORD_FILE = "comparison.json"  # the runs compared
 
 COMPARED_METRICS = (
     "rms_position_error_m",
@@ -107,8 +105,9 @@ def compare_runs(
 ) -> list[Path]:
     """Write the overlay figures, ``metrics.md``, ``metrics.csv`` and ``comparison.json``.
 
-    ``out`` is created; an existing folder is rewritten only if an earlier ``compare``
-    wrote it (it holds ``comparison.json``), so nothing else is ever replaced.
+    ``out`` is new, empty, or an earlier comparison of auvmpc's, replaced (without
+    ``--overwrite``) only if it holds nothing but what auvmpc wrote there
+    (:mod:`auvmpc.experiments.outputs`).
     """
     from auvmpc.plots import (
         figure_compare_errors,
@@ -117,11 +116,7 @@ def compare_runs(
         save_figures,
     )
 
-    out = Path(out)
-    if out.exists() and (
-        not out.is_dir() or (any(out.iterdir()) and not (out / MARKER_FILE).is_file())
-    ):
-        raise ConfigError("--out", str(out), "exists and was not written by compare")
+    check_output_folder(out, OutputKind.COMPARE, overwrite=True)  # before drawing
     pairs = [(run.label, run.log) for run in runs]
     first = runs[0]
     scenarios = ", ".join(sorted({run.scenario.name for run in runs}))
@@ -132,26 +127,13 @@ def compare_runs(
         "errors": figure_compare_errors(pairs, title),
         "thrusts": figure_compare_thrusts(pairs, first.model, title),
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
-    try:
-        staging.chmod(0o755)
+    with staged_folder(out, OutputKind.COMPARE, overwrite=True) as staging:
         save_figures(figures, staging, dpi=dpi, fmt=fmt)
         (staging / "metrics.md").write_text(metrics_markdown(runs))
         _metrics_frame(runs).to_csv(staging / "metrics.csv", index=False)
         record = {"runs": [{"label": r.label, "folder": str(r.folder)} for r in runs]}
-        (staging / MARKER_FILE).write_text(json.dumps(record, indent=2))
-        if out.exists():
-            retired = out.with_name(f".{out.name}.old-{os.getpid()}")
-            os.replace(out, retired)
-            os.replace(staging, out)
-            shutil.rmtree(retired, ignore_errors=True)
-        else:
-            os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return sorted(out.iterdir())
+        (staging / RECORD_FILE).write_text(json.dumps(record, indent=2))
+    return sorted(p for p in Path(out).iterdir() if p.name != MARKER)
 
 
 def _metrics_frame(runs: Sequence[ComparedRun]):

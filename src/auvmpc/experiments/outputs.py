@@ -1,15 +1,24 @@
 """Where auvmpc may write, and how: never over anything it did not write itself.
 
-The rule, for every command that writes a folder (``run``, ``reproduce``, ``campaign``,
-``plot``):
+Every command that writes (``run``, ``reproduce``, ``compare``, ``campaign``,
+``campaign-report``, ``plot``, ``animate``, ``export``, ``export-c``) goes through this
+module. The rule:
 
 - a new folder, or an existing empty one, is written;
-- a folder carrying auvmpc's own marker file (:data:`MARKER`, or the files of an
-  auvmpc folder written before the marker existed) is replaced only with
-  ``--overwrite``, and only if it holds nothing but what auvmpc wrote there; a
-  campaign folder is resumed without it;
-- anything else (a user's folder, a file, the filesystem root) is refused with one
-  line, touching nothing.
+- a folder carrying auvmpc's marker file (:data:`MARKER`) is replaced only with
+  ``--overwrite`` (``compare`` replaces its own without), and only if it holds nothing
+  but what the marker lists; a campaign folder is resumed without it;
+- a file added later to auvmpc's folder (an animation, a bag, redrawn figures, a
+  campaign report) is listed in the marker before it is written; an existing file of
+  that name is replaced only if the marker already lists it;
+- anything else (a user's folder or file, the filesystem root, a symbolic link) is
+  refused with one line, touching nothing.
+
+Ownership comes from the marker only: it lists every file and folder auvmpc wrote, by
+path relative to the marked folder (a folder inside with a marker of its own, such as a
+run folder of a reproduction, lists its own). Nothing is recognised by its name or
+contents. Operating-system errors on the output (read-only, permission denied, disk
+full, a name too long) become one line naming the path.
 
 Results are staged in a hidden sibling folder ``.<name>.<pid>.<token>.partial`` that
 carries the marker from its first moment and is renamed into place when complete, so an
@@ -26,7 +35,7 @@ import re
 import shutil
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime
 from enum import StrEnum
 from pathlib import Path
@@ -36,20 +45,36 @@ from auvmpc.errors import ConfigError
 
 __all__ = [
     "MARKER",
+    "MAX_NAME_BYTES",
     "OutputKind",
+    "adding",
     "atomic_write_text",
+    "cannot_write",
+    "claim",
     "check_output_file",
     "check_output_folder",
+    "folder_name",
     "mark_folder",
+    "new_entry",
+    "output_errors",
     "own_kind",
-    "record_written",
     "prepare_campaign_folder",
     "require_own_folder",
     "staged_folder",
+    "write_named_file",
 ]
 
 MARKER = ".auvmpc-output.json"
+# The marker's layout: 2 lists every path (1, before, listed top-level names only and let
+# folders be recognised by their contents; such folders are not auvmpc's as far as it knows).
+MARKER_FORMAT = 2
 _PARTIAL = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.partial$")
+# A folder name must leave room for its staging name ".<name>.<pid>.<token>.partial"
+# within the 255 bytes most filesystems allow for one name.
+MAX_NAME_BYTES = 255 - len(".4194304.01234567.partial") - 1
+_UNSAFE_CHARACTERS = re.compile(r"[/\\\x00-\x1f\x7f]")
+# SQLite's own companions of a database file (write-ahead log, shared memory, journal).
+_SQLITE_COMPANIONS = ("-wal", "-shm", "-journal")
 
 
 class OutputKind(StrEnum):
@@ -57,27 +82,62 @@ class OutputKind(StrEnum):
     REPRODUCE = "reproduce"
     CAMPAIGN = "campaign"
     EXPORT_C = "export-c"
+    COMPARE = "compare"
 
 
-# What each kind of folder holds at its top level, for folders written before the marker
-# existed (recognised as auvmpc's own) and for campaigns, whose files change as they run.
-_LEGACY_NAMES = {
-    OutputKind.RUN: re.compile(r"^(log\.csv|run\.json|[\w.-]+\.png)$"),
-    OutputKind.REPRODUCE: re.compile(
-        r"^(runs|summary\.(md|csv|json)|depth\.(md|json)|error_vs_uncertainty\.png)$"
-    ),
-    OutputKind.CAMPAIGN: re.compile(
-        r"^(results\.sqlite(-wal|-shm|-journal)?|\.campaign\.lock|report[\w.-]*\.(md|json)"
-        r"|figures[\w.-]*)$"
-    ),
-    OutputKind.EXPORT_C: re.compile(r"^[\w.-]+\.(c|h|txt|json|md)$|^Makefile$"),
+_NOUN = {
+    OutputKind.RUN: "run",
+    OutputKind.REPRODUCE: "reproduction",
+    OutputKind.CAMPAIGN: "campaign",
+    OutputKind.EXPORT_C: "C export",
+    OutputKind.COMPARE: "comparison",
 }
-_LEGACY_REQUIRED = {  # any one of these sets of names marks the kind
-    OutputKind.RUN: ({"run.json", "log.csv"},),
-    OutputKind.REPRODUCE: ({"summary.md", "runs"},),
-    OutputKind.CAMPAIGN: ({"results.sqlite"}, {".campaign.lock"}),
-    OutputKind.EXPORT_C: (),  # written with the marker from the start: no older form
-}
+
+
+@contextlib.contextmanager
+def output_errors(
+    option: str, shown: str, staging: Path | None = None, target: Path | None = None
+) -> Iterator[None]:
+    """Operating-system errors on the output as one line naming the path (a staging
+    path shown as the path it stands for)."""
+    try:
+        yield
+    except OSError as error:
+        where = error.filename if error.filename is not None else target or shown
+        if staging is not None and target is not None:
+            if not str(where).startswith(str(target.parent)):
+                raise  # not the output's (e.g. a preset read while the block computes)
+            where = str(where).replace(str(staging), str(target))
+        raise cannot_write(option, shown, where, error.strerror or type(error).__name__) from None
+
+
+def cannot_write(option: str, shown: str, where: Path | str, reason: str) -> ConfigError:
+    """The one line for output that the system refuses to take (also a database's)."""
+    return ConfigError(option, shown, f"cannot write {where}: {reason}")
+
+
+def folder_name(text: str, field: str) -> str:
+    """``text`` as one file or folder name (e.g. a scenario name in the default run
+    folder): never a path, so nothing is written outside the folder meant.
+
+    Raises
+    ------
+    ConfigError
+        Empty, ``.`` or ``..``, a ``/``, ``\\``, NUL or other control character, or more
+        than :data:`MAX_NAME_BYTES` bytes of UTF-8.
+    """
+    if text in ("", ".", ".."):
+        raise ConfigError(field, text, "is not a name a folder can have")
+    if _UNSAFE_CHARACTERS.search(text):
+        raise ConfigError(
+            field, text, "becomes a folder name: no '/', '\\', NUL or control characters"
+        )
+    size = len(text.encode("utf-8", "surrogateescape"))
+    if size > MAX_NAME_BYTES:
+        raise ConfigError(
+            field, text, f"too long for a folder name ({size} bytes, at most {MAX_NAME_BYTES})"
+        )
+    return text
 
 
 def _marker(folder: Path) -> dict | None:
@@ -90,39 +150,66 @@ def _marker(folder: Path) -> dict | None:
     return data
 
 
+def _listed(marker: dict) -> set[str] | None:
+    """The paths a marker lists, or None for an older marker that does not list them all."""
+    files = marker.get("files")
+    if marker.get("format") != MARKER_FORMAT or not isinstance(files, list):
+        return None
+    return {name for name in files if isinstance(name, str)}
+
+
 def own_kind(folder: Path) -> OutputKind | None:
-    """The kind of auvmpc output ``folder`` is, or None if auvmpc did not write it."""
+    """The kind of auvmpc output ``folder`` is (from its marker), or None."""
     folder = Path(folder)
-    if not folder.is_dir():
+    if not folder.is_dir() or folder.is_symlink():
         return None
     marker = _marker(folder)
-    if marker is not None:
-        return OutputKind(marker["kind"])
-    names = {entry.name for entry in folder.iterdir()}
-    for kind, pattern in _LEGACY_NAMES.items():
-        if all(pattern.match(name) for name in names) and any(
-            required <= names for required in _LEGACY_REQUIRED[kind]
-        ):
-            return kind
-    return None
+    return None if marker is None else OutputKind(marker["kind"])
 
 
-def _strangers(folder: Path, kind: OutputKind) -> list[str]:
-    """Top-level entries of an own folder that auvmpc did not write there."""
-    marker = _marker(folder) or {}
-    written = marker.get("files")
-    if kind is OutputKind.CAMPAIGN or written is None:  # names a folder of this kind holds
-        pattern = _LEGACY_NAMES[kind]
-        return sorted(
-            e.name for e in folder.iterdir() if e.name != MARKER and not pattern.match(e.name)
-        )
-    return sorted(e.name for e in folder.iterdir() if e.name not in {*written, MARKER})
+def _owns(listed: set[str], relative: str) -> bool:
+    if relative in listed:
+        return True
+    return any(relative == f"{name}{suffix}" for name in listed for suffix in _SQLITE_COMPANIONS)
+
+
+def _strangers(folder: Path) -> list[str]:
+    """Paths in an own folder that its marker (or a marker further in) does not list."""
+    found: list[str] = []
+
+    def walk(directory: Path, base: Path, listed: set[str]) -> None:
+        for entry in sorted(directory.iterdir()):
+            if directory == base and entry.name == MARKER:
+                continue
+            if not _owns(listed, entry.relative_to(base).as_posix()):
+                found.append(entry.relative_to(folder).as_posix())
+            elif entry.is_dir() and not entry.is_symlink():
+                inner = _marker(entry)
+                inner_listed = None if inner is None else _listed(inner)
+                if inner_listed is not None:
+                    walk(entry, entry, inner_listed)
+                else:
+                    walk(entry, base, listed)
+
+    walk(folder, folder, _listed(_marker(folder) or {}) or set())
+    return found
+
+
+def _all_paths(folder: Path, entries: Iterable[Path]) -> list[str]:
+    """``entries`` and everything in those that are folders, relative to ``folder``."""
+    paths = []
+    for entry in entries:
+        paths.append(entry.relative_to(folder).as_posix())
+        if entry.is_dir() and not entry.is_symlink():
+            paths += [inner.relative_to(folder).as_posix() for inner in entry.rglob("*")]
+    return paths
 
 
 def _absolute(path: Path, option: str) -> Path:
     path = Path(os.path.abspath(Path(path).expanduser()))
     if path.parent == path:
         raise ConfigError(option, str(path), "is the filesystem root; name a folder to write")
+    folder_name(path.name, option)
     for ancestor in path.parents:
         if ancestor.exists():
             if not ancestor.is_dir():
@@ -131,12 +218,9 @@ def _absolute(path: Path, option: str) -> Path:
     return path
 
 
-_NOUN = {
-    OutputKind.RUN: "run",
-    OutputKind.REPRODUCE: "reproduction",
-    OutputKind.CAMPAIGN: "campaign",
-    OutputKind.EXPORT_C: "C export",
-}
+def _shown(names: list[str]) -> str:
+    more = f" and {len(names) - 3} more" if len(names) > 3 else ""
+    return ", ".join(names[:3]) + more
 
 
 def check_output_folder(
@@ -152,22 +236,28 @@ def check_output_folder(
     Raises
     ------
     ConfigError
-        ``path`` is a file, the root, a non-empty folder auvmpc did not write, auvmpc's
-        folder of another kind, or auvmpc's own folder without ``overwrite`` (and without
-        ``resume``), or one holding files auvmpc did not write.
+        ``path`` is a file, a symbolic link, the root, a non-empty folder without auvmpc's
+        marker, auvmpc's folder of another kind, or auvmpc's own folder without
+        ``overwrite`` (and without ``resume``), or one holding anything its marker does
+        not list.
     """
-    target = _absolute(Path(path), option)
     shown = str(path)
-    if target.exists() or target.is_symlink():
+    with output_errors(option, shown):
+        target = _absolute(Path(path), option)
+        if target.is_symlink():
+            raise ConfigError(option, shown, "is a symbolic link; name the folder itself")
+        if not target.exists():
+            return target
         if not target.is_dir():
             raise ConfigError(option, shown, "is a file, not a folder; name a new folder")
         if not any(target.iterdir()):
             return target
-        found = own_kind(target)
-        if found is None:
+        marker = _marker(target)
+        if marker is None:
             raise ConfigError(
                 option, shown, "holds files auvmpc did not write; name a new or empty folder"
             )
+        found = OutputKind(marker["kind"])
         if found is not kind:
             raise ConfigError(
                 option,
@@ -182,15 +272,27 @@ def check_output_folder(
                 shown,
                 f"holds an earlier auvmpc {_NOUN[kind]}; add --overwrite to replace it",
             )
-        strangers = _strangers(target, kind)
-        if strangers:
-            raise ConfigError(
-                option,
-                shown,
-                f"also holds files auvmpc did not write ({', '.join(strangers[:3])}); "
-                "move them or name another folder",
-            )
+        _refuse_strangers(target, marker, option, shown)
     return target
+
+
+_OLDER_MARKER = (
+    "was written by an earlier auvmpc whose marker does not list its files; "
+    "remove it yourself or name another folder"
+)
+
+
+def _refuse_strangers(folder: Path, marker: dict, option: str, shown: str) -> None:
+    if _listed(marker) is None:
+        raise ConfigError(option, shown, _OLDER_MARKER)
+    strangers = _strangers(folder)
+    if strangers:
+        raise ConfigError(
+            option,
+            shown,
+            f"also holds files auvmpc did not write ({_shown(strangers)}); "
+            "move them or name another folder",
+        )
 
 
 def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
@@ -198,47 +300,119 @@ def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
     folder = Path(path)
     if not folder.is_dir():
         raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder (no such folder)")
-    found = own_kind(folder)
-    if found is not kind:
+    if own_kind(folder) is not kind:
         raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder written by auvmpc")
     return folder
 
 
 def check_output_file(path: Path | str, *, overwrite: bool, option: str) -> Path:
-    """A file to write: its folder must exist as a folder; an existing file needs
-    ``overwrite``; a folder is refused."""
-    target = _absolute(Path(path), option)
-    if target.is_dir():
-        raise ConfigError(option, str(path), "is a folder; name a file")
-    if target.exists() and not overwrite:
-        raise ConfigError(option, str(path), "exists; add --overwrite to replace it")
+    """A file the user names to write: its folder must exist as a folder; an existing file
+    needs ``overwrite``; a folder is refused."""
+    with output_errors(option, str(path)):
+        target = _absolute(Path(path), option)
+        if target.is_dir():
+            raise ConfigError(option, str(path), "is a folder; name a file")
+        if target.exists() and not overwrite:
+            raise ConfigError(option, str(path), "exists; add --overwrite to replace it")
     return target
 
 
-def _write_marker(folder: Path, kind: OutputKind, files: list[str] | None = None) -> None:
+def write_named_file(path: Path | str, text: str, *, option: str) -> None:
+    """Write the file the user named (checked first with :func:`check_output_file`)
+    atomically; an operating-system error is one line naming it."""
+    with output_errors(option, str(path)):
+        atomic_write_text(path, text)
+
+
+def _write_marker(folder: Path, kind: OutputKind, files: Iterable[str]) -> None:
     data = {
         "kind": str(kind),
+        "format": MARKER_FORMAT,
         "auvmpc_version": __version__,
         "written_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "pid": os.getpid(),
-        "files": sorted(files) if files is not None else None,
+        "files": sorted(set(files) - {MARKER}),
     }
     atomic_write_text(folder / MARKER, json.dumps(data, indent=2) + "\n")
 
 
-def record_written(folder: Path, kind: OutputKind, names: list[str]) -> None:
-    """Add ``names`` (written into an own folder after the fact, e.g. redrawn figures) to
-    its marker, so that ``--overwrite`` later knows them as auvmpc's."""
-    marker = _marker(folder)
-    if marker is None:  # a folder from before the marker: everything in it is auvmpc's
-        _write_marker(folder, kind, [entry.name for entry in folder.iterdir()])
-    elif marker.get("files") is not None:
-        _write_marker(folder, kind, sorted({*marker["files"], *names}))
-
-
 def mark_folder(folder: Path, kind: OutputKind) -> None:
     """Mark a finished folder inside a staged one (e.g. a run folder of a reproduction)."""
-    _write_marker(folder, kind, [entry.name for entry in folder.iterdir()])
+    _write_marker(folder, kind, _all_paths(folder, (e for e in folder.iterdir())))
+
+
+def claim(folder: Path | str, names: Iterable[str], option: str) -> OutputKind:
+    """List entries ``names`` (files or folders, top level) in the marker of auvmpc's own
+    ``folder`` before they are written, so that they count as auvmpc's. Returns the
+    folder's kind.
+
+    Raises
+    ------
+    ConfigError
+        ``folder`` has no marker of the current layout, or holds one of ``names``
+        that the marker does not list (auvmpc never writes into or over it).
+    """
+    folder = Path(folder)
+    names = list(names)
+    shown = str(folder)
+    with output_errors(option, shown):
+        for name in names:
+            folder_name(name, option)
+        marker = _marker(folder)
+        if marker is None:
+            raise ConfigError(option, shown, "not a folder auvmpc wrote; name another")
+        listed = _listed(marker)
+        if listed is None:
+            raise ConfigError(option, shown, _OLDER_MARKER)
+        taken = [n for n in names if (folder / n).exists() and not _owns(listed, n)]
+        if taken:
+            raise ConfigError(
+                option,
+                shown,
+                f"holds {_shown(taken)}, which auvmpc did not write; move it or write elsewhere",
+            )
+        kind = OutputKind(marker["kind"])
+        _write_marker(folder, kind, {*listed, *names})
+    return kind
+
+
+@contextlib.contextmanager
+def adding(folder: Path | str, names: Iterable[str], option: str) -> Iterator[Path]:
+    """Write entries ``names`` into auvmpc's own ``folder`` in the block: claimed first
+    (:func:`claim`, so a killed write is recognisably auvmpc's); when the block ends,
+    those that exist are listed with whatever the named folders hold, and a name the
+    block did not write is no longer claimed. Operating-system errors become one line."""
+    folder = Path(folder)
+    names = list(names)
+    before = _listed(_marker(folder) or {}) or set()
+    kind = claim(folder, names, option)
+    try:
+        with output_errors(option, str(folder)):
+            yield folder
+    finally:
+        entries = [folder / n for n in names if (folder / n).exists()]
+        kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
+        with output_errors(option, str(folder)):
+            _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
+
+
+@contextlib.contextmanager
+def new_entry(path: Path | str, option: str) -> Iterator[Path]:
+    """A file or folder ``path`` to create: listed in its folder's marker if auvmpc wrote
+    that folder (:func:`adding`, so an own earlier one is replaced); elsewhere it must not
+    exist. Yields ``path``."""
+    shown = str(path)
+    with output_errors(option, shown):
+        target = _absolute(Path(path), option)
+    if own_kind(target.parent) is not None:
+        with adding(target.parent, [target.name], option):
+            yield Path(path)
+        return
+    with output_errors(option, shown):
+        if target.exists() or target.is_symlink():
+            raise ConfigError(option, shown, "exists; remove it or choose another name")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        yield Path(path)
 
 
 def _pid_alive(pid: int) -> bool:
@@ -275,53 +449,73 @@ def clean_stale_partials(parent: Path, name: str) -> list[Path]:
     return removed
 
 
+def _staging_name(target: Path) -> Path:
+    return target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+
+
 @contextlib.contextmanager
-def staged_folder(path: Path | str, kind: OutputKind, *, overwrite: bool) -> Iterator[Path]:
+def staged_folder(
+    path: Path | str, kind: OutputKind, *, overwrite: bool, option: str = "--out"
+) -> Iterator[Path]:
     """Write a ``kind`` folder all or nothing.
 
     Yields a hidden staging folder next to ``path``; when the block ends normally the
-    staging folder gets its final marker and replaces ``path`` (checked again first).
-    On any exception, interrupts included, it is removed and ``path`` is untouched.
+    staging folder gets its final marker (listing everything in it) and replaces ``path``
+    (checked again first). On any exception, interrupts included, it is removed and
+    ``path`` is untouched; an operating-system error becomes one line naming the path.
     """
-    target = check_output_folder(path, kind, overwrite=overwrite)
-    parent = target.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    clean_stale_partials(parent, target.name)
-    staging = parent / f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial"
-    staging.mkdir()
+    target = check_output_folder(path, kind, overwrite=overwrite, option=option)
+    staging = _staging_name(target)
     try:
-        _write_marker(staging, kind)  # first, so a killed write is recognisably ours
-        yield staging
-        _write_marker(staging, kind, [entry.name for entry in staging.iterdir()])
-        check_output_folder(path, kind, overwrite=overwrite)  # nobody wrote there meanwhile
-        _replace(staging, target)
+        with output_errors(option, str(path), staging, target):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            clean_stale_partials(target.parent, target.name)
+            staging.mkdir()
+            _write_marker(staging, kind, [])  # first, so a killed write is recognisably ours
+            yield staging
+            _write_marker(staging, kind, _all_paths(staging, staging.iterdir()))
+            check_output_folder(path, kind, overwrite=overwrite, option=option)  # meanwhile?
+            _replace(staging, target, option, str(path))
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
 
 
-def _replace(staging: Path, target: Path) -> None:
-    if target.is_dir() and any(target.iterdir()):  # an own folder, --overwrite given
-        retired = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-        os.replace(target, retired)
-        os.replace(staging, target)
-        shutil.rmtree(retired, ignore_errors=True)
-    else:  # absent or empty: rename(2) replaces an empty folder and refuses a full one
-        os.replace(staging, target)
+def _replace(staging: Path, target: Path, option: str, shown: str) -> None:
+    if not (target.is_dir() and any(target.iterdir())):
+        os.replace(staging, target)  # rename(2) replaces an empty folder, refuses a full one
+        return
+    retired = _staging_name(target)  # an own folder, --overwrite given
+    os.replace(target, retired)
+    marker = _marker(retired)
+    try:  # checked again where nobody else writes: a file added since the check stays
+        _refuse_strangers(retired, marker or {}, option, shown)
+    except ConfigError:
+        os.replace(retired, target)
+        raise
+    os.replace(staging, target)
+    shutil.rmtree(retired, ignore_errors=True)
 
 
-def prepare_campaign_folder(path: Path | str, *, overwrite: bool) -> Path:
-    """Create (or accept for resuming) a campaign folder; with ``overwrite`` an existing
-    campaign folder is emptied first (only if it holds nothing but auvmpc's files)."""
+def prepare_campaign_folder(
+    path: Path | str, *, overwrite: bool, files: Iterable[str], option: str = "--out"
+) -> Path:
+    """Create (or accept for resuming) a campaign folder whose marker lists ``files`` (the
+    campaign's store and lock, before they are created); with ``overwrite`` an existing
+    campaign folder is discarded first (only if it holds nothing its marker does not list).
+    """
     target = check_output_folder(path, OutputKind.CAMPAIGN, overwrite=overwrite, resume=True)
-    if overwrite and own_kind(target) is OutputKind.CAMPAIGN:
-        check_output_folder(path, OutputKind.CAMPAIGN, overwrite=True)  # no strangers
-        retired = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-        os.replace(target, retired)
-        shutil.rmtree(retired, ignore_errors=True)
-    target.mkdir(parents=True, exist_ok=True)
-    if _marker(target) is None:
-        _write_marker(target, OutputKind.CAMPAIGN)
+    shown = str(path)
+    with output_errors(option, shown, target=target):
+        if overwrite and own_kind(target) is OutputKind.CAMPAIGN:
+            check_output_folder(path, OutputKind.CAMPAIGN, overwrite=True, option=option)
+            retired = _staging_name(target)
+            os.replace(target, retired)
+            shutil.rmtree(retired, ignore_errors=True)
+        target.mkdir(parents=True, exist_ok=True)
+        if _marker(target) is None:
+            _write_marker(target, OutputKind.CAMPAIGN, [])
+    claim(target, files, option)
     return target
 
 
@@ -343,7 +537,12 @@ def atomic_write_text(path: Path | str, text: str) -> None:
     the user creates, not the private mode of a temporary file.
     """
     path = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        handle, temporary = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
+        )
+    except OSError as error:  # name the file meant, not the temporary one
+        raise OSError(error.errno, error.strerror, str(path)) from None
     try:
         os.fchmod(handle, 0o666 & ~_umask())
         with os.fdopen(handle, "w") as stream:
@@ -351,6 +550,9 @@ def atomic_write_text(path: Path | str, text: str) -> None:
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temporary, path)
+    except OSError as error:
+        Path(temporary).unlink(missing_ok=True)
+        raise OSError(error.errno, error.strerror, str(path)) from None
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise

@@ -23,7 +23,7 @@ from auvmpc.experiments.kinds import (
     SixDofRunResult,
     kind_of,
 )
-from auvmpc.experiments.outputs import OutputKind, atomic_write_text, staged_folder
+from auvmpc.experiments.outputs import OutputKind, adding, atomic_write_text, staged_folder
 from auvmpc.experiments.provenance import Stopwatch
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
@@ -224,7 +224,8 @@ def fill_run_folder(
 
 
 def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
-    """Re-draw the figures of a saved run folder (of any kind) as ``fmt`` files."""
+    """Re-draw the figures of a saved run folder (of any kind) as ``fmt`` files, listed in
+    its marker; a file of the same name that auvmpc did not write is refused, not replaced."""
     from auvmpc.plots import save_figures
 
     run_dir = Path(run_dir)
@@ -236,7 +237,8 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
         VehicleParams.model_validate(info["model"]),
         VehicleParams.model_validate(info["plant"]),
     )
-    save_figures(figures, run_dir, dpi=dpi, fmt=fmt)
+    with adding(run_dir, [f"{name}.{fmt}" for name in figures], "RUN_DIR"):
+        save_figures(figures, run_dir, dpi=dpi, fmt=fmt)
 
 
 def read_planar_run(

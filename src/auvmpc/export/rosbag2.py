@@ -30,6 +30,7 @@ import pandas as pd
 from pydantic import ValidationError
 
 from auvmpc.errors import ConfigError
+from auvmpc.experiments.outputs import new_entry
 from auvmpc.experiments.run_folder import RunTables, read_run_tables
 from auvmpc.models.actuators import WRENCH
 from auvmpc.models.vehicle import VehicleParams
@@ -87,8 +88,9 @@ def export_rosbag2(run_dir: Path, out: Path | None = None) -> Path:
     run_dir : Path
         A folder written by ``auvmpc run`` (or ``run --from-campaign``).
     out : Path, optional
-        The bag folder to create; default ``run_dir/rosbag2``. It must not exist:
-        nothing auvmpc did not write is replaced.
+        The bag folder to create; default ``run_dir/rosbag2``. It must not exist. Inside
+        a folder auvmpc wrote it is listed in that folder's marker
+        (:mod:`auvmpc.experiments.outputs`).
 
     Returns
     -------
@@ -101,21 +103,29 @@ def export_rosbag2(run_dir: Path, out: Path | None = None) -> Path:
         If ``run_dir`` is not a run folder, ``out`` exists, or ``rosbags`` is missing.
     """
     try:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-        from rosbags.typesys import Stores, get_typestore
+        import rosbags  # noqa: F401  (checked first: the one line names the extra to install)
     except ImportError:
         raise ConfigError(
             "--format", "rosbag2", "needs the rosbags package: pip install 'auvmpc[ros]'"
         ) from None
     tables = read_run_tables(run_dir)
     out = Path(out) if out is not None else Path(run_dir) / "rosbag2"
-    if out.exists():
+    if out.exists() or out.is_symlink():  # a bag is written once, never over another
         raise ConfigError("--out", str(out), "exists; remove it or choose another folder")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    with new_entry(out, "--out") as target:
+        _write_bag(tables, target)
+    return out
+
+
+def _write_bag(tables: RunTables, out: Path) -> None:
+    """The bag, staged in a hidden sibling folder and renamed onto ``out`` when complete."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     bag = staging / out.name  # rosbags names the .mcap after the folder
     try:
-        store = get_typestore(Stores.ROS2_JAZZY)
         messages = _Messages(store)
         with Writer(bag, version=METADATA_VERSION, storage_plugin=StoragePlugin.MCAP) as writer:
             connections: dict[str, Any] = {}
@@ -129,7 +139,6 @@ def export_rosbag2(run_dir: Path, out: Path | None = None) -> Path:
         os.replace(bag, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return out
 
 
 # --- messages ---------------------------------------------------------------------------------

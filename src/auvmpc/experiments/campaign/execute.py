@@ -30,7 +30,9 @@ from auvmpc.experiments.campaign.sampling import (
     validate_campaign,
 )
 from auvmpc.experiments.campaign.spec import (
+    LOCK_FILE,
     MAX_WORKER_DEATHS,
+    RESULTS_FILE,
     Campaign,
     CampaignSpec,
     _resolve,
@@ -222,7 +224,7 @@ def run_campaign(
     new = 0
     copied: list[int] = []  # runs whose stored twin came from yardstick_from
     stopwatch = Stopwatch()
-    prepare_campaign_folder(out, overwrite=overwrite)
+    prepare_campaign_folder(out, overwrite=overwrite, files=(RESULTS_FILE, LOCK_FILE))
     with _exclusive(out):
         store = _Store(out, campaign)
         try:

@@ -217,7 +217,7 @@ def campaign_report(
     workers : int
         Processes simulating those runs again.
     """
-    from auvmpc.experiments.outputs import atomic_write_text
+    from auvmpc.experiments.outputs import adding, atomic_write_text
 
     out = Path(out_dir)
     campaign = stored_campaign(out)
@@ -322,10 +322,13 @@ def campaign_report(
     if write:
         from auvmpc.plots import save_figures
 
-        if drawn:
-            files += save_figures(drawn, out / figures_dir)
-        atomic_write_text(out / report_json, json.dumps(summary, indent=2, allow_nan=False) + "\n")
-        atomic_write_text(out / report_file, markdown)
+        names = [report_json, report_file, *([figures_dir] if drawn else [])]
+        with adding(out, names, "DIR"):
+            if drawn:
+                files += save_figures(drawn, out / figures_dir)
+            text = json.dumps(summary, indent=2, allow_nan=False) + "\n"
+            atomic_write_text(out / report_json, text)
+            atomic_write_text(out / report_file, markdown)
         files += [out / report_json, out / report_file]
     return CampaignReport(summary, markdown, drawn, files)
 

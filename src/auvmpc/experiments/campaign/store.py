@@ -25,6 +25,7 @@ from auvmpc.experiments.campaign.spec import (
     _with_implicit_overrides,
     expand_controller,
 )
+from auvmpc.experiments.outputs import cannot_write, output_errors
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS campaign (
@@ -81,13 +82,31 @@ def _connect(path: Path, read_only: bool = False) -> sqlite3.Connection:
     return connection
 
 
+# SQLite's primary result codes for a file the system does not let it write: PERM,
+# READONLY, IOERR (a full disk often shows as one), FULL, CANTOPEN.
+_STORAGE_REFUSED = frozenset({3, 8, 10, 13, 14})
+
+
+@contextlib.contextmanager
+def _storage_errors(path: Path) -> Iterator[None]:
+    """The store's write refused by the system (disk full, read-only): one line naming it."""
+    try:
+        yield
+    except sqlite3.Error as error:
+        code = getattr(error, "sqlite_errorcode", None)
+        if code is None or code & 0xFF not in _STORAGE_REFUSED:
+            raise
+        raise cannot_write("--out", str(path.parent), path, str(error)) from None
+
+
 @contextlib.contextmanager
 def _transaction(connection: sqlite3.Connection) -> Iterator[sqlite3.Connection]:
     connection.execute("BEGIN IMMEDIATE")
     try:
         yield connection
     except BaseException:
-        connection.execute("ROLLBACK")
+        with contextlib.suppress(sqlite3.Error):  # a failed COMMIT may have ended it already
+            connection.execute("ROLLBACK")
         raise
     connection.execute("COMMIT")
 
@@ -97,10 +116,12 @@ class _Store:
 
     def __init__(self, out_dir: Path, campaign: Campaign) -> None:
         self.path = out_dir / RESULTS_FILE
-        self.connection = _connect(self.path)
+        with _storage_errors(self.path):
+            self.connection = _connect(self.path)
         self.campaign = campaign
         try:
-            self._open(out_dir, campaign)
+            with _storage_errors(self.path):
+                self._open(out_dir, campaign)
         except BaseException:
             self.connection.close()
             raise
@@ -145,7 +166,7 @@ class _Store:
 
     def record_session(self, provenance: Mapping[str, Any], new_runs: int) -> None:
         """One coordinator session (``provenance``: interfaces.md keys), in one transaction."""
-        with _transaction(self.connection) as db:
+        with _storage_errors(self.path), _transaction(self.connection) as db:
             db.execute(
                 "INSERT INTO sessions (started_utc, wall_s, new_runs, provenance) "
                 "VALUES (?, ?, ?, ?)",
@@ -164,7 +185,7 @@ class _Store:
         return dict(self.connection.execute('SELECT "index", deaths FROM worker_deaths'))
 
     def add_death(self, index: int) -> int:
-        with _transaction(self.connection) as db:
+        with _storage_errors(self.path), _transaction(self.connection) as db:
             db.execute(
                 'INSERT INTO worker_deaths ("index", deaths) VALUES (?, 1) '
                 'ON CONFLICT("index") DO UPDATE SET deaths = deaths + 1',
@@ -178,7 +199,7 @@ class _Store:
         """One finished run, in one transaction."""
         metrics = _finite_or_none(result["metrics"])
         index = result["index"]
-        with _transaction(self.connection) as db:
+        with _storage_errors(self.path), _transaction(self.connection) as db:
             deaths = db.execute(
                 'SELECT deaths FROM worker_deaths WHERE "index" = ?', (index,)
             ).fetchone()
@@ -257,7 +278,9 @@ def _exclusive(out_dir: Path) -> Iterator[None]:
     except ImportError:  # not POSIX: no lock
         yield
         return
-    with open(out_dir / LOCK_FILE, "a") as handle:
+    with output_errors("--out", str(out_dir)):
+        handle = open(out_dir / LOCK_FILE, "a")  # closed by the with below
+    with handle:
         try:
             fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
