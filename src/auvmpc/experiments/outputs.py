@@ -151,9 +151,13 @@ def _marker(folder: Path) -> dict | None:
 
 
 def _listed(marker: dict) -> set[str] | None:
-    """The paths a marker lists, or None for an older marker that does not list them all."""
+    """The paths a marker lists, or None for an older marker that lists none (a campaign's
+    before format 2). A format-1 marker (no ``format``) lists the names it wrote at its
+    folder's top level, which is what a run folder of that time holds, so a run or a
+    reproduction written by an earlier version can still be replaced; anything else in such
+    a folder is a stranger, and the folder is refused by name."""
     files = marker.get("files")
-    if marker.get("format") != MARKER_FORMAT or not isinstance(files, list):
+    if marker.get("format", 1) not in (1, MARKER_FORMAT) or not isinstance(files, list):
         return None
     return {name for name in files if isinstance(name, str)}
 
