@@ -77,6 +77,11 @@ class ResolvedScenario:
         # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
         self.choices = scenario.controller.choices(self.model)
         controller = scenario.controller.for_vehicle(self.model)
+        if controller.playback is not None:  # the thrust table, as the vehicle file
+            table = relative_to(controller.playback.path, base_dir)
+            controller = controller.model_copy(
+                update={"playback": controller.playback.model_copy(update={"path": table})}
+            )
         noise = max(scenario.sensing.std[:2])
         if (
             scenario.obstacles
@@ -196,6 +201,11 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 "plant": self.scenario.plant.model_copy(update={"max_step": plant_step}),
             }
         )
+
+
+def relative_to(path: str, base_dir: Path) -> str:
+    """A file a scenario names: a relative path is relative to the scenario's folder."""
+    return path if Path(path).is_absolute() else str(base_dir / path)
 
 
 def load_vehicle_relative(vehicle: str | dict[str, Any], base_dir: Path) -> VehicleParams:
