@@ -114,8 +114,8 @@ class PlaybackConfig(StrictModel):
     path: str = Field(
         min_length=1,
         description="CSV with header t, F1..Fn (s, N): row k is the thrust over "
-        "[k Te, (k+1) Te), t = k Te; after the last row the thrust ramps to zero within the rate limit. A "
-        "relative path is relative to the scenario file's folder",
+        "[k Te, (k+1) Te), t = k Te; after the last row the thrust ramps to zero within the "
+        "rate limit. A relative path is relative to the scenario file's folder",
     )
 
 
