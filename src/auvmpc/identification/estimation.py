@@ -19,10 +19,13 @@ with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknown
    velocity (multiple shooting without continuity: the segments are independent, so a
    poor start cannot make a long simulation diverge), and the weighted squared difference
    to the measured velocities is minimised by IPOPT over the parameters and the segments'
-   initial velocities (CasADi). Weights are 1 / the noise level of each velocity,
-   estimated from what the filter removes. With white measurement noise and a noise-free
-   plant this is the maximum-likelihood estimate (Ljung 1999, ch. 7; Klein and Morelli
-   2006, ch. 6).
+   initial velocities (CasADi, exact Hessian). It starts from the equation-error estimate
+   or from the start file, whichever simulates the log better (on a vehicle faster than
+   the log's sampling the filter's derivatives are poor). Weights are 1 / the noise level
+   of each velocity: first what the filter removes, then, in a second fit, the first
+   fit's residual RMS (the filter also removes dynamics it cannot follow). With white
+   measurement noise and a noise-free plant this is the maximum-likelihood estimate
+   (Ljung 1999, ch. 7; Klein and Morelli 2006, ch. 6).
 3. Intervals (Fisher information). At the optimum the Gauss-Newton Hessian J'J of the
    weighted residuals, scaled by the residual variance, gives the covariance
    ``s^2 (J'J)^-1`` (the segments' initial velocities included as nuisance parameters);
@@ -30,8 +33,9 @@ with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknown
 4. Excitation. A parameter is *excited* if its interval is narrower than its value
    (half-width <= 0.5 |value|) or if its interval moves its equation's force by less than
    :data:`SENSITIVITY_SHARE` of that force's RMS (a parameter that is small but well
-   determined, e.g. a zero linear damping). Parameters that are not are fixed at their
-   start value and the fit is repeated without them.
+   determined, e.g. a zero linear damping), judged on the second fit. Parameters that are
+   not are fixed at their start value and the fit is repeated without them; the vehicle
+   file keeps their start values and the report names them.
 5. Validation: the held-out end of each log is simulated from its first measured
    velocity with the identified and with the start parameters; RMS of the differences.
 """
