@@ -160,9 +160,7 @@ def _write_log(folder, rows, columns="t,u,v,r,F1,F2,F3,F4"):
             "has no column F1, F2, F3, F4",
         ),
         (
-            lambda p: _write_log(
-                p / "still", [[0.1 * k, 0, 0, 0, 1, 1, 1, 1] for k in range(200)]
-            ),
+            lambda p: _write_log(p / "still", [[0.1 * k, 0, 0, 0, 1, 1, 1, 1] for k in range(200)]),
             "the thrust never changes",
         ),
     ],
