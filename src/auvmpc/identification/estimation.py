@@ -473,6 +473,10 @@ def identify(
             weight=weight,
             model=model,
         )
+    # An excited parameter's interval is the final fit's; an unexcited one's the fit that
+    # judged it (the final one holds it fixed).
+    center = np.where(excited, final.theta, fit.theta)
+    half_width = np.where(excited, final.half_width, fit.half_width)
     parameters = [
         ParameterEstimate(
             name=name,
@@ -480,14 +484,7 @@ def identify(
             equation_error=float(first[i]),
             value=float(final.theta[i]) if excited[i] else float(start[i]),
             fitted=float(fit.theta[i]),
-            ci95=(
-                float(fit.theta[i] - fit.half_width[i])
-                if not excited[i]
-                else float(final.theta[i] - final.half_width[i]),
-                float(fit.theta[i] + fit.half_width[i])
-                if not excited[i]
-                else float(final.theta[i] + final.half_width[i]),
-            ),
+            ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
         )
         for i, name in enumerate(PARAMETERS)
