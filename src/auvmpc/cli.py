@@ -612,6 +612,68 @@ def vehicle_new(
     )
 
 
+@app.command()
+def excite(
+    vehicle: Annotated[str, typer.Argument(help="preset name or vehicle file")],
+    out: Annotated[Path, typer.Option("--out", help="scenario file to write (.yaml)")],
+    duration: Annotated[float, typer.Option("--duration", help="manoeuvre length (s)")] = 300.0,
+    seed: Annotated[int, typer.Option("--seed", help="seed of the multisine phases")] = 0,
+    sample_time: Annotated[
+        float, typer.Option("--sample-time", help="how long each thrust row is held (s)")
+    ] = 0.1,
+    box: Annotated[
+        float, typer.Option("--box", help="the nominal model stays this close to its start (m)")
+    ] = 15.0,
+    overwrite: Overwrite = False,
+) -> None:
+    """Write an identification manoeuvre: a scenario that plays a thrust table open loop,
+    and the table (CSV, beside it) to play on the real vehicle."""
+    from auvmpc.identification import write_excitation
+
+    excitation = write_excitation(vehicle, out, duration, seed, sample_time, box, overwrite)
+    console.print(
+        f"wrote {out} and {out.with_suffix('.csv').name}: {len(excitation.thrust)} rows of "
+        f"{excitation.sample_time:g} s, peak {excitation.amplitude_share:.0%} of the thrust "
+        f"limits, nominal excursion {excitation.excursion_m:.1f} m",
+        highlight=False,
+    )
+
+
+@app.command()
+def identify(
+    run_dirs: Annotated[list[str], typer.Argument(help="auvmpc run folders (log.csv)")],
+    vehicle: Annotated[str, typer.Option("--vehicle", help="start vehicle: preset or file")],
+    out: Annotated[Path, typer.Option("--out", help="identified vehicle file to write (.yaml)")],
+    holdout: Annotated[
+        float, typer.Option("--holdout", help="share at the end of each log kept to validate")
+    ] = 0.2,
+    overwrite: Overwrite = False,
+) -> None:
+    """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
+    file, identification.json, identification.md and a fit figure beside it."""
+    from auvmpc.identification import write_identification
+
+    found = write_identification(run_dirs, vehicle, out, holdout, overwrite)
+    table = Table(title=f"identified from {len(found.logs)} log(s)")
+    for column in ("parameter", "start", "identified", "95 % interval", "excited"):
+        table.add_column(column)
+    for p in found.parameters:
+        table.add_row(
+            p.name, f"{p.start:.4g}", f"{p.value:.4g}", f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]",
+            "yes" if p.excited else "NO",
+        )  # fmt: skip
+    console.print(table)
+    rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)
+    rms_start = ", ".join(f"{x:.3g}" for x in found.validation_rms_start)
+    console.print(f"held-out RMS u, v, r: {rms} (start file: {rms_start})", highlight=False)
+    if found.unexcited:
+        errors.print(
+            f"warning: not excited by the logs, start value kept: {', '.join(found.unexcited)}",
+            highlight=False,
+        )
+    console.print(f"wrote {out} and identification.json, .md, -fit.png beside it")
+
+
 FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
 Dpi = Annotated[int, typer.Option("--dpi", help="resolution (dots per inch) of raster output")]
 

@@ -36,6 +36,7 @@ __all__ = [
     "HEADING_PER_SAMPLE_RAD",
     "DisturbanceBound",
     "NmpcMode",
+    "PlaybackConfig",
     "QpStructure",
     "THRUST_MOVE_COST",
     "ThrustPenalty",
@@ -57,6 +58,7 @@ class ControllerType(StrEnum):
     LTV_MPC = "ltv-mpc"  # linearised along the shifted previous solution, exact Jacobians
     NMPC = "nmpc"  # nonlinear multiple shooting (CasADi): full IPOPT solve or real-time SQP
     DO_MPC = "do-mpc"  # the same OCP solved by do-mpc (pip install auvmpc[compare]), a yardstick
+    THRUST_PLAYBACK = "thrust-playback"  # open loop: a thrust table played sample by sample
 
 
 class NmpcMode(StrEnum):
@@ -104,6 +106,17 @@ class DisturbanceBound(StrictModel):
     @property
     def is_zero(self) -> bool:
         return self.total_force_N == 0.0 and self.moment_Nm == 0.0
+
+
+class PlaybackConfig(StrictModel):
+    """A thrust time series to play open loop (``thrust-playback``)."""
+
+    path: str = Field(
+        min_length=1,
+        description="CSV with header t, F1..Fn (s, N): row k is the thrust over "
+        "[k Te, (k+1) Te), t = k Te; after the last row the thrust ramps to zero within the "
+        "rate limit. A relative path is relative to the scenario file's folder",
+    )
 
 
 # The validation context of a scenario read back from a run folder's run.json.
@@ -261,6 +274,11 @@ class ControllerConfig(StrictModel):
     baseline: BaselineConfig = Field(
         default_factory=BaselineConfig, description="gains of the classical baseline tracker"
     )
+    playback: PlaybackConfig | None = Field(
+        default=None,
+        description="the thrust table thrust-playback plays (required by it, refused by the "
+        "others); `auvmpc excite` writes one",
+    )
 
     @field_validator("type", mode="before")
     @classmethod
@@ -282,6 +300,15 @@ class ControllerConfig(StrictModel):
             return value
         known = ", ".join(repr(str(name)) for name in REGISTRY if name != DEPTH_MPC)
         raise FieldError("", value, f"input should be one of {known}")
+
+    @model_validator(mode="after")
+    def _playback_table(self) -> ControllerConfig:
+        playing = self.type == ControllerType.THRUST_PLAYBACK
+        if playing and self.playback is None:
+            raise FieldError("playback", None, "thrust-playback needs playback.path (a CSV)")
+        if not playing and self.playback is not None:
+            raise FieldError("playback", self.playback.model_dump(), "only for thrust-playback")
+        return self
 
     @model_validator(mode="after")
     def _tightened_type(self) -> ControllerConfig:

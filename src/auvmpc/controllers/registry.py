@@ -28,6 +28,7 @@ REGISTRY: dict[str, tuple[str, str] | type] = {
     ControllerType.LTV_MPC: ("auvmpc.controllers.ltv", "LtvMpc"),
     ControllerType.NMPC: ("auvmpc.controllers.nmpc", "NonlinearMpc"),
     ControllerType.DO_MPC: ("auvmpc.controllers.dompc", "DoMpcController"),
+    ControllerType.THRUST_PLAYBACK: ("auvmpc.controllers.playback", "ThrustPlayback"),
     DEPTH_MPC: ("auvmpc.controllers.depth_mpc", "DepthMpc"),  # kind: depth, 6-DOF's depth
 }
 

@@ -78,6 +78,11 @@ class ResolvedScenario:
         # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
         self.choices = scenario.controller.choices(self.model)
         controller = scenario.controller.for_vehicle(self.model)
+        if controller.playback is not None:  # the thrust table, as the vehicle file
+            table = relative_to(controller.playback.path, base_dir)
+            controller = controller.model_copy(
+                update={"playback": controller.playback.model_copy(update={"path": table})}
+            )
         noise = max(scenario.sensing.std[:2])
         if (
             scenario.obstacles
@@ -223,12 +228,17 @@ def _plant_vehicle(model: VehicleParams, scenario: Scenario, base_dir: Path) -> 
     return plant
 
 
+def relative_to(path: str, base_dir: Path) -> str:
+    """A file a scenario names: a relative path is relative to the scenario's folder."""
+    return path if Path(path).is_absolute() else str(base_dir / path)
+
+
 def load_vehicle_relative(
     vehicle: str | dict[str, Any], base_dir: Path, field: str = "vehicle"
 ) -> VehicleParams:
     """A vehicle named by a scenario; a file path is relative to the scenario's folder."""
     if isinstance(vehicle, str) and vehicle.endswith((".yaml", ".yml")):
-        vehicle = str(base_dir / vehicle) if not Path(vehicle).is_absolute() else vehicle
+        vehicle = relative_to(vehicle, base_dir)
     return load_vehicle(vehicle, field)
 
 

@@ -1,0 +1,106 @@
+"""Open-loop thrust playback: a thrust table applied sample by sample (``thrust-playback``).
+
+The controller of an identification manoeuvre (``auvmpc excite``): it ignores the measured
+state and the reference, and applies row k of its table over [t_k, t_k+1), clipped into the
+thrust and rate limits (a table written by ``excite`` is already inside them). After the
+last row the thrust ramps to zero within the rate limit. The vehicle stays in a box of
+water because the table's forces are bounded and zero-mean, not by feedback
+(docs/identification.md).
+
+Thrust table (CSV): header ``t, F1..Fn`` (s, N), row k at t = k Te.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from pathlib import Path
+
+import numpy as np
+
+from auvmpc.config import read_text_file
+from auvmpc.controllers.base import (
+    Controller,
+    ControlResult,
+    ControlStatus,
+    Observation,
+    project_to_limits,
+)
+from auvmpc.errors import ConfigError
+from auvmpc.models.vehicle import VehicleParams
+
+__all__ = ["ThrustPlayback", "read_thrust_table", "write_thrust_table"]
+
+# How far a table's times may sit from the sample grid k Te (s): written to 1 us.
+_TIME_TOLERANCE_S = 1e-5
+_FIELD = "controller.playback.path"
+
+
+def write_thrust_table(path: Path, sample_time: float, thrust: np.ndarray) -> None:
+    """Write ``thrust`` (N, n) as a thrust table, row k at t = k ``sample_time``."""
+    n = thrust.shape[1]
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["t", *(f"F{i + 1}" for i in range(n))])
+    for k, row in enumerate(thrust):
+        writer.writerow([f"{k * sample_time:.6f}", *(f"{value:.6f}" for value in row)])
+    Path(path).write_text(buffer.getvalue())
+
+
+def read_thrust_table(path: str | Path, sample_time: float, n_thrusters: int) -> np.ndarray:
+    """The thrusts (N, n) of a thrust table; a bad table is a one-line ConfigError."""
+    text = read_text_file(path, _FIELD, "thrust table (CSV)")
+    rows = list(csv.reader(io.StringIO(text)))
+    expected = ["t", *(f"F{i + 1}" for i in range(n_thrusters))]
+    if not rows or [name.strip() for name in rows[0]] != expected:
+        raise ConfigError(_FIELD, str(path), f"the header must be {','.join(expected)}")
+    try:
+        table = np.array([[float(value) for value in row] for row in rows[1:]], dtype=float)
+    except ValueError as error:
+        raise ConfigError(_FIELD, str(path), f"a value is not a number ({error})") from None
+    if table.ndim != 2 or table.shape[0] < 1 or table.shape[1] != n_thrusters + 1:
+        raise ConfigError(_FIELD, str(path), f"needs rows of {n_thrusters + 1} numbers")
+    if not np.all(np.isfinite(table)):
+        raise ConfigError(_FIELD, str(path), "holds a value that is not finite")
+    grid = sample_time * np.arange(table.shape[0])
+    if np.max(np.abs(table[:, 0] - grid)) > _TIME_TOLERANCE_S:
+        raise ConfigError(
+            _FIELD, str(path), f"t must be 0, {sample_time:g}, ... (the controller's sample time)"
+        )
+    return table[:, 1:]
+
+
+class ThrustPlayback(Controller):
+    """Plays a thrust table open loop (module docstring)."""
+
+    preview_steps = 0
+
+    def __init__(self, model: VehicleParams, sample_time: float, thrust: np.ndarray) -> None:
+        thrust = np.asarray(thrust, dtype=float)
+        if thrust.ndim != 2 or thrust.shape[1] != model.n_thrusters:
+            raise ValueError(f"thrust must have shape (N, {model.n_thrusters}), got {thrust.shape}")
+        self.model = model
+        self.sample_time = float(sample_time)
+        self.table = thrust
+        self.reset(np.zeros(6), np.zeros(model.n_thrusters))
+
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> ThrustPlayback:
+        table = read_thrust_table(config.playback.path, config.sample_time, model.n_thrusters)
+        return cls(model, config.sample_time, table)
+
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._previous = np.asarray(initial_thrust, dtype=float).copy()
+
+    def compute(self, observation: Observation) -> ControlResult:
+        started = time.perf_counter()
+        k = observation.k
+        wanted = self.table[k] if k < len(self.table) else np.zeros(self.model.n_thrusters)
+        thrust, moved = project_to_limits(wanted, self._previous, self.model, self.sample_time)
+        self._previous = thrust
+        return ControlResult(
+            thrust=thrust,
+            status=ControlStatus.SATURATED if moved else ControlStatus.OK,
+            solve_time_s=time.perf_counter() - started,
+        )

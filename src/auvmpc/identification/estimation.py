@@ -1,0 +1,523 @@
+"""Grey-box identification of the 3-DOF velocity model from logged velocities and thrusts.
+
+The model is the velocity part of :mod:`auvmpc.models.vehicle` (Fossen 2021, ch. 6)::
+
+    m11 u' = Xu u + Xuu |u| u + m22 v r + tau_u
+    m22 v' = Yv v + Yvv |v| v - m11 u r + tau_v
+    Iz  r' = Nr r + Nrr |r| r + (m11 - m22) u v + tau_r,    Iz = Iz_rb + Iz_added
+
+with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknowns are
+:data:`PARAMETERS`; ``Iz_rb`` is kept from the start file (only the sum Iz is observable).
+
+1. Equation error (:func:`equation_error`). The equations are linear in the parameters
+   once the accelerations are known: ``A theta = b`` with rows per sample and axis. The
+   velocities and their derivatives come from a Savitzky-Golay filter (Savitzky and Golay
+   1964), each axis' rows are scaled by its force level, and ``scipy.linalg.lstsq`` solves
+   it. Noise in the regressors biases this estimate; it is a start, not the answer.
+2. Output error (:func:`output_error`). The velocity model is simulated (RK4, thrust held
+   over each sample) over segments of the log, each segment from its own free initial
+   velocity (multiple shooting without continuity: the segments are independent, so a
+   poor start cannot make a long simulation diverge), and the weighted squared difference
+   to the measured velocities is minimised by IPOPT over the parameters and the segments'
+   initial velocities (CasADi, exact Hessian). It starts from the equation-error estimate
+   or from the start file, whichever simulates the log better (on a vehicle faster than
+   the log's sampling the filter's derivatives are poor). Weights are 1 / the noise level
+   of each velocity: first what the filter removes, then, in a second fit, the first
+   fit's residual RMS (the filter also removes dynamics it cannot follow). With white
+   measurement noise and a noise-free plant this is the maximum-likelihood estimate
+   (Ljung 1999, ch. 7; Klein and Morelli 2006, ch. 6).
+3. Intervals (Fisher information). At the optimum the Gauss-Newton Hessian J'J of the
+   weighted residuals, scaled by the residual variance, gives the covariance
+   ``s^2 (J'J)^-1`` (the segments' initial velocities included as nuisance parameters);
+   95 % intervals are +-1.96 standard deviations (Klein and Morelli 2006, sec. 6.2).
+4. Excitation. A parameter is *excited* if its interval is narrower than its value
+   (half-width <= 0.5 |value|) or if its interval moves its equation's force by less than
+   :data:`SENSITIVITY_SHARE` of that force's RMS (a parameter that is small but well
+   determined, e.g. a zero linear damping), judged on the second fit. Parameters that are
+   not are fixed at their start value and the fit is repeated without them; the vehicle
+   file keeps their start values and the report names them.
+5. Validation: the held-out end of each log is simulated from its first measured
+   velocity with the identified and with the start parameters; RMS of the differences.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from scipy.linalg import lstsq
+from scipy.signal import savgol_filter
+
+from auvmpc.errors import ConfigError
+from auvmpc.identification.logs import MIN_SAMPLES, VelocityLog
+from auvmpc.models.integrators import rk4_step
+from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams
+
+__all__ = [
+    "PARAMETERS",
+    "Identification",
+    "ParameterEstimate",
+    "equation_error",
+    "identify",
+    "output_error",
+    "regression",
+    "velocity_rhs",
+]
+
+PARAMETERS = ("m11", "m22", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr")
+MASSES = ("m11", "m22", "Iz_added")
+# 95 % two-sided normal quantile.
+Z95 = 1.959963984540054
+# A parameter whose interval moves its equation's force by less than this share of the
+# force's RMS counts as excited even where the interval is wide relative to its value.
+SENSITIVITY_SHARE = 0.05
+# An interval half-width up to this share of the value counts as excited.
+RELATIVE_HALF_WIDTH = 0.5
+# Savitzky-Golay filter: cubic over about this long a window (at least 7 samples).
+FILTER_WINDOW_S = 0.7
+FILTER_ORDER = 3
+# Output-error segments: this long (s), each from its own initial velocity.
+SEGMENT_S = 10.0
+# Longest RK4 step (s) of the simulated model, whatever the damping: the simulator's
+# plant step (experiments: DEFAULT_PLANT_STEP_S).
+MAX_MODEL_STEP_S = 0.05
+
+
+def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
+    """[u', v', r'] of the model above; ``theta`` in :data:`PARAMETERS` order. NumPy arrays
+    (``nu``, ``tau`` of shape (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
+    m11, m22, iz_added, xu, xuu, yv, yvv, nr, nrr = (theta[i] for i in range(9))
+    u, v, r = nu[0], nu[1], nu[2]
+    iz = iz_rb + iz_added
+    u_dot = (xu * u + xuu * absolute(u) * u + m22 * v * r + tau[0]) / m11
+    v_dot = (yv * v + yvv * absolute(v) * v - m11 * u * r + tau[1]) / m22
+    r_dot = (nr * r + nrr * absolute(r) * r + (m11 - m22) * u * v + tau[2]) / iz
+    if isinstance(u_dot, ca.SX | ca.MX):
+        return ca.vertcat(u_dot, v_dot, r_dot)
+    return np.array([u_dot, v_dot, r_dot])
+
+
+def start_vector(vehicle: VehicleParams) -> np.ndarray:
+    return np.array([float(getattr(vehicle, name)) for name in PARAMETERS])
+
+
+def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float):
+    """The model as ``A theta = b``: per axis a block of rows, one per sample.
+
+    Parameters
+    ----------
+    nu, nu_dot, tau : (N, 3) velocities, their derivatives and the applied force
+    iz_rb : kg m2, the rigid-body yaw inertia (known)
+
+    Returns
+    -------
+    A : (3, N, 9), b : (3, N): block a is axis a (surge, sway, yaw).
+    """
+    u, v, r = nu.T
+    du, dv, dr = nu_dot.T
+    zero = np.zeros_like(u)
+    surge = [-du, v * r, zero, u, np.abs(u) * u, zero, zero, zero, zero]
+    sway = [-u * r, -dv, zero, zero, zero, v, np.abs(v) * v, zero, zero]
+    yaw = [u * v, -u * v, -dr, zero, zero, zero, zero, r, np.abs(r) * r]
+    A = np.stack([np.column_stack(block) for block in (surge, sway, yaw)])
+    b = np.stack([-tau[:, 0], -tau[:, 1], -tau[:, 2] + iz_rb * dr])
+    return A, b
+
+
+def filter_window(sample_time: float) -> int:
+    window = max(7, round(FILTER_WINDOW_S / sample_time))
+    return window + 1 - window % 2  # odd
+
+
+def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
+    """Savitzky-Golay smoothed velocities and their derivatives, (N+1, 3) each."""
+    window = filter_window(log.sample_time)
+    nu = savgol_filter(log.velocity, window, FILTER_ORDER, axis=0)
+    nu_dot = savgol_filter(
+        log.velocity, window, FILTER_ORDER, deriv=1, delta=log.sample_time, axis=0
+    )
+    return nu, nu_dot
+
+
+def applied_force(log: VelocityLog, vehicle: VehicleParams) -> np.ndarray:
+    """tau = T F per command, (N, 3)."""
+    return log.thrust @ vehicle.T.T
+
+
+def noise_levels(logs: list[VelocityLog]) -> np.ndarray:
+    """Each velocity's noise standard deviation, from what the filter removes (3,), with a
+    floor of 1 % of its RMS (a noise-free log still needs finite weights)."""
+    removed = np.vstack([log.velocity - smoothed(log)[0] for log in logs])
+    window = filter_window(logs[0].sample_time)
+    # The filter passes a share (about its hat-matrix diagonal) of white noise through.
+    passed = savgol_filter(np.eye(window)[window // 2], window, FILTER_ORDER)[window // 2]
+    noise = removed.std(axis=0) / math.sqrt(max(1.0 - passed, 1e-6))
+    level = np.sqrt(np.mean(np.vstack([log.velocity for log in logs]) ** 2, axis=0))
+    return np.maximum(noise, 0.01 * np.maximum(level, 1e-6))
+
+
+def _stacked_regression(logs: list[VelocityLog], vehicle: VehicleParams):
+    blocks_a, blocks_b = [], []
+    for log in logs:
+        nu, nu_dot = smoothed(log)
+        tau = applied_force(log, vehicle)
+        # The derivative at t_k spans the commands before and after it: their mean.
+        tau_k = np.vstack([tau[:1], 0.5 * (tau[:-1] + tau[1:])])
+        edge = filter_window(log.sample_time) // 2  # the filter's ends are extrapolations
+        rows = slice(edge, log.steps - edge)
+        A, b = regression(nu[:-1][rows], nu_dot[:-1][rows], tau_k[rows], vehicle.Iz_rb)
+        blocks_a.append(A)
+        blocks_b.append(b)
+    return np.concatenate(blocks_a, axis=1), np.concatenate(blocks_b, axis=1)
+
+
+def equation_error(
+    logs: list[VelocityLog], vehicle: VehicleParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares parameters (9,) and the regression ``A`` (3, N, 9), ``b`` (3, N) they
+    solve, each axis' rows scaled by its force RMS so that N and N m weigh alike."""
+    A, b = _stacked_regression(logs, vehicle)
+    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ start_vector(vehicle)) ** 2, 1))
+    scale = np.where(scale > 0, scale, 1.0)
+    theta, *_ = lstsq((A / scale[:, None, None]).reshape(-1, 9), (b / scale[:, None]).ravel())
+    return theta, A, b
+
+
+@dataclass
+class _Model:
+    """The simulated velocity model for one sample time: one RK4-integrated sample."""
+
+    sample_time: float
+    substeps: int
+    iz_rb: float
+
+    def __post_init__(self) -> None:
+        nu, tau, theta = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3), ca.SX.sym("theta", 9)
+
+        def f(x, u):
+            return velocity_rhs(x, u, theta, self.iz_rb, ca.fabs)
+
+        x = nu
+        for _ in range(self.substeps):
+            x = rk4_step(f, x, tau, self.sample_time / self.substeps)
+        self.step = ca.Function("step", [nu, tau, theta], [x])
+        self._rollouts: dict[int, ca.Function] = {}
+
+    def rollout(self, steps: int) -> ca.Function:
+        """(nu0 (3,), tau (3, steps), theta (9, steps)) -> velocities at k = 1..steps."""
+        if steps not in self._rollouts:
+            self._rollouts[steps] = self.step.mapaccum("rollout", steps)
+        return self._rollouts[steps]
+
+    def simulate(self, nu0, tau: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """Numeric rollout: (N+1, 3) from nu0 under tau (N, 3)."""
+        steps = len(tau)
+        out = self.rollout(steps)(nu0, tau.T, np.tile(theta[:, None], (1, steps)))
+        return np.vstack([np.asarray(nu0, dtype=float)[None, :], np.asarray(out).T])
+
+
+def model_substeps(sample_time: float, vehicle: VehicleParams, logs: list[VelocityLog]) -> int:
+    """RK4 steps per sample: at most MAX_MODEL_STEP_S each, and stable for the start
+    vehicle's damping at twice the logged speeds (the fit moves the parameters)."""
+    top = 2.0 * np.max(np.vstack([np.abs(log.velocity) for log in logs]), axis=0)
+    rates = (
+        abs(vehicle.Xu + 2 * vehicle.Xuu * top[0]) / vehicle.m11,
+        abs(vehicle.Yv + 2 * vehicle.Yvv * top[1]) / vehicle.m22,
+        abs(vehicle.Nr + 2 * vehicle.Nrr * top[2]) / vehicle.Iz,
+    )
+    stable = RK4_STABLE_STEP / max(max(rates), 1e-9) / 2.0
+    return max(1, math.ceil(sample_time / min(stable, MAX_MODEL_STEP_S) - 1e-9))
+
+
+@dataclass
+class _Fit:
+    theta: np.ndarray  # (9,)
+    half_width: np.ndarray  # (9,) 95 % half-widths, 0 for a fixed parameter, inf unknown
+    residual_rms: np.ndarray  # (3,) RMS of the velocity residuals (m/s, m/s, rad/s)
+    started_from: int  # which candidate
+    iterations: int
+    status: str
+
+
+def _segments(log: VelocityLog, length: int) -> list[tuple[int, int]]:
+    count = max(1, round(log.steps / length))
+    edges = np.linspace(0, log.steps, count + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+
+
+def _scales(start: np.ndarray, first: np.ndarray, vehicle: VehicleParams) -> np.ndarray:
+    """Typical size per parameter, so that IPOPT's variables are of order one."""
+    axis_mass = {"X": vehicle.m11, "Y": vehicle.m22, "N": vehicle.Iz}
+    masses = {"m11": vehicle.m11, "m22": vehicle.m22, "Iz_added": vehicle.Iz}
+    floor = 0.01 * np.array([masses.get(name) or axis_mass[name[0]] for name in PARAMETERS])
+    return np.maximum.reduce([np.abs(start), np.abs(first), floor])
+
+
+def output_error(
+    logs: list[VelocityLog],
+    vehicle: VehicleParams,
+    candidates: list[np.ndarray],
+    fixed: tuple[str, ...] = (),
+    weight: np.ndarray | None = None,
+    model: _Model | None = None,
+) -> _Fit:
+    """Output-error refinement (module docstring, steps 2 and 3) from whichever of the
+    ``candidates`` (9,) simulates the log best; the ``fixed`` parameters stay at that
+    candidate's values. ``weight`` (3,): per velocity, 1 / its noise level (default: the
+    filter's estimate)."""
+    sample_time = logs[0].sample_time
+    model = model or _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
+    start = start_vector(vehicle)
+    scale = _scales(start, candidates[0], vehicle)
+    weight = 1.0 / noise_levels(logs) if weight is None else np.asarray(weight, dtype=float)
+    z = ca.MX.sym("z", 9)
+    theta = z * scale
+    length = max(MIN_SAMPLES // 4, round(SEGMENT_S / sample_time))
+    initial, guesses, residuals = [], [], []
+    for log in logs:
+        tau = applied_force(log, vehicle)
+        nu_smooth = smoothed(log)[0]
+        for a, b in _segments(log, length):
+            x0 = ca.MX.sym(f"x0_{len(initial)}", 3)
+            initial.append(x0)
+            guesses.append(nu_smooth[a])
+            steps = b - a
+            predicted = model.rollout(steps)(x0, tau[a:b].T, ca.repmat(theta, 1, steps))
+            measured = log.velocity[a + 1 : b + 1].T
+            residuals.append(ca.vec((predicted - measured) * weight))
+            residuals.append((x0 - log.velocity[a]) * weight)
+    x = ca.vertcat(z, *initial)
+    residual = ca.vertcat(*residuals)
+    lower, upper = _bounds(vehicle, scale)
+    is_fixed = np.array([name in fixed for name in PARAMETERS])
+    guess = np.concatenate(guesses)
+    cost = ca.Function("cost", [x], [0.5 * ca.sumsqr(residual)])
+    costs = [float(cost(np.concatenate([c / scale, guess]))) for c in candidates]
+    best = min(range(len(costs)), key=lambda i: costs[i] if math.isfinite(costs[i]) else math.inf)
+    z0 = np.clip(candidates[best] / scale, lower, upper)
+    lower = np.where(is_fixed, z0, lower)
+    upper = np.where(is_fixed, z0, upper)
+    n_initial = 3 * len(initial)
+    solver = ca.nlpsol(
+        "output_error",
+        "ipopt",
+        {"x": x, "f": 0.5 * ca.sumsqr(residual)},
+        {
+            "print_time": False,
+            "show_eval_warnings": False,  # a trial step may blow the model up: IPOPT backs off
+            "ipopt": {
+                "print_level": 0,
+                "sb": "yes",
+                "max_iter": 300,
+                "tol": 1e-9,
+                "hessian_approximation": HESSIAN,
+            },
+        },
+    )
+    solution = solver(
+        x0=np.concatenate([z0, guess]),
+        lbx=np.concatenate([lower, np.full(n_initial, -np.inf)]),
+        ubx=np.concatenate([upper, np.full(n_initial, np.inf)]),
+    )
+    stats = solver.stats()
+    optimum = np.asarray(solution["x"]).ravel()
+    jacobian_of = ca.Function("J", [x], [residual, ca.jacobian(residual, x)])
+    r_value, j_value = (np.asarray(value) for value in jacobian_of(optimum))
+    r_value = r_value.ravel()
+    free = np.concatenate([~is_fixed, np.ones(n_initial, dtype=bool)])
+    J = j_value[:, free]
+    dof = max(1, r_value.size - J.shape[1])
+    variance = float(r_value @ r_value) / dof
+    information = J.T @ J
+    half_width = np.zeros(9)
+    try:
+        covariance = variance * np.linalg.inv(information)
+        std = np.sqrt(np.clip(np.diag(covariance)[: int((~is_fixed).sum())], 0.0, None))
+    except np.linalg.LinAlgError:
+        std = np.full(int((~is_fixed).sum()), np.inf)
+    half_width[~is_fixed] = Z95 * std * scale[~is_fixed]
+    residual_rms = np.sqrt(np.mean(r_value.reshape(-1, 3) ** 2, axis=0)) / weight
+    return _Fit(
+        theta=optimum[:9] * scale,
+        half_width=half_width,
+        residual_rms=residual_rms,
+        started_from=best,
+        iterations=int(stats.get("iter_count", -1)),
+        status=str(stats.get("return_status", "")),
+    )
+
+
+def _bounds(vehicle: VehicleParams, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Physical bounds on the scaled parameters: masses positive (added yaw inertia >= 0),
+    damping <= 0; every magnitude within a factor MAGNITUDE of its scale."""
+    lower = np.full(9, -MAGNITUDE)
+    upper = np.zeros(9)
+    lower[:2], upper[:2] = 1.0 / MAGNITUDE, MAGNITUDE  # m11, m22
+    lower[2], upper[2] = 0.0, MAGNITUDE  # Iz_added
+    return lower, upper
+
+
+MAGNITUDE = 100.0
+HESSIAN = "exact"
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    name: str
+    start: float
+    equation_error: float  # the least-squares first estimate
+    value: float  # what the vehicle file gets (the start value where not excited)
+    fitted: float  # the output-error estimate before an unexcited one is put back
+    ci95: tuple[float, float]
+    excited: bool
+
+
+@dataclass
+class Identification:
+    """What :func:`identify` found and how well it predicts the held-out data."""
+
+    parameters: list[ParameterEstimate]
+    logs: list[str]
+    sample_time: float
+    fit_samples: int
+    validation_samples: int
+    noise_std: np.ndarray  # (3,) RMS of the fit's residuals: the noise of u, v, r
+    equation_error_used: bool  # the fit started from it (else from the start file)
+    validation_rms: np.ndarray  # (3,) identified model on the held-out parts
+    validation_rms_start: np.ndarray  # (3,) the start model there
+    iterations: int
+    solver_status: str
+    substeps: int
+    traces: list[dict[str, np.ndarray]] = field(default_factory=list)  # per log, for figures
+
+    @property
+    def unexcited(self) -> list[str]:
+        return [p.name for p in self.parameters if not p.excited]
+
+    def vehicle_values(self) -> dict[str, float]:
+        return {p.name: p.value for p in self.parameters}
+
+
+def _excited(theta, half_width, A, b) -> np.ndarray:
+    """Module docstring, step 4."""
+    relative = half_width <= RELATIVE_HALF_WIDTH * np.abs(theta)
+    force = np.sqrt(np.mean((A * theta) ** 2, axis=(1, 2)) * 9 + np.mean(b**2, axis=1))
+    column = np.sqrt(np.mean(A**2, axis=1))  # (3, 9) each regressor's RMS per axis
+    moved = half_width[None, :] * column  # force the interval moves, per axis
+    share = np.where(column > 0, moved / np.maximum(force[:, None], 1e-12), np.inf).min(axis=0)
+    return relative | (share <= SENSITIVITY_SHARE)
+
+
+def identify(
+    logs: list[VelocityLog], vehicle: VehicleParams, holdout: float = 0.2
+) -> Identification:
+    """Identify :data:`PARAMETERS` from ``logs`` starting from ``vehicle`` (module
+    docstring); the last ``holdout`` share of each log validates."""
+    if not logs:
+        raise ConfigError("RUN_DIR", None, "give at least one log")
+    sample_time = logs[0].sample_time
+    for log in logs:
+        if abs(log.sample_time - sample_time) > 1e-6 * sample_time:
+            raise ConfigError(
+                "RUN_DIR",
+                log.name,
+                f"sampled every {log.sample_time:g} s, the first log "
+                f"every {sample_time:g} s: give logs of one sample time",
+            )
+        if log.thrust.shape[1] != vehicle.n_thrusters:
+            raise ConfigError(
+                "RUN_DIR",
+                log.name,
+                f"has {log.thrust.shape[1]} thrusters, the start vehicle {vehicle.n_thrusters}",
+            )
+    if not 0.0 < holdout < 0.5:
+        raise ConfigError("--holdout", holdout, "must be in (0, 0.5)")
+    fit_logs, check_logs = [], []
+    for log in logs:
+        cut = round((1.0 - holdout) * log.steps)
+        if cut < MIN_SAMPLES or log.steps - cut < MIN_SAMPLES // 4:
+            raise ConfigError(
+                "RUN_DIR",
+                log.name,
+                f"has {log.steps} samples, too short: need "
+                f"{math.ceil(MIN_SAMPLES / (1 - holdout))} to fit and validate",
+            )
+        fit_logs.append(log.part(0, cut))
+        check_logs.append(log.part(cut, log.steps))
+
+    start = start_vector(vehicle)
+    first, A, b = equation_error(fit_logs, vehicle)
+    # A least-squares value outside the physics (a negative mass, a positive damping) is
+    # noise's: the fit starts from the start file's value there.
+    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6])
+    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6])
+    initial = np.where((first >= lower) & (first <= upper), first, start)
+    model = _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
+    # Weighted first by the filter's noise estimate, then again by the residuals' (the
+    # filter also removes fast dynamics it cannot follow), all parameters free; those the
+    # second fit finds unexcited are then fixed at their start values for a third.
+    first_fit = output_error(fit_logs, vehicle, [initial, start], model=model)
+    weight = 1.0 / np.maximum(first_fit.residual_rms, 1e-9)
+    fit = output_error(fit_logs, vehicle, [first_fit.theta], weight=weight, model=model)
+    excited = _excited(fit.theta, fit.half_width, A, b)
+    final = fit
+    if not excited.all():
+        fixed = tuple(name for name, ok in zip(PARAMETERS, excited, strict=True) if not ok)
+        final = output_error(
+            fit_logs,
+            vehicle,
+            [np.where(excited, fit.theta, start)],
+            fixed=fixed,
+            weight=weight,
+            model=model,
+        )
+    # An excited parameter's interval is the final fit's; an unexcited one's the fit that
+    # judged it (the final one holds it fixed).
+    center = np.where(excited, final.theta, fit.theta)
+    half_width = np.where(excited, final.half_width, fit.half_width)
+    parameters = [
+        ParameterEstimate(
+            name=name,
+            start=float(start[i]),
+            equation_error=float(first[i]),
+            value=float(final.theta[i]) if excited[i] else float(start[i]),
+            fitted=float(fit.theta[i]),
+            ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
+            excited=bool(excited[i]),
+        )
+        for i, name in enumerate(PARAMETERS)
+    ]
+    identified = np.array([p.value for p in parameters])
+    traces, errors, errors_start = [], [], []
+    for log in check_logs:
+        tau = applied_force(log, vehicle)
+        nu0 = smoothed(log)[0][0] if log.steps > filter_window(sample_time) else log.velocity[0]
+        simulated = model.simulate(nu0, tau, identified)
+        simulated_start = model.simulate(nu0, tau, start)
+        errors.append(simulated - log.velocity)
+        errors_start.append(simulated_start - log.velocity)
+        traces.append(
+            {
+                "t": sample_time * np.arange(log.steps + 1),
+                "measured": log.velocity,
+                "identified": simulated,
+                "start": simulated_start,
+            }
+        )
+    return Identification(
+        parameters=parameters,
+        logs=[log.name for log in logs],
+        sample_time=sample_time,
+        fit_samples=sum(log.steps for log in fit_logs),
+        validation_samples=sum(log.steps for log in check_logs),
+        noise_std=final.residual_rms,
+        equation_error_used=first_fit.started_from == 0,
+        validation_rms=np.sqrt(np.mean(np.vstack(errors) ** 2, axis=0)),
+        validation_rms_start=np.sqrt(np.mean(np.vstack(errors_start) ** 2, axis=0)),
+        iterations=final.iterations,
+        solver_status=final.status,
+        substeps=model.substeps,
+        traces=traces,
+    )

@@ -1,0 +1,215 @@
+"""What ``auvmpc identify`` writes: the vehicle file, identification.json, a Markdown
+report and a fit figure (docs/identification.md)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from auvmpc.config import read_text_file, read_yaml_mapping
+from auvmpc.errors import ConfigError
+from auvmpc.identification.estimation import Identification
+from auvmpc.models.vehicle import preset_names
+
+__all__ = [
+    "fit_figure",
+    "identification_json",
+    "markdown_report",
+    "start_file_data",
+    "vehicle_file_text",
+    "write_identification",
+]
+
+VELOCITIES = ("u (m/s)", "v (m/s)", "r (rad/s)")
+
+
+def start_file_data(spec: str) -> dict[str, Any]:
+    """The start vehicle's fields as written (a preset name or a vehicle file)."""
+    if spec in preset_names():
+        text = (resources.files("auvmpc.presets") / "vehicles" / f"{spec}.yaml").read_text()
+    else:
+        text = read_text_file(spec, "--vehicle", "vehicle file")
+    return read_yaml_mapping(text, "--vehicle", spec, "vehicle fields")
+
+
+def _number(value: float) -> float:
+    return float(f"{value:.6g}")
+
+
+def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: str) -> str:
+    """The start file's fields with the identified values, ``estimated`` listing them and
+    a header saying where they came from (the logs, the intervals)."""
+    data = dict(start)
+    identified = [p for p in found.parameters if p.excited]
+    for estimate in identified:
+        data[estimate.name] = _number(estimate.value)
+    listed = list(data.get("estimated", ()))
+    data["estimated"] = listed + [p.name for p in identified if p.name not in listed]
+    logs = ", ".join(found.logs)
+    note = f"identified from {len(found.logs)} log(s) by auvmpc identify (start: {start_name})"
+    description = str(data.get("description", "")).strip()
+    data["description"] = f"{description}; {note}" if description else note
+    if "source" in data:
+        data["source"] = f"{data['source']}; {note}"
+    today = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d")
+    header = [
+        f"# Identified by auvmpc identify on {today} from: {logs}",
+        f"# start file: {start_name}; grey-box 3-DOF velocity model, output error (IPOPT);",
+        "# 95 % intervals from the Fisher information (identification.json beside this file):",
+    ]
+    for estimate in found.parameters:
+        low, high = estimate.ci95
+        kept = "" if estimate.excited else "  NOT EXCITED: start value kept"
+        header.append(f"#   {estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}")
+    rms = ", ".join(f"{value:.3g}" for value in found.validation_rms)
+    header.append(f"# held-out validation RMS u, v, r: {rms} (m/s, m/s, rad/s)")
+    body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+    return "\n".join(header) + "\n" + body
+
+
+def identification_json(found: Identification) -> dict[str, Any]:
+    """identification.json: per parameter ``value``, ``ci95`` and ``excited`` (the
+    contract), plus the start value and how the fit went."""
+    return {
+        "parameters": {
+            p.name: {
+                "value": p.value,
+                "ci95": list(p.ci95),
+                "excited": p.excited,
+                "start": p.start,
+                "equation_error": p.equation_error,
+            }
+            for p in found.parameters
+        },
+        "logs": found.logs,
+        "sample_time_s": found.sample_time,
+        "fit_samples": found.fit_samples,
+        "validation_samples": found.validation_samples,
+        "validation_rms": dict(zip(("u", "v", "r"), found.validation_rms.tolist(), strict=True)),
+        "validation_rms_start": dict(
+            zip(("u", "v", "r"), found.validation_rms_start.tolist(), strict=True)
+        ),
+        "residual_rms": dict(zip(("u", "v", "r"), found.noise_std.tolist(), strict=True)),
+        "solver_status": found.solver_status,
+        "iterations": found.iterations,
+        "started_from_equation_error": found.equation_error_used,
+        "not_excited": found.unexcited,
+    }
+
+
+def markdown_report(found: Identification, start_name: str, figure: str | None) -> str:
+    lines = [
+        "# Identification report",
+        "",
+        f"Logs: {', '.join(found.logs)} (sample time {found.sample_time:g} s; "
+        f"{found.fit_samples} samples fitted, the last {found.validation_samples} held out).",
+        f"Start file: {start_name}. Output error solved by IPOPT: {found.solver_status}, "
+        f"{found.iterations} iterations, {found.substeps} RK4 steps per sample; started from "
+        f"{'the equation-error estimate' if found.equation_error_used else 'the start file'}.",
+        "",
+        "| parameter | start | equation error | identified | 95 % interval | excited |",
+        "|---|---|---|---|---|---|",
+    ]
+    for p in found.parameters:
+        lines.append(
+            f"| {p.name} | {p.start:.4g} | {p.equation_error:.4g} | {p.value:.4g} | "
+            f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] | {'yes' if p.excited else '**no**'} |"
+        )
+    lines += [
+        "",
+        "Held-out validation (simulated velocities vs the log, RMS):",
+        "",
+        "| model | u (m/s) | v (m/s) | r (rad/s) |",
+        "|---|---|---|---|",
+        "| identified | " + " | ".join(f"{x:.4g}" for x in found.validation_rms) + " |",
+        "| start | " + " | ".join(f"{x:.4g}" for x in found.validation_rms_start) + " |",
+        "",
+        "Fit residual RMS (about the measurement noise when the model fits): "
+        + ", ".join(f"{x:.3g}" for x in found.noise_std)
+        + " (u, v, r).",
+    ]
+    if found.unexcited:
+        lines += [
+            "",
+            f"**Not excited** by these logs (start value kept): {', '.join(found.unexcited)}.",
+        ]
+    if figure:
+        lines += ["", f"![held-out fit]({figure})"]
+    return "\n".join(lines) + "\n"
+
+
+def fit_figure(found: Identification, path: Path, dpi: int = 110) -> None:
+    """The held-out part of the first log: measured, identified and start model velocities."""
+    trace = found.traces[0]
+    figure = Figure(figsize=(8, 6.5))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(3, 1, sharex=True)
+    for i, ax in enumerate(axes):
+        ax.plot(trace["t"], trace["measured"][:, i], color="0.6", lw=0.8, label="log")
+        ax.plot(trace["t"], trace["start"][:, i], "--", color="tab:red", lw=1.0, label="start")
+        ax.plot(trace["t"], trace["identified"][:, i], color="tab:blue", lw=1.2,
+                label="identified")  # fmt: skip
+        ax.set_ylabel(VELOCITIES[i])
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", ncols=3, fontsize="small")
+    axes[-1].set_xlabel("time into the held-out part (s)")
+    figure.suptitle("Held-out validation: simulated from the first measured velocity")
+    figure.savefig(path, format="png", dpi=dpi, bbox_inches="tight")
+
+
+def write_identification(
+    run_dirs: list[str], vehicle: str, out: Path, holdout: float = 0.2, overwrite: bool = False
+) -> Identification:
+    """``auvmpc identify``: identify from run folders starting from ``vehicle`` (preset or
+    file) and write ``out`` with identification.json, identification.md and
+    identification-fit.png beside it."""
+    from auvmpc.identification.estimation import identify
+    from auvmpc.identification.logs import read_run_folder
+    from auvmpc.models.vehicle import load_vehicle
+
+    out = Path(out)
+    if out.suffix not in (".yaml", ".yml"):
+        raise ConfigError("--out", str(out), "the vehicle file must end in .yaml or .yml")
+    folder = out.parent
+    outputs = [out, *(folder / name for name in OUTPUT_NAMES)]
+    for path in outputs:
+        if path.exists() and not overwrite:
+            raise ConfigError("--out", str(path), "exists; pass --overwrite to replace it")
+    start = load_vehicle(vehicle, "--vehicle")
+    start_data = start_file_data(vehicle)
+    if not run_dirs:
+        raise ConfigError("RUN_DIR", None, "give at least one run folder")
+    logs = [read_run_folder(path, start.n_thrusters) for path in run_dirs]
+    found = identify(logs, start, holdout)
+    text = vehicle_file_text(start_data, found, vehicle)
+    load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out, text)
+    atomic_write_text(
+        folder / "identification.json", json.dumps(identification_json(found), indent=2) + "\n"
+    )
+    fit_figure(found, folder / "identification-fit.png.tmp")
+    os.replace(folder / "identification-fit.png.tmp", folder / "identification-fit.png")
+    atomic_write_text(
+        folder / "identification.md", markdown_report(found, vehicle, "identification-fit.png")
+    )
+    return found
+
+
+OUTPUT_NAMES = ("identification.json", "identification.md", "identification-fit.png")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Readers see the old file or the new one, never a part (experiments/outputs.py does
+    the same for run folders; identification sits below that layer)."""
+    partial = path.with_name(f".{path.name}.partial")
+    partial.write_text(text)
+    os.replace(partial, path)
