@@ -187,3 +187,17 @@ def test_excite_refuses_bad_input_in_one_line(tmp_path, monkeypatch, capsys, arg
     code, _, err = run_cli(monkeypatch, capsys, "excite", *args)
     assert code == 2
     assert err.count("\n") == 1 and message in err
+
+
+def test_a_run_folder_longer_than_a_yaml_file_may_be_is_read(tmp_path):
+    """A 300 s log.csv is about 0.8 MB, more than the 512 kB a YAML file may have: the log
+    reader has its own bound (identification/logs.py, MAX_LOG_BYTES)."""
+    from auvmpc.identification.logs import read_run_folder
+    from auvmpc.safe_yaml import MAX_YAML_BYTES
+
+    rows = ["t,u,v,r,F1,F2,F3,F4"]
+    rows += [f"{0.1 * k:.1f},0.1,0.0,0.0,1.0,1.0,1.0,1.0" for k in range(30000)]
+    (tmp_path / "log.csv").write_text("\n".join(rows) + "\n")
+    assert (tmp_path / "log.csv").stat().st_size > MAX_YAML_BYTES
+    log = read_run_folder(tmp_path, 4)
+    assert log.steps == 30000 - 1 and log.sample_time == pytest.approx(0.1)

@@ -151,9 +151,10 @@ def yaml_problem(error: yaml.YAMLError, line: bool = True) -> str:
     return f"{lead}{where}{detail}"
 
 
-def read_text_file(path: str | Path, field: str, what: str) -> str:
-    """The text of a user's file; a folder, a missing file, a binary or huge file is a
-    one-line :class:`ConfigError` naming ``field``."""
+def read_text_file(path: str | Path, field: str, what: str, limit: int = MAX_YAML_BYTES) -> str:
+    """The text of a user's file; a folder, a missing file, a binary file or one larger than
+    ``limit`` bytes (a YAML file's by default) is a one-line :class:`ConfigError` naming
+    ``field``."""
     file = Path(path)
     if file.is_dir():
         raise ConfigError(field, str(path), f"is a folder, not a {what}")
@@ -161,20 +162,20 @@ def read_text_file(path: str | Path, field: str, what: str) -> str:
         raise ConfigError(field, str(path), f"no such {what}")
     try:
         size = file.stat().st_size
-        if size > MAX_YAML_BYTES:
+        if size > limit:
             raise ConfigError(
-                field, str(path), f"is {size} bytes, more than a {what} may be ({MAX_YAML_BYTES})"
+                field, str(path), f"is {size} bytes, more than a {what} may be ({limit})"
             )
         data = file.read_bytes()
     except OSError as error:
         raise ConfigError(field, str(path), f"cannot be read ({error.strerror})") from None
     if b"\x00" in data:
-        raise ConfigError(field, str(path), f"is a binary file, not a {what} (YAML text)")
+        raise ConfigError(field, str(path), f"is a binary file, not a {what}")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as error:
         raise ConfigError(
-            field, str(path), f"is not UTF-8 text (byte {error.start}); a {what} is YAML text"
+            field, str(path), f"is not UTF-8 text (byte {error.start}); a {what} is text"
         ) from None
 
 

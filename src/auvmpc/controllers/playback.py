@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from auvmpc.config import read_text_file
 from auvmpc.controllers.base import (
     Controller,
     ControlResult,
@@ -29,12 +28,15 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import VehicleParams
+from auvmpc.safe_yaml import read_text_file
 
 __all__ = ["ThrustPlayback", "read_thrust_table", "write_thrust_table"]
 
 # How far a table's times may sit from the sample grid k Te (s): written to 1 us.
 _TIME_TOLERANCE_S = 1e-5
 _FIELD = "controller.playback.path"
+# A thrust table read whole: an hour at 0.05 s for 8 thrusters is about 10 MB.
+MAX_TABLE_BYTES = 64 * 1024 * 1024
 
 
 def write_thrust_table(path: Path, sample_time: float, thrust: np.ndarray) -> None:
@@ -50,7 +52,7 @@ def write_thrust_table(path: Path, sample_time: float, thrust: np.ndarray) -> No
 
 def read_thrust_table(path: str | Path, sample_time: float, n_thrusters: int) -> np.ndarray:
     """The thrusts (N, n) of a thrust table; a bad table is a one-line ConfigError."""
-    text = read_text_file(path, _FIELD, "thrust table (CSV)")
+    text = read_text_file(path, _FIELD, "thrust table (CSV)", MAX_TABLE_BYTES)
     rows = list(csv.reader(io.StringIO(text)))
     expected = ["t", *(f"F{i + 1}" for i in range(n_thrusters))]
     if not rows or [name.strip() for name in rows[0]] != expected:

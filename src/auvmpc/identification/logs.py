@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from auvmpc.config import read_text_file
 from auvmpc.errors import ConfigError
+from auvmpc.safe_yaml import read_text_file
 
 __all__ = ["MIN_SAMPLES", "VelocityLog", "read_run_folder"]
 
@@ -48,6 +48,11 @@ class VelocityLog:
         )
 
 
+# A log.csv read whole: an hour at 0.05 s with 8 thrusters is about 60 MB; four times that
+# stays well inside memory (the rows are parsed once).
+MAX_LOG_BYTES = 256 * 1024 * 1024
+
+
 def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
     """The velocities and thrusts in a run folder's log.csv (columns t, u, v, r, F1..Fn)."""
     path = Path(folder)
@@ -57,7 +62,8 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
     log_file = path / "log.csv"
     if not log_file.is_file():
         raise ConfigError(field, str(folder), "has no log.csv (not an auvmpc run folder)")
-    rows = list(csv.reader(io.StringIO(read_text_file(log_file, field, "log.csv"))))
+    text = read_text_file(log_file, field, "log.csv", MAX_LOG_BYTES)
+    rows = list(csv.reader(io.StringIO(text)))
     if not rows:
         raise ConfigError(field, str(log_file), "is empty")
     header = [name.strip() for name in rows[0]]

@@ -14,10 +14,10 @@ import yaml
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from auvmpc.config import read_text_file, read_yaml_mapping
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import Identification
 from auvmpc.models.vehicle import preset_names
+from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
     "fit_figure",
