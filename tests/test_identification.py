@@ -196,7 +196,7 @@ def test_a_run_folder_longer_than_a_yaml_file_may_be_is_read(tmp_path):
     from auvmpc.safe_yaml import MAX_YAML_BYTES
 
     rows = ["t,u,v,r,F1,F2,F3,F4"]
-    rows += [f"{0.1 * k:.1f},0.1,0.0,0.0,1.0,1.0,1.0,1.0" for k in range(30000)]
+    rows += [f"{0.1 * k:.1f},0.1,0.0,0.0,{np.sin(0.1 * k):.4f},1.0,1.0,1.0" for k in range(30000)]
     (tmp_path / "log.csv").write_text("\n".join(rows) + "\n")
     assert (tmp_path / "log.csv").stat().st_size > MAX_YAML_BYTES
     log = read_run_folder(tmp_path, 4)
