@@ -41,6 +41,17 @@ def _run(tmp_path, scenario: str, overrides: list[str]):
 
 
 @needs_cc
+def test_the_documented_flow_verifies(tmp_path):
+    """docs/onboard.md: export the preset as it is (its controller is the paper's mpc), run
+    it with the exported controller by overrides, verify. The run's configuration has nmpc's
+    defaults filled in, the export's record not: compared filled in for the vehicle."""
+    export_c(load_scenario("paper-obstacles", ["duration=5"]), tmp_path / "export")
+    _, run_dir = _run(tmp_path, "paper-obstacles", _FREE)
+    result = verify_c(tmp_path / "export", run_dir)
+    assert result.steps == 10 and result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
+
+
+@needs_cc
 @pytest.mark.parametrize(
     ("scenario", "overrides"),
     [

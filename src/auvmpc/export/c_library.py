@@ -40,6 +40,7 @@ from auvmpc.estimation import covariance_bounds
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
 from auvmpc.ocp.multiple_shooting import (
     _PARKED_OBSTACLE_M,
@@ -386,10 +387,14 @@ def _check_run(export: Path, run_dir: Path) -> None:
             "RUN_DIR", str(run_dir), "the run has sensor noise; log.csv holds the true states"
         )
     controller = ControllerConfig.model_validate(scenario.get("controller", {}))
-    ran = json.loads(exported_config(controller).model_dump_json())
+    # Both filled in for the vehicle: a run of the exported type has the defaults of that
+    # type (nmpc's trust region) filled in, an export of a preset of another type does not.
+    model = VehicleParams.model_validate(record["model"])
+    exported = ControllerConfig.model_validate(record["controller"])
+    ran = json.loads(exported_config(controller).for_vehicle(model).model_dump_json())
     if (
         controller.control_horizon not in (None, controller.prediction_horizon)
-        or ran != record["controller"]
+        or ran != json.loads(exported.for_vehicle(model).model_dump_json())
         or controller.type is not ControllerType.NMPC
         or controller.nmpc_mode is not NmpcMode.REAL_TIME
     ):
