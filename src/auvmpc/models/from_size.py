@@ -355,8 +355,27 @@ def _number(value: float) -> str:
     return f"{value:.6g}"
 
 
-def _vector(values) -> str:
-    return "[" + ", ".join(_number(float(v)) for v in values) + "]"
+def _flow(value) -> str:
+    """A value as flow-style YAML: numbers to 6 significant digits, sequences and mappings
+    nested."""
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{key}: {_flow(item)}" for key, item in value.items()) + "}"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_flow(item) for item in value) + "]"
+    return _number(float(value))
+
+
+def _section(name: str, section, note: str, list_note: str = "") -> list[str]:
+    """A vehicle file section, its fields in the model's order; a list of mappings (the
+    thrusters) one entry per line, after ``list_note``."""
+    lines = [f"{name + ':':<20}# ESTIMATES: {note}"]
+    for field, value in section.model_dump(exclude_none=True).items():
+        if isinstance(value, list | tuple) and value and isinstance(value[0], dict):
+            lines.append(f"  {field}:         # {list_note}" if list_note else f"  {field}:")
+            lines += [f"    - {_flow(item)}" for item in value]
+        else:
+            lines.append(f"  {field}: {_flow(value)}")
+    return lines
 
 
 def vehicle_file_text(estimate: SizeEstimate) -> str:
@@ -385,42 +404,15 @@ def vehicle_file_text(estimate: SizeEstimate) -> str:
     lines.append("thrusters:          # given: position (m), angle (deg from +x towards +y)")
     for thruster in p.thrusters:
         angle = _number(thruster.angle_deg)
-        lines.append(f"  - {{position: {_vector(thruster.position)}, angle_deg: {angle}}}")
-    lines.append(f"thrust_limits: {_vector(p.thrust_limits)}   # N per thruster, given")
+        lines.append(f"  - {{position: {_flow(thruster.position)}, angle_deg: {angle}}}")
+    lines.append(f"thrust_limits: {_flow(p.thrust_limits)}   # N per thruster, given")
     rate_note = notes["thrust_rate_limit"] if "thrust_rate_limit" in p.estimated else "given"
     lines.append(
         f"thrust_rate_limit: {_number(p.thrust_rate_limit)}   # N/s per thruster, {rate_note}"
     )
     if p.heave is not None:
-        heave = p.heave
-        lines += [
-            f"heave:              # ESTIMATES: {notes['heave']}",
-            f"  m_heave: {_number(heave.m_heave)}",
-            f"  Zw: {_number(heave.Zw)}",
-            f"  Zww: {_number(heave.Zww)}",
-            f"  net_buoyancy_N: {_number(heave.net_buoyancy_N)}",
-            f"  thruster_count: {heave.thruster_count}",
-            f"  thrust_limits: {_vector(heave.thrust_limits)}",
-            f"  thrust_rate_limit: {_number(heave.thrust_rate_limit)}",
-        ]
+        lines += _section("heave", p.heave, notes["heave"])
     if p.six_dof is not None:
-        six = p.six_dof
-        lines += [
-            f"six_dof:            # ESTIMATES: {notes['six_dof']}",
-            f"  inertia: {_vector(six.inertia)}",
-            f"  center_of_gravity: {_vector(six.center_of_gravity)}",
-            f"  center_of_buoyancy: {_vector(six.center_of_buoyancy)}",
-            f"  displaced_volume: {_number(six.displaced_volume)}",
-            f"  water_density: {_number(six.water_density)}",
-            f"  gravity: {_number(six.gravity)}",
-            f"  added_mass: {_vector(six.added_mass)}",
-            f"  linear_damping: {_vector(six.linear_damping)}",
-            f"  quadratic_damping: {_vector(six.quadratic_damping)}",
-            "  thrusters:         # the horizontal ones first, in order, then the vertical ones",
-        ]
-        for thruster in six.thrusters:
-            lines.append(
-                f"    - {{position: {_vector(thruster.position)}, "
-                f"direction: {_vector(thruster.direction)}}}"
-            )
+        in_order = "the horizontal ones first, in order, then the vertical ones"
+        lines += _section("six_dof", p.six_dof, notes["six_dof"], in_order)
     return "\n".join(lines) + "\n"
