@@ -189,6 +189,10 @@ FORMERLY_LOST = {
 }
 
 
+# How much of hard-survey case (2, 22) is compared with the converged OCP (s).
+COMPARED_DURATION_S = 100
+
+
 def _case_run(seed: int, index: int, *overrides: str):
     from pathlib import Path
 
@@ -206,10 +210,10 @@ def _case_run(seed: int, index: int, *overrides: str):
 def test_formerly_lost_hard_survey_cases_hold_the_bar(seed, index):
     """The issue's bar on a few hard cases: not lost, at most 3 samples in a row without an
     optimiser, no contact, no limit violation, and (for the first) an RMS error after the
-    transient within max(0.1 m, 1.2 x) the converged OCP's on the same case. At full yaw
-    moment all three turn 6.4-8.4 rad/s, half a turn in 0.37-0.49 s, so they fly at the
-    0.25 s the sample-time rule gives them ((2, 39) spun beside its disc at 0.5 s, longest
-    streak 4)."""
+    transient within max(0.1 m, 1.2 x) the converged OCP's on the same case (its first
+    COMPARED_DURATION_S). At full yaw moment all three turn 6.4-8.4 rad/s, half a turn in
+    0.37-0.49 s, so they fly at the 0.25 s the sample-time rule gives them ((2, 39) spun
+    beside its disc at 0.5 s, longest streak 4)."""
     metrics = _case_run(seed, index).metrics
     assert metrics["verdict"] != "lost", metrics["verdict_reason"]
     assert metrics["longest_fallback_streak"] <= 3
@@ -218,6 +222,10 @@ def test_formerly_lost_hard_survey_cases_hold_the_bar(seed, index):
     if (seed, index) == (2, 22):
         from auvmpc.experiments.survey_cases import YARDSTICK
 
-        converged = _case_run(seed, index, *YARDSTICK).metrics
+        # Judged against the converged OCP over the mission's first 100 s (of 220): the
+        # converged solve is most of this test's time (21 s for the whole mission).
+        first = f"duration={COMPARED_DURATION_S}"
+        converged = _case_run(seed, index, *YARDSTICK, first).metrics
+        ours = _case_run(seed, index, first).metrics
         bar = max(0.1, 1.2 * converged["rms_position_error_after_transient_m"])
-        assert metrics["rms_position_error_after_transient_m"] <= bar
+        assert ours["rms_position_error_after_transient_m"] <= bar
