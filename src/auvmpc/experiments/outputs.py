@@ -33,7 +33,6 @@ import json
 import os
 import re
 import shutil
-import tempfile
 import uuid
 from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime
@@ -41,6 +40,7 @@ from enum import StrEnum
 from pathlib import Path
 
 from auvmpc import __version__
+from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
 
 __all__ = [
@@ -65,8 +65,8 @@ __all__ = [
 ]
 
 MARKER = ".auvmpc-output.json"
-# The marker's layout: 2 lists every path (1, before, listed top-level names only and let
-# folders be recognised by their contents; such folders are not auvmpc's as far as it knows).
+# The marker's layout: 2 lists every path; 1 (no "format" key) listed the top-level names
+# a run or reproduction wrote, and nothing for a campaign (_listed says what counts).
 MARKER_FORMAT = 2
 _PARTIAL = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.partial$")
 # A folder name must leave room for its staging name ".<name>.<pid>.<token>.partial"
@@ -521,42 +521,3 @@ def prepare_campaign_folder(
             _write_marker(target, OutputKind.CAMPAIGN, [])
     claim(target, files, option)
     return target
-
-
-def _umask() -> int:
-    """The process umask, read without changing it where /proc allows."""
-    with contextlib.suppress(OSError, ValueError):
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write_text(path: Path | str, text: str) -> None:
-    """Write a file so that readers see the old content or the new, never a part.
-
-    The file gets the user's normal permissions (0666 minus the umask), like any file
-    the user creates, not the private mode of a temporary file.
-    """
-    path = Path(path)
-    try:
-        handle, temporary = tempfile.mkstemp(
-            prefix=f".{path.name}.", suffix=".tmp", dir=path.parent
-        )
-    except OSError as error:  # name the file meant, not the temporary one
-        raise OSError(error.errno, error.strerror, str(path)) from None
-    try:
-        os.fchmod(handle, 0o666 & ~_umask())
-        with os.fdopen(handle, "w") as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except OSError as error:
-        Path(temporary).unlink(missing_ok=True)
-        raise OSError(error.errno, error.strerror, str(path)) from None
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise

@@ -53,7 +53,9 @@ from scipy.signal import savgol_filter
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import MIN_SAMPLES, VelocityLog
 from auvmpc.models.integrators import rk4_step
-from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams
+from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates
+from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
+from auvmpc.sim.plant import substeps_for
 
 __all__ = [
     "PARAMETERS",
@@ -80,9 +82,6 @@ FILTER_WINDOW_S = 0.7
 FILTER_ORDER = 3
 # Output-error segments: this long (s), each from its own initial velocity.
 SEGMENT_S = 10.0
-# Longest RK4 step (s) of the simulated model, whatever the damping: the simulator's
-# plant step (experiments: DEFAULT_PLANT_STEP_S).
-MAX_MODEL_STEP_S = 0.05
 
 
 def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
@@ -219,16 +218,12 @@ class _Model:
 
 
 def model_substeps(sample_time: float, vehicle: VehicleParams, logs: list[VelocityLog]) -> int:
-    """RK4 steps per sample: at most MAX_MODEL_STEP_S each, and stable for the start
-    vehicle's damping at twice the logged speeds (the fit moves the parameters)."""
+    """RK4 steps per sample: at most the plant's step (DEFAULT_PLANT_STEP_S) each, and
+    stable for the start vehicle's damping at twice the logged speeds (the fit moves the
+    parameters)."""
     top = 2.0 * np.max(np.vstack([np.abs(log.velocity) for log in logs]), axis=0)
-    rates = (
-        abs(vehicle.Xu + 2 * vehicle.Xuu * top[0]) / vehicle.m11,
-        abs(vehicle.Yv + 2 * vehicle.Yvv * top[1]) / vehicle.m22,
-        abs(vehicle.Nr + 2 * vehicle.Nrr * top[2]) / vehicle.Iz,
-    )
-    stable = RK4_STABLE_STEP / max(max(rates), 1e-9) / 2.0
-    return max(1, math.ceil(sample_time / min(stable, MAX_MODEL_STEP_S) - 1e-9))
+    stable = RK4_STABLE_STEP / max(max(damping_rates(vehicle, *top)), 1e-9) / 2.0
+    return substeps_for(sample_time, min(stable, DEFAULT_PLANT_STEP_S))
 
 
 @dataclass
@@ -290,7 +285,7 @@ def output_error(
             residuals.append((x0 - log.velocity[a]) * weight)
     x = ca.vertcat(z, *initial)
     residual = ca.vertcat(*residuals)
-    lower, upper = _bounds(vehicle, scale)
+    lower, upper = _bounds()
     is_fixed = np.array([name in fixed for name in PARAMETERS])
     guess = np.concatenate(guesses)
     cost = ca.Function("cost", [x], [0.5 * ca.sumsqr(residual)])
@@ -349,7 +344,7 @@ def output_error(
     )
 
 
-def _bounds(vehicle: VehicleParams, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _bounds() -> tuple[np.ndarray, np.ndarray]:
     """Physical bounds on the scaled parameters: masses positive (added yaw inertia >= 0),
     damping <= 0; every magnitude within a factor MAGNITUDE of its scale."""
     lower = np.full(9, -MAGNITUDE)
@@ -369,7 +364,6 @@ class ParameterEstimate:
     start: float
     equation_error: float  # the least-squares first estimate
     value: float  # what the vehicle file gets (the start value where not excited)
-    fitted: float  # the output-error estimate before an unexcited one is put back
     ci95: tuple[float, float]
     excited: bool
 
@@ -483,7 +477,6 @@ def identify(
             start=float(start[i]),
             equation_error=float(first[i]),
             value=float(final.theta[i]) if excited[i] else float(start[i]),
-            fitted=float(fit.theta[i]),
             ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
         )

@@ -26,6 +26,7 @@ import yaml
 
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import (
     VehicleParams,
     dynamics,
@@ -33,6 +34,8 @@ from auvmpc.models.vehicle import (
     preset_names,
     stable_plant_step,
 )
+from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
+from auvmpc.sim.plant import substeps_for
 
 __all__ = [
     "Excitation",
@@ -97,8 +100,8 @@ def simulate_open_loop(
 ) -> np.ndarray:
     """The 3-DOF model's states (N+1, 6) from rest at the origin under ``thrust`` (N, n),
     each row held over its sample (RK4 at the plant's stable step)."""
-    substeps = max(1, math.ceil(sample_time / stable_plant_step(vehicle, 0.05) - 1e-9))
-    states = np.zeros((len(thrust) + 1, 6))
+    substeps = substeps_for(sample_time, stable_plant_step(vehicle, DEFAULT_PLANT_STEP_S))
+    states = np.zeros((len(thrust) + 1, HORIZONTAL.size))
     for k, row in enumerate(thrust):
         states[k + 1] = rk4(
             lambda x, u: dynamics(x, u, vehicle), states[k], row, sample_time, substeps

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import os
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -14,9 +13,12 @@ import yaml
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import Identification
+from auvmpc.identification.logs import VELOCITY_NAMES
 from auvmpc.models.vehicle import preset_names
+from auvmpc.plots import save_figures
 from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
@@ -93,11 +95,11 @@ def identification_json(found: Identification) -> dict[str, Any]:
         "sample_time_s": found.sample_time,
         "fit_samples": found.fit_samples,
         "validation_samples": found.validation_samples,
-        "validation_rms": dict(zip(("u", "v", "r"), found.validation_rms.tolist(), strict=True)),
+        "validation_rms": dict(zip(VELOCITY_NAMES, found.validation_rms.tolist(), strict=True)),
         "validation_rms_start": dict(
-            zip(("u", "v", "r"), found.validation_rms_start.tolist(), strict=True)
+            zip(VELOCITY_NAMES, found.validation_rms_start.tolist(), strict=True)
         ),
-        "residual_rms": dict(zip(("u", "v", "r"), found.noise_std.tolist(), strict=True)),
+        "residual_rms": dict(zip(VELOCITY_NAMES, found.noise_std.tolist(), strict=True)),
         "solver_status": found.solver_status,
         "iterations": found.iterations,
         "started_from_equation_error": found.equation_error_used,
@@ -146,7 +148,7 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
     return "\n".join(lines) + "\n"
 
 
-def fit_figure(found: Identification, path: Path, dpi: int = 110) -> None:
+def fit_figure(found: Identification) -> Figure:
     """The held-out part of the first log: measured, identified and start model velocities."""
     trace = found.traces[0]
     figure = Figure(figsize=(8, 6.5))
@@ -162,7 +164,7 @@ def fit_figure(found: Identification, path: Path, dpi: int = 110) -> None:
     axes[0].legend(loc="upper right", ncols=3, fontsize="small")
     axes[-1].set_xlabel("time into the held-out part (s)")
     figure.suptitle("Held-out validation: simulated from the first measured velocity")
-    figure.savefig(path, format="png", dpi=dpi, bbox_inches="tight")
+    return figure
 
 
 def write_identification(
@@ -196,8 +198,7 @@ def write_identification(
     atomic_write_text(
         folder / "identification.json", json.dumps(identification_json(found), indent=2) + "\n"
     )
-    fit_figure(found, folder / "identification-fit.png.tmp")
-    os.replace(folder / "identification-fit.png.tmp", folder / "identification-fit.png")
+    save_figures({"identification-fit": fit_figure(found)}, folder, dpi=FIT_FIGURE_DPI)
     atomic_write_text(
         folder / "identification.md", markdown_report(found, vehicle, "identification-fit.png")
     )
@@ -205,11 +206,4 @@ def write_identification(
 
 
 OUTPUT_NAMES = ("identification.json", "identification.md", "identification-fit.png")
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Readers see the old file or the new one, never a part (experiments/outputs.py does
-    the same for run folders; identification sits below that layer)."""
-    partial = path.with_name(f".{path.name}.partial")
-    partial.write_text(text)
-    os.replace(partial, path)
+FIT_FIGURE_DPI = 110

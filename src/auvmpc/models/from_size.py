@@ -53,6 +53,7 @@ from pydantic import ValidationError
 from scipy.special import elliprd
 
 from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.models.actuators.thruster import planar_direction
 from auvmpc.models.vehicle import (
     Thruster,
     VehicleParams,
@@ -174,13 +175,11 @@ def _turning(per_axis: np.ndarray, extent: np.ndarray, quadratic: bool) -> np.nd
 
 @dataclass(frozen=True)
 class SizeEstimate:
-    """A vehicle estimated from its size: the validated parameters, how each was estimated,
-    the top speed used, and the shape."""
+    """A vehicle estimated from its size: the validated parameters, how each was estimated
+    (the top speed used among them), the shape and the water density."""
 
     params: VehicleParams
     notes: dict[str, str]
-    top_speed: float
-    top_speed_given: bool
     shape: HullShape
     water_density: float
 
@@ -291,7 +290,7 @@ def estimate_vehicle(
     if six_dof:
         thrusters_3d = [
             {"position": (x, y, 0.0),
-             "direction": (math.cos(math.radians(a)), math.sin(math.radians(a)), 0.0)}
+             "direction": planar_direction(a)}
             for x, y, a in thrusters
         ] + [{"position": (x, y, 0.0), "direction": (0.0, 0.0, -1.0)}
              for x, y in vertical_thrusters]  # fmt: skip
@@ -314,7 +313,7 @@ def estimate_vehicle(
     except ValidationError as error:
         raise format_validation_error(error, "vehicle") from None
     notes = _notes(shape, cd, top_speed, given, stretch)
-    return SizeEstimate(params, notes, top_speed, given, shape, rho)
+    return SizeEstimate(params, notes, shape, rho)
 
 
 def _notes(
