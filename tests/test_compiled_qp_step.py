@@ -15,8 +15,9 @@ from auvmpc.controllers.base import ObstacleState
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty
 from auvmpc.models.vehicle import load_vehicle
 from auvmpc.ocp.multiple_shooting import MultipleShootingProgram
+from auvmpc.ocp.stage_qp import stage_qp
 from auvmpc.solvers.hpipm import hpipm_settings
-from auvmpc.solvers.sparse_rti import SparseRealTimeIteration, stage_qp
+from auvmpc.solvers.real_time_iteration import RealTimeIteration
 
 pytestmark = pytest.mark.skipif(
     compiled_qp_step.compiler() is None, reason="no C compiler on this machine"
@@ -81,7 +82,7 @@ def _exact_step(program: MultipleShootingProgram) -> compiled_qp_step.CompiledQp
 def test_compiled_step_solves_the_same_qp_as_casadi(preset, penalty, slots):
     program = _program(preset, penalty, slots)
     compiled = _exact_step(program)
-    reference = SparseRealTimeIteration(program, compiled=False)
+    reference = RealTimeIteration(program, compiled=False)
     assert not reference.compiled
     rng = np.random.default_rng(7)
     for _ in range(3):
@@ -100,7 +101,7 @@ def test_compiled_step_solves_the_same_qp_as_casadi(preset, penalty, slots):
 @pytest.mark.parametrize(("preset", "penalty", "slots"), CASES)
 def test_the_fast_first_pass_lands_near_the_exact_step(preset, penalty, slots):
     program = _program(preset, penalty, slots)
-    fast = SparseRealTimeIteration(program, compiled=True)
+    fast = RealTimeIteration(program, compiled=True)
     exact = _exact_step(program)
     rng = np.random.default_rng(7)
     for _ in range(3):  # each warm-started from the previous, unrelated, QP's solution
@@ -133,7 +134,7 @@ def test_a_hot_try_that_fails_leaves_no_trace(preset, penalty, slots):
     assert settings[_GENERAL + _HOT_LIMIT] == 3, "the fast pass has a hot try"
     settings[_GENERAL + _HOT_LIMIT] = 1  # one iteration from an unrelated QP's solution
     tried, plain = _step_with(program, settings), _step_with(program, settings)
-    solver, rng = SparseRealTimeIteration(program, compiled=False), np.random.default_rng(3)
+    solver, rng = RealTimeIteration(program, compiled=False), np.random.default_rng(3)
     for _ in range(3):  # each started from the previous, unrelated, QP's solution
         arguments = _qp_arguments(program, solver, rng)
         status, iterations = tried(*arguments, hot_start=True)
@@ -150,7 +151,7 @@ def test_the_hot_try_solves_a_repeated_qp_without_iterating(preset, penalty, slo
     tolerance and needs no iteration (the first solve, warm from zero, took 8-17), and the
     step is the same, within that tolerance."""
     program = _program(preset, penalty, slots)
-    solver = SparseRealTimeIteration(program, compiled=True)
+    solver = RealTimeIteration(program, compiled=True)
     step = solver._step
     arguments = _qp_arguments(program, solver, np.random.default_rng(5))
     assert step(*arguments, hot_start=True)[0] == 0
@@ -163,7 +164,7 @@ def test_the_hot_try_solves_a_repeated_qp_without_iterating(preset, penalty, slo
 
 def test_non_finite_iterate_is_refused_before_the_solver():
     program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
-    solver = SparseRealTimeIteration(program, compiled=True)
+    solver = RealTimeIteration(program, compiled=True)
     arguments = list(_qp_arguments(program, solver, np.random.default_rng(1)))
     arguments[0] = arguments[0].copy()
     arguments[0][5, 3] = np.nan
@@ -173,7 +174,7 @@ def test_non_finite_iterate_is_refused_before_the_solver():
 def test_library_is_built_once_and_then_loaded(tmp_path, monkeypatch):
     monkeypatch.setenv("AUVMPC_CACHE_DIR", str(tmp_path))
     program = _program("bluerov2-heavy", ThrustPenalty.ABSOLUTE, 1)
-    assert SparseRealTimeIteration(program).compiled
+    assert RealTimeIteration(program).compiled
     built = list(tmp_path.glob("rti-*.so"))
     assert len(built) == 1
 
@@ -181,22 +182,22 @@ def test_library_is_built_once_and_then_loaded(tmp_path, monkeypatch):
         raise AssertionError("compiled again")
 
     monkeypatch.setattr(compiled_qp_step.subprocess, "run", no_compiler)
-    assert SparseRealTimeIteration(program).compiled
+    assert RealTimeIteration(program).compiled
     assert list(tmp_path.glob("*")) == built, "no partial or second file left behind"
 
 
 def test_without_a_compiler_the_casadi_step_is_used(monkeypatch):
     program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
     monkeypatch.setattr(native, "compiler", lambda: None)
-    assert not SparseRealTimeIteration(program).compiled
+    assert not RealTimeIteration(program).compiled
     with pytest.raises(RuntimeError, match="no C compiler"):
-        SparseRealTimeIteration(program, compiled=True)
+        RealTimeIteration(program, compiled=True)
 
 
 def test_jit_off_keeps_the_casadi_step():
     config = ControllerConfig(type="nmpc", jit=False, offset_free=False)
     program = MultipleShootingProgram(load_vehicle("jmse2210"), config, 1)
-    assert not SparseRealTimeIteration(program).compiled
+    assert not RealTimeIteration(program).compiled
 
 
 def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path, monkeypatch):
@@ -206,7 +207,7 @@ def test_an_unwritable_cache_folder_falls_back_to_the_temporary_folder(tmp_path,
     (tmp_path / "tmp").mkdir()
     monkeypatch.setattr(compiled_qp_step.tempfile, "tempdir", str(tmp_path / "tmp"))
     program = _program("jmse2210", ThrustPenalty.INCREMENT, 1)
-    assert SparseRealTimeIteration(program).compiled
+    assert RealTimeIteration(program).compiled
     assert blocked.read_text() == "a file where the cache folder would be"
     assert len(list((tmp_path / "tmp").glob("auvmpc-*/rti-*.so"))) == 1
 
@@ -220,7 +221,7 @@ def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch)
         os.utime(library, (1e9 + age, 1e9 + age))
     mine = tmp_path / "notes.txt"
     mine.write_text("not auvmpc's")
-    assert SparseRealTimeIteration(_program("jmse2210", ThrustPenalty.ABSOLUTE, 1)).compiled
+    assert RealTimeIteration(_program("jmse2210", ThrustPenalty.ABSOLUTE, 1)).compiled
     kept = sorted(p.name for p in tmp_path.glob("rti-*.so"))
     assert len(kept) == 2 and old[2].name in kept, "the newest old one and the new one"
     assert mine.read_text() == "not auvmpc's"

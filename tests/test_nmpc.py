@@ -39,8 +39,7 @@ from auvmpc.models.integrators import rk4
 from auvmpc.models.vehicle import body_from_world, dynamics, load_vehicle
 from auvmpc.references import CircleConfig, LineConfig, PaperOvalConfig, make_reference
 from auvmpc.scenario import load_scenario
-from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
-from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
+from auvmpc.solvers.real_time_iteration import RealTimeIteration
 from tests.conftest import random_limit_case
 
 SAMPLE_TIME = 0.5  # s, the paper's Te
@@ -232,11 +231,7 @@ def test_real_time_iterations_converge_to_the_full_solve(fields, trust):
     real_time = NonlinearMpc(model, config)
     program = real_time.program
     assert program.config.trust_region_weight == (5.0 if trust is None else trust)
-    solver = (
-        SparseRealTimeIteration(program)
-        if "control_horizon" not in fields
-        else CondensedRealTimeIteration(program, program.config)
-    )
+    solver = RealTimeIteration(program, condensed="control_horizon" in fields)
     preview = tracked_reference(model, state, np.zeros(3), reference, SAMPLE_TIME)
     sample = program.sample(state, previous, preview, np.zeros(3), ())
     solution = solver.solve(program.reference_guess(sample), sample, RTI_SQP_STEPS, True)
@@ -524,11 +519,13 @@ def _light_lawnmower_with_disc(*overrides: str) -> RunResult:
 
 def test_the_multiple_shooting_retry_runs_with_the_condensed_qp_too():
     """Move blocking takes the condensed QP, whose solve has the same re-simulation switch: the
-    retry ran into a TypeError there (the run failed at step 0). It now completes; the
-    condensed QP still falls back on this open-loop-unstable vehicle (its module docstring),
-    and the run says so."""
+    retry ran into a TypeError there (the run failed at step 0). It completes, and since the
+    condensed QP is condensed from the stage QP's data (solvers/condensed_qp_step.py) it
+    solves every sample of this open-loop-unstable vehicle and keeps off the disc (the former
+    condensed form, derived apart, fell back)."""
     run = _light_lawnmower_with_disc("controller.type=nmpc", "controller.control_horizon=3")
-    assert run.metrics["fallback_steps"] > 0
+    assert run.metrics["fallback_steps"] == 0
+    assert run.metrics["min_obstacle_clearance_m"] >= 0
     _assert_no_violations(run.metrics)
 
 

@@ -538,7 +538,7 @@ def default_sqp_iterations(model: VehicleParams) -> int:
 # real-time nmpc): a penalty per rad^2 and (m/s)^2 on each step's deviation from it, in the
 # units of the stage weights Q (5 on heading by default). ltv-mpc weighs heading and
 # velocities (controllers/mpc.py); the real-time nmpc the heading alone (solvers/
-# sparse_rti.py, condensed_rti.py). Measured for nmpc (docs/recovery.md): on the hard survey
+# real_time_iteration.py). Measured for nmpc (docs/recovery.md): on the hard survey
 # the runs with fallbacks fell from 7 to 2 and its one miss (spun beside a disc at a corner,
 # 1.03 x its bar) matched the converged OCP; on 102 cases from another seed every fallback
 # (29 steps) and both contacts (-0.19, -0.075 m) went. 10 lost a vehicle that 5 keeps; 5 on

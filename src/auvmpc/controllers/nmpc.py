@@ -29,13 +29,12 @@ Two ways to solve it (``config.nmpc_mode``):
   iteration scheme for nonlinear optimization in optimal feedback control"): one SQP step
   per sample from the shifted previous solution. The cost is a linear least-squares cost,
   so the Gauss-Newton Hessian is exact for it and constant. The step's QP is built from
-  the RK4 map's Jacobians at every shooting node. By default (``qp_structure: sparse``) it
-  keeps the states and HPIPM solves it (solvers/sparse_rti.py: well posed for unstable
-  vehicles), the whole step in one call to C built with the system compiler where there is
-  one (solvers/compiled_qp_step.py); ``condensed`` (and move blocking) condenses it onto
-  the thrusts (the shooting gaps enter as offsets) for the configured dense QP backend
-  (``qp_solver``). Obstacle rows
-  are kept where the linearisation point is within ``_OBSTACLE_RANGE_M`` of the disc.
+  the RK4 map's Jacobians at every shooting node, stage by stage (ocp/stage_qp.py). By
+  default (``qp_structure: sparse``) it keeps the states and HPIPM solves it (well posed for
+  unstable vehicles), the whole step in one call to C built with the system compiler where
+  there is one; ``condensed`` (and move blocking) eliminates the states for the configured
+  dense QP backend (``qp_solver``); solvers/real_time_iteration.py has the three ways. Obstacle
+  rows are kept where the linearisation point is within 5 m of the disc.
   ``linearisation_iterations`` > 1 takes that many SQP steps per sample.
 
 Without a previous solution (after a reset or a failed solve) both start from the states
@@ -83,9 +82,8 @@ from auvmpc.ocp.multiple_shooting import (
     MultipleShootingProgram,
     Sample,
 )
-from auvmpc.solvers.condensed_rti import CondensedRealTimeIteration
 from auvmpc.solvers.ipopt import IpoptSolver
-from auvmpc.solvers.sparse_rti import SparseRealTimeIteration
+from auvmpc.solvers.real_time_iteration import RealTimeIteration
 
 __all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]
 
@@ -109,26 +107,19 @@ class NonlinearMpc(ShelledController):
         self.limits = horizontal_limits(model)
         self.program = MultipleShootingProgram(model, config, obstacle_slots)
         if config.nmpc_mode is NmpcMode.FULL:
-            self._solver: IpoptSolver | CondensedRealTimeIteration | SparseRealTimeIteration = (
-                IpoptSolver(self.program, config)
+            self._solver: IpoptSolver | RealTimeIteration = IpoptSolver(self.program, config)
+        else:
+            # Held thrusts would be equality boxes, which an interior point handles badly
+            # (HPIPM took 50 iterations without converging): move blocking condenses.
+            condensed = (
+                config.qp_structure is QpStructure.CONDENSED or self.program.n_moves < self.horizon
             )
-        elif (
-            config.qp_structure is not QpStructure.CONDENSED
-            and self.program.n_moves == self.horizon
-        ):
-            # Held thrusts would be equality rows, which an interior point handles badly
-            # (HPIPM took 50 iterations without converging); move blocking keeps the
-            # condensed QP, whose variables are the moves themselves.
-            self._solver = SparseRealTimeIteration(self.program)
-            if config.jit and not self._solver.compiled:
+            self._solver = RealTimeIteration(self.program, condensed)
+            if config.jit and not condensed and not self._solver.compiled:
                 self.build_warnings = (
                     "nmpc: no C compiler (or no HPIPM in the casadi wheel), so the real-time "
                     "step runs through CasADi's virtual machine: same QP, 2-3x slower per step",
                 )
-        elif config.nmpc_mode is NmpcMode.REAL_TIME:
-            self._solver = CondensedRealTimeIteration(self.program, config)
-        else:  # unreachable: NmpcMode has no other member
-            raise NotImplementedError(config.nmpc_mode)
         self._rescue: IpoptSolver | None = None  # the real-time mode's last resort
         self._observer = (
             DisturbanceObserver(model, config.sample_time, config.observer, config.model_substeps)

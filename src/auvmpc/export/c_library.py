@@ -49,6 +49,7 @@ from auvmpc.ocp.multiple_shooting import (
     SLOT_FIELDS,
     MultipleShootingProgram,
 )
+from auvmpc.ocp.stage_qp import stage_qp
 from auvmpc.references import make_reference
 from auvmpc.solvers.blasfeo_target import (
     LIBRARY,
@@ -58,7 +59,6 @@ from auvmpc.solvers.blasfeo_target import (
 )
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
-from auvmpc.solvers.sparse_rti import stage_qp
 
 __all__ = [
     "COMMAND_TOLERANCE_N",

@@ -5,7 +5,7 @@ is held between moves. A keep-out disc is an exact constraint in distance form w
 in metres; obstacles fill ``MAX_OBSTACLES`` slots (the nearest ones when there are more) and
 an empty slot's rows have no lower bound, so the program is built once, as expanded SX, with
 all that changes between samples passed as parameters and bounds. IPOPT (solvers/ipopt.py)
-and the real-time iterations (solvers/condensed_rti.py, solvers/sparse_rti.py) solve it.
+and the real-time iterations (solvers/real_time_iteration.py) solve it.
 """
 
 from __future__ import annotations

@@ -15,7 +15,6 @@ import os
 import subprocess  # noqa: F401 -- tests replace subprocess.run to see that nothing is built
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
@@ -23,10 +22,9 @@ import numpy as np
 from auvmpc import native
 from auvmpc.native import compiler
 from auvmpc.ocp.multiple_shooting import ND, NX, SLOT_FIELDS
+from auvmpc.ocp.stage_qp import StageQp
 from auvmpc.solvers.blasfeo_target import runtime_blasfeo
-
-if TYPE_CHECKING:  # sparse_rti imports this module
-    from auvmpc.solvers.sparse_rti import StageQp
+from auvmpc.solvers.hpipm import hpipm_status
 
 __all__ = ["CompiledQpStep", "compiled_qp_step", "compiler"]
 
@@ -110,6 +108,8 @@ class CompiledQpStep:
             np.copyto(buffer, values)  # shapes as allocated, or a ValueError
         status = self._step(*self._arguments[bool(hot_start)])
         return int(status), int(self._iterations[0])
+
+    describe = staticmethod(hpipm_status)
 
 
 def compiled_qp_step(qp: StageQp, horizon: int, thrusters: int, slots: int,

@@ -7,7 +7,17 @@ from collections.abc import Sequence
 
 import casadi as ca
 
-__all__ = ["ITERATION_LIMIT", "hpipm_settings", "hpipm_solver", "slack_scale", "solved"]
+__all__ = [
+    "EVALUATION_FAILED",
+    "ITERATION_LIMIT",
+    "NOT_FINITE",
+    "SOLVED",
+    "hpipm_settings",
+    "hpipm_solver",
+    "hpipm_status",
+    "slack_scale",
+    "solved",
+]
 
 # CasADi hands HPIPM every unbounded variable as a box of +-_INFINITY; 1e8 (CasADi's default)
 # ruins the interior point's scaling (50 iterations without convergence on paper-obstacles),
@@ -41,7 +51,10 @@ _OPTIONS = {
 # Measured: at most 52 iterations on paper-obstacles (a sample where 30 obstacle rows appear);
 # 50 made that sample fall back.
 ITERATION_LIMIT = 100
-_SOLVED = 0
+# The status codes of a QP step (hpipm_ocp_step.c's, and every step's in
+# solvers/real_time_iteration.py): solved, the QP's data not finite, their evaluation failed;
+# any other is the solver's own failure code.
+SOLVED, NOT_FINITE, EVALUATION_FAILED = 0, -1, -2
 
 
 def hpipm_solver(
@@ -119,4 +132,9 @@ def slack_scale(penalty: float) -> float:
 
 def solved(stats: dict) -> bool:
     """Whether HPIPM's last solve converged (return status 0)."""
-    return stats["return_status"] == _SOLVED
+    return stats["return_status"] == SOLVED
+
+
+def hpipm_status(code: int) -> str:
+    """The log's words for a QP step's status code from HPIPM."""
+    return "QP data evaluation failed" if code == EVALUATION_FAILED else f"hpipm {code}"

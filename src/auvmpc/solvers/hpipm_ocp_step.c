@@ -1,7 +1,7 @@
 /* One sparse QP step of auvmpc's real-time iteration, in one call from Python.
  *
  * The stage data come from CasADi-generated code (rti_stage, rti_terminal: see
- * solvers/sparse_rti.py, StageQp, for the QP); HPIPM, linked from the casadi wheel, solves the
+ * ocp/stage_qp.py, StageQp, for the QP); HPIPM, linked from the casadi wheel, solves the
  * QP. Everything HPIPM needs is allocated once per controller (auvmpc_rti_create): through
  * CasADi's interface the QP's set-up and memory were allocated and freed on every call, about
  * five times the cost of the interior point itself.
@@ -10,7 +10,7 @@
  * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
  * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N).
  * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [w; sigma s], w = dF - dp
- * (solvers/sparse_rti.py, stage_qp).
+ * (ocp/stage_qp.py, stage_qp).
  *
  * Stage 0's state z_0 = [x_hat - X_0; F_prev - P_0] is known, so it is not a QP variable:
  * it is folded into stage 0's dynamics offset, input gradient and row bounds (HPIPM sees

@@ -1,5 +1,5 @@
 /* auvmpc's real-time nonlinear MPC in C: the Python NonlinearMpc (controllers/nmpc.py) with
- * every move free, its sparse real-time iteration (solvers/sparse_rti.py) and the safety
+ * every move free, its sparse real-time iteration (solvers/real_time_iteration.py) and the safety
  * shell (controllers/shell.py), step for step, so that it reproduces the Python commands.
  *
  * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost
@@ -410,7 +410,7 @@ static void reference_guess(Iterate *guess) {
     for (int k = 0; k < N; ++k) memcpy(guess->thrust[k], c.previous, sizeof c.previous);
 }
 
-/* `iterations` Gauss-Newton SQP steps from `guess` (SparseRealTimeIteration.solve); 0 and
+/* `iterations` Gauss-Newton SQP steps from `guess` (RealTimeIteration.solve); 0 and
  * c.iterate on success. With `resimulate` (a cold start's first try) the states are
  * re-simulated after each step, else moved by the QP's step (multiple shooting). */
 static int solve(const Iterate *guess, int iterations, int cold, int resimulate) {
