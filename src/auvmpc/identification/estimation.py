@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -53,7 +54,12 @@ from scipy.signal import savgol_filter
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import MIN_SAMPLES, VelocityLog
 from auvmpc.models.integrators import rk4_step
-from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, damping_rates
+from auvmpc.models.vehicle import (
+    RK4_STABLE_STEP,
+    VehicleParams,
+    damping_rates,
+    velocity_derivative,
+)
 from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
 from auvmpc.sim.plant import substeps_for
 
@@ -85,17 +91,15 @@ SEGMENT_S = 10.0
 
 
 def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
-    """[u', v', r'] of the model above; ``theta`` in :data:`PARAMETERS` order. NumPy arrays
-    (``nu``, ``tau`` of shape (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
-    m11, m22, iz_added, xu, xuu, yv, yvv, nr, nrr = (theta[i] for i in range(9))
-    u, v, r = nu[0], nu[1], nu[2]
-    iz = iz_rb + iz_added
-    u_dot = (xu * u + xuu * absolute(u) * u + m22 * v * r + tau[0]) / m11
-    v_dot = (yv * v + yvv * absolute(v) * v - m11 * u * r + tau[1]) / m22
-    r_dot = (nr * r + nrr * absolute(r) * r + (m11 - m22) * u * v + tau[2]) / iz
-    if isinstance(u_dot, ca.SX | ca.MX):
-        return ca.vertcat(u_dot, v_dot, r_dot)
-    return np.array([u_dot, v_dot, r_dot])
+    """[u', v', r'] of the model above (models.vehicle.velocity_derivative) with the
+    parameters ``theta`` in :data:`PARAMETERS` order. NumPy arrays (``nu``, ``tau`` of shape
+    (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
+    values = dict(zip(PARAMETERS, (theta[i] for i in range(len(PARAMETERS))), strict=True))
+    coefficients = SimpleNamespace(**values, Iz=iz_rb + values["Iz_added"])
+    derivative = velocity_derivative(coefficients, nu[0], nu[1], nu[2], tau, absolute)
+    if isinstance(derivative[0], ca.SX | ca.MX):
+        return ca.vertcat(*derivative)
+    return np.array(derivative)
 
 
 def start_vector(vehicle: VehicleParams) -> np.ndarray:

@@ -24,7 +24,7 @@ from collections.abc import Mapping
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Protocol
 
 import casadi as ca
 import numpy as np
@@ -56,6 +56,8 @@ __all__ = [
     "top_yaw_rate",
     "heading_turn_time",
     "turn_up_time",
+    "HorizontalCoefficients",
+    "velocity_derivative",
     "yaw_damping_moment",
 ]
 
@@ -392,7 +394,22 @@ def top_yaw_rate(params: VehicleParams) -> float:
     return steady_speed(params.Nr, params.Nrr, float(params.thrust_authority[2]))
 
 
-def yaw_damping_moment(params: VehicleParams, yaw_rate, absolute=abs):
+class HorizontalCoefficients(Protocol):
+    """What the 3-DOF velocity equations read: a VehicleParams, or the same names bound to
+    other values (CasADi symbols while a vehicle is identified from its log)."""
+
+    m11: Any
+    m22: Any
+    Iz: Any
+    Xu: Any
+    Xuu: Any
+    Yv: Any
+    Yvv: Any
+    Nr: Any
+    Nrr: Any
+
+
+def yaw_damping_moment(params: HorizontalCoefficients, yaw_rate, absolute=abs):
     """The yaw damping moment at ``yaw_rate`` (N m, opposing it): Nr r + Nrr |r| r.
     ``absolute``: ``abs`` for numbers, ``ca.fabs`` for CasADi expressions."""
     return params.Nr * yaw_rate + params.Nrr * absolute(yaw_rate) * yaw_rate
@@ -460,6 +477,17 @@ def body_from_world(force_world, psi):
     return fx * cos_psi + fy * sin_psi, -fx * sin_psi + fy * cos_psi
 
 
+def velocity_derivative(p: HorizontalCoefficients, u_r, v_r, r, tau, absolute=abs):
+    """(u', v', r') of the 3-DOF model (module docstring) at the velocity (u_r, v_r) through
+    the water and yaw rate r under the body force ``tau`` = (X, Y, N), without the current's
+    turning terms: the one statement of the velocity equations, numbers, arrays or CasADi
+    (``absolute``: ``abs``, ``np.abs`` or ``ca.fabs``)."""
+    u_dot = (p.Xu * u_r + p.Xuu * absolute(u_r) * u_r + p.m22 * v_r * r + tau[0]) / p.m11
+    v_dot = (p.Yv * v_r + p.Yvv * absolute(v_r) * v_r - p.m11 * u_r * r + tau[1]) / p.m22
+    r_dot = (yaw_damping_moment(p, r, absolute) + (p.m11 - p.m22) * u_r * v_r + tau[2]) / p.Iz
+    return u_dot, v_dot, r_dot
+
+
 def dynamics(
     state, thrust, params: VehicleParams, disturbance_body=None, current_world=None,
     effectiveness=None,
@@ -507,9 +535,7 @@ def dynamics(
         tau_u = tau_u + disturbance_body[0]
         tau_v = tau_v + disturbance_body[1]
         tau_r = tau_r + disturbance_body[2]
-    p = params
-    u_dot = (p.Xu * u_r + p.Xuu * absolute(u_r) * u_r + p.m22 * v_r * r + tau_u) / p.m11
-    v_dot = (p.Yv * v_r + p.Yvv * absolute(v_r) * v_r - p.m11 * u_r * r + tau_v) / p.m22
+    u_dot, v_dot, r_dot = velocity_derivative(params, u_r, v_r, r, (tau_u, tau_v, tau_r), absolute)
     if current_world is not None:
         u_dot, v_dot = u_dot + r * v_c, v_dot - r * u_c
     derivative = (
@@ -518,7 +544,7 @@ def dynamics(
         r,
         u_dot,
         v_dot,
-        (yaw_damping_moment(p, r, absolute) + (p.m11 - p.m22) * u_r * v_r + tau_r) / p.Iz,
+        r_dot,
     )
     if symbolic:
         return ca.vertcat(*derivative)
