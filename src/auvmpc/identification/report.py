@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -17,29 +16,18 @@ from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import Identification
 from auvmpc.identification.logs import VELOCITY_NAMES
-from auvmpc.models.vehicle import preset_names
+from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
-from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
     "fit_figure",
     "identification_json",
     "markdown_report",
-    "start_file_data",
     "vehicle_file_text",
     "write_identification",
 ]
 
 VELOCITIES = ("u (m/s)", "v (m/s)", "r (rad/s)")
-
-
-def start_file_data(spec: str) -> dict[str, Any]:
-    """The start vehicle's fields as written (a preset name or a vehicle file)."""
-    if spec in preset_names():
-        text = (resources.files("auvmpc.presets") / "vehicles" / f"{spec}.yaml").read_text()
-    else:
-        text = read_text_file(spec, "--vehicle", "vehicle file")
-    return read_yaml_mapping(text, "--vehicle", spec, "vehicle fields")
 
 
 def _number(value: float) -> float:
@@ -175,7 +163,6 @@ def write_identification(
     identification-fit.png beside it."""
     from auvmpc.identification.estimation import identify
     from auvmpc.identification.logs import read_run_folder
-    from auvmpc.models.vehicle import load_vehicle
 
     out = Path(out)
     if out.suffix not in (".yaml", ".yml"):
@@ -185,8 +172,8 @@ def write_identification(
     for path in outputs:
         if path.exists() and not overwrite:
             raise ConfigError("--out", str(path), "exists; pass --overwrite to replace it")
-    start = load_vehicle(vehicle, "--vehicle")
-    start_data = start_file_data(vehicle)
+    start_data, source = vehicle_data(vehicle, "--vehicle")
+    start = validated_vehicle(start_data, source, "--vehicle")
     if not run_dirs:
         raise ConfigError("RUN_DIR", None, "give at least one run folder")
     logs = [read_run_folder(path, start.n_thrusters) for path in run_dirs]

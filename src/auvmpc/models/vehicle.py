@@ -57,6 +57,8 @@ __all__ = [
     "heading_turn_time",
     "turn_up_time",
     "HorizontalCoefficients",
+    "validated_vehicle",
+    "vehicle_data",
     "velocity_derivative",
     "yaw_damping_moment",
 ]
@@ -637,23 +639,34 @@ def preset_names() -> list[str]:
     )
 
 
+def vehicle_data(
+    spec: str | Path | Mapping[str, Any], field: str = "vehicle"
+) -> tuple[dict[str, Any], str]:
+    """A vehicle's fields as written (a preset name, a YAML file path, or an inline mapping)
+    and, for a file the user wrote, its name for errors ("vehicle file PATH", else "")."""
+    if isinstance(spec, Mapping):
+        return dict(spec), ""
+    name = str(spec)
+    source = ""
+    if name in preset_names():
+        text = (resources.files("auvmpc.presets") / "vehicles" / f"{name}.yaml").read_text()
+    elif name.endswith((".yaml", ".yml")) or Path(name).exists():
+        if not Path(name).exists():
+            raise ConfigError(field, name, "vehicle file not found")
+        text = read_text_file(name, field, "vehicle file")
+        source = f"vehicle file {name}"
+    else:
+        raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
+    return read_yaml_mapping(text, field, name, "vehicle fields"), source
+
+
 def load_vehicle(spec: str | Path | Mapping[str, Any], field: str = "vehicle") -> VehicleParams:
     """Vehicle from a preset name, a YAML file path, or an inline mapping."""
-    source = ""  # a file the user wrote, named in its errors
-    if isinstance(spec, Mapping):
-        data = dict(spec)
-    else:
-        name = str(spec)
-        if name in preset_names():
-            text = (resources.files("auvmpc.presets") / "vehicles" / f"{name}.yaml").read_text()
-        elif name.endswith((".yaml", ".yml")) or Path(name).exists():
-            if not Path(name).exists():
-                raise ConfigError(field, name, "vehicle file not found")
-            text = read_text_file(name, field, "vehicle file")
-            source = f"vehicle file {name}"
-        else:
-            raise ConfigError(field, name, f"unknown preset; known: {preset_names()}")
-        data = read_yaml_mapping(text, field, name, "vehicle fields")
+    return validated_vehicle(*vehicle_data(spec, field), field)
+
+
+def validated_vehicle(data: Mapping[str, Any], source: str, field: str) -> VehicleParams:
+    """A vehicle from its fields as :func:`vehicle_data` read them (errors name ``source``)."""
     try:
         return VehicleParams.model_validate(data)
     except ValidationError as error:
