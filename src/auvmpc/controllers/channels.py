@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation, timed_command
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, SIX_DOF_MEASUREMENT, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
 
@@ -98,7 +98,7 @@ class ReferenceWithDepth:
         self.reference = reference  # a references.Reference with a depth profile
 
     def states(self, t: np.ndarray) -> np.ndarray:
-        return np.hstack([self.reference.states(t), self.reference.depths(t)[:, :2]])
+        return np.hstack([self.reference.states(t), self.reference.depths(t)[:, : DEPTH.size]])
 
 
 class HorizontalAndDepth(Controller):

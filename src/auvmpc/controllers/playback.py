@@ -27,6 +27,7 @@ from auvmpc.controllers.base import (
     project_to_limits,
 )
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import read_text_file
 
@@ -39,22 +40,26 @@ _FIELD = "controller.playback.path"
 MAX_TABLE_BYTES = 64 * 1024 * 1024
 
 
-def write_thrust_table(path: Path, sample_time: float, thrust: np.ndarray) -> None:
-    """Write ``thrust`` (N, n) as a thrust table, row k at t = k ``sample_time``."""
-    n = thrust.shape[1]
+def write_thrust_table(
+    path: Path, sample_time: float, thrust: np.ndarray, inputs: tuple[str, ...]
+) -> None:
+    """Write ``thrust`` (N, n) as a thrust table, row k at t = k ``sample_time``, its columns
+    named by the vehicle's ``inputs`` (its actuators' names)."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["t", *(f"F{i + 1}" for i in range(n))])
+    writer.writerow(["t", *inputs])
     for k, row in enumerate(thrust):
         writer.writerow([f"{k * sample_time:.6f}", *(f"{value:.6f}" for value in row)])
     Path(path).write_text(buffer.getvalue())
 
 
-def read_thrust_table(path: str | Path, sample_time: float, n_thrusters: int) -> np.ndarray:
-    """The thrusts (N, n) of a thrust table; a bad table is a one-line ConfigError."""
+def read_thrust_table(path: str | Path, sample_time: float, inputs: tuple[str, ...]) -> np.ndarray:
+    """The thrusts (N, n) of a thrust table whose columns are t and the vehicle's ``inputs``;
+    a bad table is a one-line ConfigError."""
     text = read_text_file(path, _FIELD, "thrust table (CSV)", MAX_TABLE_BYTES)
     rows = list(csv.reader(io.StringIO(text)))
-    expected = ["t", *(f"F{i + 1}" for i in range(n_thrusters))]
+    n_thrusters = len(inputs)
+    expected = ["t", *inputs]
     if not rows or [name.strip() for name in rows[0]] != expected:
         raise ConfigError(_FIELD, str(path), f"the header must be {','.join(expected)}")
     try:
@@ -85,11 +90,12 @@ class ThrustPlayback(Controller):
         self.model = model
         self.sample_time = float(sample_time)
         self.table = thrust
-        self.reset(np.zeros(6), np.zeros(model.n_thrusters))
+        self.reset(np.zeros(HORIZONTAL.size), np.zeros(model.n_thrusters))
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> ThrustPlayback:
-        table = read_thrust_table(config.playback.path, config.sample_time, model.n_thrusters)
+        inputs = model.actuators.layout.names
+        table = read_thrust_table(config.playback.path, config.sample_time, inputs)
         return cls(model, config.sample_time, table)
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:

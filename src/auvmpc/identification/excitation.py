@@ -235,7 +235,7 @@ def write_excitation(
         named = os.path.relpath(Path(vehicle).resolve(), out.resolve().parent)
     scenario = excitation_scenario(named, excitation, table.name, out.stem, box_m)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_thrust_table(table, sample_time, excitation.thrust)
+    write_thrust_table(table, sample_time, excitation.thrust, params.actuators.layout.names)
     out.write_text(
         f"# auvmpc excite {vehicle} --duration {duration:g} --seed {seed}: thrusts in "
         f"{table.name}\n" + yaml.safe_dump(scenario, sort_keys=False, default_flow_style=None)
