@@ -723,7 +723,8 @@ def _reference_clearance(log, obstacle_center, velocity, radius, vehicle_radius,
 # the disc appearing at 5 s (-0.032 m): its frozen model holds the Munk moment (m11 - m22) u v
 # at the present sway for 15 s, the plant's sway reverses beside the disc and the vehicle turns
 # into it where the plan predicted a steady heading; the check sees that turn on the nonlinear
-# model and moves the half-planes out by the prediction's error (docs/paper-reproduction.md 4).
+# model and moves the half-planes out by the prediction's error
+# (docs/paper-reproduction.md#obstacles-and-the-frozen-model).
 @pytest.mark.parametrize("appear_time", [2.0, 5.0, 8.0])
 @pytest.mark.parametrize("controller_type", list(CONTROLLERS))
 def test_obstacle_appearing_on_the_path_is_never_touched(controller_type, appear_time):

@@ -206,7 +206,8 @@ class ControllerConfig(StrictModel):
         description="mpc: after the QP, roll the plan's thrusts through the nonlinear model; "
         "where that rollout enters an obstacle's keep-out disc, solve the same QP once more "
         "with those steps' half-planes moved out by the frozen prediction's error there "
-        "(docs/paper-reproduction.md, 4); false: the paper's frozen prediction alone",
+        "(docs/paper-reproduction.md#obstacles-and-the-frozen-model); false: the paper's "
+        "frozen prediction alone",
     )
     obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
         default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"

@@ -282,9 +282,10 @@ class PaperMpc(LinearMpc):
         The frozen model neither turns the predicted velocity with the heading nor lets
         the Munk moment (m11 - m22) u v follow the sway, so beside a disc passed with sway
         the vehicle can turn into the disc where the plan predicted a steady heading
-        (docs/paper-reproduction.md, 4). The check costs one rollout per sample with an
-        obstacle in view; the model, the cost, the moves and the QP are the paper's, and
-        while no rollout enters a disc the result is the paper's plan unchanged.
+        (docs/paper-reproduction.md#obstacles-and-the-frozen-model). The check costs one
+        rollout per sample with an obstacle in view; the model, the cost, the moves and the
+        QP are the paper's, and while no rollout enters a disc the result is the paper's
+        plan unchanged.
         """
         if not self.config.rollout_check or not observation.obstacles:
             return None

@@ -8,19 +8,21 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from auvmpc.controllers.config import CONTROLLER_PRESETS
+from auvmpc.experiments.markdown_table import Column, legend, table
 from auvmpc.experiments.outputs import OutputKind, atomic_write_text, mark_folder, staged_folder
+from auvmpc.experiments.paper_claims import PAPER_CLAIMS, missed_claims
 from auvmpc.experiments.run import fill_run_folder, simulate
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.scenario import ResolvedScenario, load_scenario, planar_twin
 from auvmpc.sim.log import SimLog
-from auvmpc.sim.metrics import STEP_METRIC_KEYS
+from auvmpc.sim.metrics import STEADY_WINDOW_S
 
 __all__ = ["PAPER_VARIANTS", "PAPER_SCENARIOS", "SWEEP_LEVELS", "reproduce", "sweep_scale"]
 
@@ -36,6 +38,8 @@ DEPTH_SCENARIOS = ("paper-depth-calm", "paper-depth-waves")  # section 4.3, the 
 SIX_DOF_SCENARIOS = ("paper-6dof",)
 SIX_DOF_VARIANTS = ("mpc", "ltv-mpc-offset-free")
 # Uncertainty level -1..1 maps to rigid-body yaw inertia -25..+25 % and added -35..+35 %.
+IZ_RB_SPAN = 0.25
+IZ_ADDED_SPAN = 0.35
 SWEEP_LEVELS = tuple(float(level) for level in np.linspace(-1.0, 1.0, 7))
 SWEEP_VARIANTS = ("mpc", "ltv-mpc", "ltv-mpc-nc30", "ltv-mpc-offset-free", "baseline")
 SUMMARY_KEYS = (
@@ -49,8 +53,8 @@ SUMMARY_KEYS = (
 def sweep_scale(level: float) -> tuple[str, ...]:
     """Overrides for one uncertainty level (paper-model.md section 6)."""
     return (
-        f"plant.scale.Iz_rb={1.0 + 0.25 * level:.6g}",
-        f"plant.scale.Iz_added={1.0 + 0.35 * level:.6g}",
+        f"plant.scale.Iz_rb={1.0 + IZ_RB_SPAN * level:.6g}",
+        f"plant.scale.Iz_added={1.0 + IZ_ADDED_SPAN * level:.6g}",
     )
 
 
@@ -108,6 +112,7 @@ def _reproduce_into(
     (out_dir / "runs").mkdir(parents=True, exist_ok=True)
     planned = jobs(include_sweep)
     rows = []
+    transients = {}  # scenario -> its transient_s, for the legend
     for index, job in enumerate(planned):
         if on_run is not None:
             on_run(index, len(planned), job.folder_name)
@@ -120,6 +125,7 @@ def _reproduce_into(
         row.update({key: result.metrics[key] for key in SUMMARY_KEYS})
         row.update(velocity_settling(result.log.horizontal()))
         rows.append(row)
+        transients.setdefault(job.scenario, result.metrics["transient_s"])
     depth_rows = []
     for name in DEPTH_SCENARIOS:
         if on_run is not None:
@@ -142,7 +148,7 @@ def _reproduce_into(
     atomic_write_text(out_dir / "depth.md", depth_markdown(depth_rows))
     atomic_write_text(out_dir / "summary.json", json.dumps(rows, indent=2))
     atomic_write_text(out_dir / "summary.csv", _csv(rows))
-    atomic_write_text(out_dir / "summary.md", summary_markdown(rows))
+    atomic_write_text(out_dir / "summary.md", summary_markdown(rows, transients))
     if include_sweep and figures:
         _sweep_figure(rows, out_dir)
     return rows
@@ -171,42 +177,256 @@ def velocity_settling(log: SimLog) -> dict[str, float | None]:
     return settled
 
 
-def summary_markdown(rows: Sequence[dict]) -> str:
-    columns = (
-        ("scenario", "scenario"), ("controller", "controller"), ("level", "uncertainty"),
-        ("rms_position_error_after_transient_m", "RMS err after transient (m)"),
-        ("max_position_error_after_transient_m", "max err after transient (m)"),
-        ("final_position_error_m", "final err (m)"),
-        ("min_obstacle_clearance_m", "min clearance (m)"),
-        ("thrust_limit_violations", "F viol."), ("thrust_rate_violations", "dF viol."),
-        ("solver_failures", "fails"), ("solve_ms_median", "median ms"), ("solve_ms_p99", "p99 ms"),
-        ("settle_r_s", "r settles (s)"), ("settle_u_s", "u settles (s)"),
-        ("settle_v_s", "v settles (s)"),
-    )  # fmt: skip
-    lines = [
-        "| " + " | ".join(title for _, title in columns) + " |",
-        "|" + "---|" * len(columns),
+# The tables' columns, each described once: the markdown tables and their legends come from
+# these. Units are in the metric keys too (docs/run-folder.md defines every metric).
+_AFTER_TRANSIENT = "after the transient"
+_SOLVE = "wall time of one controller call (varies with the machine and its load)"
+_CLAIM_COLUMN = Column(
+    "paper_claim",
+    "the paper's claims for this scenario (below): `met` if the row meets them all, else the"
+    " missed ones, each linked to its explanation; empty where the paper claims nothing."
+    " Only in this file",
+    title="paper's claim",
+)
+SUMMARY_COLUMNS = (
+    Column("scenario", "the paper's scenario (`auvmpc scenarios`)"),
+    Column(
+        "controller",
+        "the controller preset: `mpc` is the paper's (its model frozen at the current state,"
+        " 2 moves), `ltv-` linearises along the plan, `-nc30` frees every move of the"
+        " horizon, `-offset-free` estimates the current, `baseline` is PID with feedback"
+        " linearisation, blind to obstacles"
+        " (docs/paper-reproduction.md, `CONTROLLER_PRESETS`)",
+    ),
+    Column(
+        "level",
+        f"the plant's yaw-inertia error, -1..+1: rigid-body {-100 * IZ_RB_SPAN:+.0f}.."
+        f"{100 * IZ_RB_SPAN:+.0f} %, added {-100 * IZ_ADDED_SPAN:+.0f}.."
+        f"{100 * IZ_ADDED_SPAN:+.0f} %"
+        " (the controller keeps the nominal); `-`: the scenario as written (paper-disturbed's"
+        " plant is level -1's)",
+        title="uncertainty",
+    ),
+    Column(
+        "rms_position_error_after_transient_m",
+        f"RMS distance from the reference position {_AFTER_TRANSIENT}",
+        "m",
+        "RMS err after transient",
+    ),
+    Column(
+        "max_position_error_after_transient_m",
+        f"largest distance from the reference position {_AFTER_TRANSIENT}",
+        "m",
+        "max err after transient",
+    ),
+    Column("final_position_error_m", "distance at the end of the run", "m", "final err"),
+    Column(
+        "min_obstacle_clearance_m",
+        "smallest gap between the vehicle's disc and an obstacle's; negative is contact;"
+        " `-`: no obstacles",
+        "m",
+        "min clearance",
+    ),
+    Column(
+        "thrust_limit_violations",
+        "samples whose applied thrust left the hard limits (the paper: none)",
+        title="F viol.",
+    ),
+    Column(
+        "thrust_rate_violations",
+        "samples whose change of thrust exceeded the rate limit (the paper: none)",
+        title="dF viol.",
+    ),
+    Column(
+        "solver_failures",
+        "samples whose command was not the optimiser's (fallback or recovery)",
+        title="fails",
+    ),
+    Column("solve_ms_median", f"median {_SOLVE}", "ms", "median"),
+    Column("solve_ms_p99", f"99th percentile {_SOLVE}", "ms", "p99"),
+    *(
+        Column(
+            f"settle_{name}_s",
+            f"time after which the {what} error stays within {SETTLING_BAND:g} {unit} until the"
+            f" first straight ends at {FIRST_STRAIGHT_END_S:g} s; `-`: it does not",
+            "s",
+            f"{name} settles",
+        )
+        for name, what, unit in (
+            ("r", "yaw-rate", "rad/s"),
+            ("u", "surge", "m/s"),
+            ("v", "sway", "m/s"),
+        )
+    ),  # fmt: skip
+    _CLAIM_COLUMN,
+)
+DEPTH_COLUMNS = (
+    Column("scenario", "the tank step in calm water, and in 0.1 m waves (docs/depth.md)"),
+    Column("rise_time_s", "10 % to 90 % of the step", "s"),
+    Column(
+        "settling_time_0p05m_s",
+        "from the step until the depth stays within 0.05 m of the target; `-`: it does not",
+        "s",
+    ),
+    Column(
+        "settling_time_2pct_s",
+        "from the step until the depth stays within 2 % of the step; `-`: it does not",
+        "s",
+    ),
+    Column("overshoot_m", "beyond the target, in the step's direction", "m"),
+    Column(
+        "steady_state_error_mean_abs_m",
+        f"mean distance from the depth setpoint over the last {STEADY_WINDOW_S:g} s",
+        "m",
+    ),
+    Column(
+        "steady_state_error_max_abs_m",
+        f"largest distance from the depth setpoint over the last {STEADY_WINDOW_S:g} s",
+        "m",
+    ),
+    Column("max_z_m", "highest depth reached (z up: below 0 is below the still surface)", "m"),
+    Column("thrust_limit_violations", "samples whose applied thrust left the hard limits"),
+    Column("thrust_rate_violations", "samples whose change of thrust exceeded the rate limit"),
+    Column("solve_ms_median", f"median {_SOLVE}", "ms"),
+)
+_VELOCITY_ERROR = "RMS of the true minus the reference {} " + _AFTER_TRANSIENT
+SIX_DOF_COLUMNS = (
+    Column("scenario", "the 6-DOF scenario (docs/six-dof.md)"),
+    Column("controller", "the horizontal controller preset (docs/paper-reproduction.md)"),
+    Column(
+        "plant",
+        "`6-DOF`: the scenario's plant; `3-DOF`: its planar twin (the same controller,"
+        " reference, current and noise on the 3-DOF plant)",
+    ),
+    Column(
+        "rms_position_error_after_transient_m",
+        f"RMS horizontal distance from the reference {_AFTER_TRANSIENT}",
+        "m",
+    ),
+    Column(
+        "max_position_error_after_transient_m",
+        f"largest horizontal distance from the reference {_AFTER_TRANSIENT}",
+        "m",
+    ),
+    Column(
+        "rms_heading_error_after_transient_rad",
+        f"RMS heading error {_AFTER_TRANSIENT}",
+        "rad",
+    ),
+    Column(
+        "rms_yaw_rate_error_after_transient_rad_per_s",
+        _VELOCITY_ERROR.format("yaw rate"),
+        "rad/s",
+    ),
+    Column("rms_surge_error_after_transient_m_per_s", _VELOCITY_ERROR.format("surge"), "m/s"),
+    Column("rms_sway_error_after_transient_m_per_s", _VELOCITY_ERROR.format("sway"), "m/s"),
+    Column(
+        "depth_rms_error_after_transient_m",
+        f"RMS depth error {_AFTER_TRANSIENT}; `-` on the 3-DOF plant",
+        "m",
+    ),
+    Column("max_abs_roll_rad", "largest true roll; `-` on the 3-DOF plant", "rad"),
+    Column("max_abs_pitch_rad", "largest true pitch; `-` on the 3-DOF plant", "rad"),
+    Column(
+        "thrust_limit_violations",
+        "samples whose applied thrust left the hard limits (every thruster)",
+    ),
+    Column(
+        "thrust_rate_violations",
+        "samples whose change of thrust exceeded the rate limit (every thruster)",
+    ),
+    Column("verdict", "`ok`, `degraded` or `lost` (docs/verdict.md)"),
+)
+# What a 6-DOF row takes from the run's metrics and the velocity errors.
+SIX_DOF_KEYS = tuple(
+    column.key
+    for column in SIX_DOF_COLUMNS
+    if column.key not in ("scenario", "controller", "plant")
+)
+
+
+def summary_markdown(rows: Sequence[dict], transients: Mapping[str, float]) -> str:
+    """summary.md: the rows, each judged against the paper's claims for its scenario, the
+    legend of the columns and the claims. ``transients``: scenario -> its ``transient_s``."""
+    shown = [{**row, _CLAIM_COLUMN.key: _claim_cell(row)} for row in rows]
+    after = ", ".join(f"{name} {seconds:g} s" for name, seconds in transients.items())
+    claims = [
+        f"| {claim.name} | {claim.scenario} | {claim.paper} | {claim.test} |"
+        f" [{claim.link}]({claim.link}) |"
+        for claim in PAPER_CLAIMS
     ]
-    for row in rows:
-        lines.append("| " + " | ".join(_cell(row[key]) for key, _ in columns) + " |")
+    lines = [
+        "# The paper's horizontal scenarios (section 4.1)",
+        "",
+        *table(shown, SUMMARY_COLUMNS),
+        "",
+        "## Columns",
+        "",
+        f'"After the transient" is from the scenario\'s `transient_s` on ({after}).'
+        " summary.csv and summary.json hold the same rows under the keys below, and the errors"
+        " over the whole run and the slowest solve; the run folder"
+        " `runs/<scenario>--<controller>[--level<level>]` holds every metric in its run.json"
+        " (docs/run-folder.md).",
+        "",
+        *legend(SUMMARY_COLUMNS, "key"),
+        "",
+        "## The paper's claims",
+        "",
+        "Each row is judged against what the paper claims for its scenario. A missed claim"
+        " links to the section of docs/paper-reproduction.md that explains it; the links are"
+        " relative to the repository's root, not to this folder. The claims about the sweep as"
+        " a whole and those this table cannot show are compared on that page only.",
+        "",
+        "| claim | scenario | the paper | judged here as | why rows miss it |",
+        "|---|---|---|---|---|",
+        *claims,
+    ]
     return "\n".join(lines) + "\n"
+
+
+def _claim_cell(row: Mapping) -> str:
+    missed = missed_claims(row)
+    if missed is None:
+        return ""
+    if not missed:
+        return "met"
+    return "missed: " + ", ".join(f"[{claim.name}]({claim.link})" for claim in missed)
 
 
 def depth_markdown(rows: Sequence[dict]) -> str:
-    keys = ("scenario", *STEP_METRIC_KEYS, "max_z_m", "thrust_limit_violations",
-            "thrust_rate_violations", "solve_ms_median")  # fmt: skip
-    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(_cell(row[key]) for key in keys) + " |" for row in rows]
+    """depth.md: the tank step (section 4.3) and the legend of its columns."""
+    lines = [
+        "# The tank depth step (section 4.3)",
+        "",
+        *table(rows, DEPTH_COLUMNS),
+        "",
+        "## Columns",
+        "",
+        "Each run folder `runs/<scenario>` holds every metric in its run.json"
+        " (docs/run-folder.md).",
+        "",
+        *legend(DEPTH_COLUMNS),
+    ]
     return "\n".join(lines) + "\n"
 
 
-SIX_DOF_KEYS = (
-    "rms_position_error_after_transient_m", "max_position_error_after_transient_m",
-    "rms_heading_error_after_transient_rad", "rms_yaw_rate_error_after_transient_rad_per_s",
-    "rms_surge_error_after_transient_m_per_s", "rms_sway_error_after_transient_m_per_s",
-    "depth_rms_error_after_transient_m", "max_abs_roll_rad", "max_abs_pitch_rad",
-    "thrust_limit_violations", "thrust_rate_violations", "verdict",
-)  # fmt: skip
+def six_dof_markdown(rows: Sequence[dict]) -> str:
+    """six_dof.md: the same controller on the 6-DOF plant and on the 3-DOF one (section 4.2),
+    and the legend of its columns."""
+    lines = [
+        "# The 6-DOF validation (section 4.2)",
+        "",
+        *table(rows, SIX_DOF_COLUMNS),
+        "",
+        "## Columns",
+        "",
+        '"After the transient" is from the scenario\'s `transient_s` on. Each run folder'
+        " `runs/<scenario>--<controller>--<plant>` holds every metric in its run.json"
+        " (docs/run-folder.md).",
+        "",
+        *legend(SIX_DOF_COLUMNS),
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def _six_dof_pair(name: str, label: str, out_dir: Path, figures: bool) -> list[dict]:
@@ -239,21 +459,6 @@ def velocity_errors(log: SimLog, transient_s: float) -> dict[str, float]:
     }
 
 
-def six_dof_markdown(rows: Sequence[dict]) -> str:
-    keys = ("scenario", "controller", "plant", *SIX_DOF_KEYS)
-    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(_cell(row[key]) for key in keys) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
-
-
-def _cell(value) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
-
-
 def _csv(rows: Sequence[dict]) -> str:
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
@@ -273,11 +478,13 @@ def _sweep_figure(rows: Sequence[dict], out_dir: Path) -> None:
         series[label] = [
             by_level[level]["max_position_error_after_transient_m"] for level in levels
         ]
-    percent = [f"{25 * level:+.0f}/{35 * level:+.0f}" for level in levels]
+    rb, added = 100 * IZ_RB_SPAN, 100 * IZ_ADDED_SPAN  # %
+    percent = [f"{rb * level:+.0f}/{added * level:+.0f}" for level in levels]
     figure = figure_error_vs_parameter(
         levels,
         series,
-        xlabel="uncertainty level (-1: Iz_rb -25 %, Iz_added -35 %; +1: +25 %, +35 %)",
+        xlabel=f"uncertainty level (-1: Iz_rb {-rb:.0f} %, Iz_added {-added:.0f} %;"
+        f" +1: {rb:+.0f} %, {added:+.0f} %)",
         ylabel="max position error, t >= 30 s (m)",
         title="paper-disturbed: error against yaw-inertia uncertainty ("
         + ", ".join(percent[::3])
