@@ -249,7 +249,8 @@ def test_solution_agrees_with_our_nonlinear_mpc_in_full_mode(jmse, case):
     )
     if observation.obstacles:
         centre = observation.obstacles[0].center
-        reach = 0.5 + config.vehicle_radius + config.obstacle_margin
+        filled = config.for_vehicle(jmse)  # the radius from the vehicle's size
+        reach = 0.5 + filled.vehicle_radius + filled.obstacle_margin
         gaps = np.hypot(*(result.predicted_states[:, :2] - centre).T) - reach
         assert abs(gaps.min()) < NMPC_PREDICTION_TOL_M, "the obstacle constraint is active"
 

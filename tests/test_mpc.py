@@ -396,7 +396,8 @@ def test_first_move_with_an_obstacle_matches_the_non_condensed_ocp(controller_ty
         controller, state, reference, previous, (obstacle,)
     )
 
-    reach = obstacle.radius + config.vehicle_radius + config.obstacle_margin
+    filled = config.for_vehicle(model)  # the radius from the vehicle's size
+    reach = obstacle.radius + filled.vehicle_radius + filled.obstacle_margin
     assert len(steps) > 0
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(offsets - normals @ obstacle.center, reach, rtol=0, atol=1e-12)

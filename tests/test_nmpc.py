@@ -158,8 +158,9 @@ def test_program_constraints_use_the_package_rk4_map_and_exact_distances(preset,
     rows = g[6 * ny + 4 * n :].reshape(ny, MAX_OBSTACLES)
     # The nearest obstacle takes slot 0.
     order = sorted(obstacles, key=lambda o: np.linalg.norm(o.center - states[0, :2]))
+    filled = config.for_vehicle(params)  # the radius from the vehicle's size
     for o, obstacle in enumerate(order):
-        reach = obstacle.radius + config.vehicle_radius + config.obstacle_margin
+        reach = obstacle.radius + filled.vehicle_radius + filled.obstacle_margin
         for i in range(1, ny + 1):
             centre = obstacle.center_at(i * SAMPLE_TIME)
             expected = np.linalg.norm(states[i, :2] - centre) - reach + slack[i - 1, o]

@@ -44,7 +44,8 @@ def test_ocp_states_limits_and_schedule_once(vehicle, request):
     assert weights.shape == (config.prediction_horizon, 6)
     np.testing.assert_array_equal(weights[-1], config.S)
     np.testing.assert_array_equal(weights[0], config.Q)
-    assert ocp.keep_out_extra == config.vehicle_radius + config.obstacle_margin
+    filled = config.for_vehicle(model)  # the radius from the vehicle's size
+    assert ocp.keep_out_extra == filled.vehicle_radius + filled.obstacle_margin
 
 
 # -- the shell --------------------------------------------------------------------------------

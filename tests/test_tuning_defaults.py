@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 import yaml
 
-from auvmpc.controllers.config import THRUST_MOVE_COST, ControllerConfig, ThrustPenalty
+from auvmpc.controllers.config import (
+    DEFAULT_VEHICLE_RADIUS_M,
+    THRUST_MOVE_COST,
+    ControllerConfig,
+    ControllerType,
+    ThrustPenalty,
+)
 from auvmpc.estimation import ObserverConfig
 from auvmpc.experiments.run import simulate
 from auvmpc.models.integrators import rk4_step
@@ -19,7 +25,9 @@ from auvmpc.models.random_vehicles import random_vehicle
 from auvmpc.models.vehicle import dynamics, load_vehicle, preset_names, scaled, stable_plant_step
 from auvmpc.scenario import (
     DEFAULT_PLANT_STEP_S,
+    ResolvedDepthScenario,
     ResolvedScenario,
+    builtin_scenarios,
     load_scenario,
     validate_scenario,
 )
@@ -30,6 +38,7 @@ PAPER_R = (0.01, 0.01, 0.01, 0.01)
 FORMER_PRIOR = (20.0, 20.0, 2.0)
 FORMER_RATE = (1.0, 1.0, 0.05)
 FORMER_TUNING_RTOL = 0.11  # measured: 6 % (X, Y) and 10 % (N) away
+PAPER_VEHICLE_RADIUS_M = 0.5  # r_auv, paper-model.md section 7
 
 
 @pytest.mark.parametrize("preset", preset_names())
@@ -96,9 +105,13 @@ def test_a_loaded_scenario_records_the_values_it_runs_with():
 
 @pytest.mark.parametrize("name", ["paper-ideal", "paper-disturbed", "paper-obstacles"])
 def test_paper_scenarios_keep_the_papers_weights(name):
-    controller = load_scenario(name).scenario.controller
+    resolved = load_scenario(name)
+    controller = resolved.scenario.controller
     assert controller.R == PAPER_R
     assert controller.thrust_penalty is ThrustPenalty.ABSOLUTE
+    # the paper's r_auv as written, not the one from the vehicle's size (0.51 m)
+    assert controller.vehicle_radius == PAPER_VEHICLE_RADIUS_M
+    assert "vehicle_radius" not in resolved.choices
 
 
 # The issue's floor for the default controller on an ideal circle, any vehicle (m).
@@ -196,3 +209,68 @@ def test_a_campaign_may_scale_a_default_that_depends_on_the_vehicle(tmp_path):
     default = load_scenario("bluerov2-figure-eight").scenario.controller.R[0]
     scaled_weight = scenario_for_run(load_campaign(path), 0).scenario.controller.R[0]
     assert 2.0 * default <= scaled_weight <= 3.0 * default
+
+
+# -- controller.vehicle_radius from the vehicle's size ----------------------------------------
+
+
+@pytest.mark.parametrize("preset", preset_names())
+def test_the_default_vehicle_radius_is_the_disc_through_the_planforms_corners(preset):
+    """Omitted, the radius is half the length x width diagonal: the disc round the middle
+    of the planform that its farthest corner touches, so it holds the hull at any heading;
+    run.json's ``choices`` and ``auvmpc explain`` say so."""
+    model = load_vehicle(preset)
+    size = model.size
+    assert size is not None, "every preset has a size"
+    radius = ControllerConfig().for_vehicle(model).vehicle_radius
+    corners = np.array([[size.length, size.width], [size.length, -size.width]]) / 2.0
+    assert radius == pytest.approx(np.hypot(*corners.T).max(), rel=1e-12)
+    assert radius == pytest.approx(math.hypot(size.length, size.width) / 2.0, rel=1e-12)
+    chosen = ControllerConfig().choices(model)["vehicle_radius"]
+    assert chosen["value"] == radius
+    assert f"{size.length:g} x {size.width:g} m planform" in chosen["why"]
+
+
+def test_the_bluerov2_heavy_gets_the_disc_of_its_published_frame():
+    """457 x 575 mm (Blue Robotics): 0.367 m, where every vehicle had 0.5 m before."""
+    radius = ControllerConfig().for_vehicle(load_vehicle("bluerov2-heavy")).vehicle_radius
+    assert radius == pytest.approx(0.3672, abs=1e-4)
+
+
+def test_a_vehicle_without_size_keeps_half_a_metre():
+    model = load_vehicle("bluerov2-heavy").model_copy(update={"size": None})
+    assert ControllerConfig().for_vehicle(model).vehicle_radius == DEFAULT_VEHICLE_RADIUS_M
+    chosen = ControllerConfig().choices(model)["vehicle_radius"]
+    assert chosen["value"] == DEFAULT_VEHICLE_RADIUS_M
+    assert "has no size" in chosen["why"]
+
+
+def test_a_given_vehicle_radius_wins_over_the_size():
+    model = load_vehicle("rexrov")  # its size gives 1.48 m
+    given = ControllerConfig(vehicle_radius=0.8)
+    assert given.for_vehicle(model).vehicle_radius == 0.8
+    assert "vehicle_radius" not in given.choices(model)
+    assert given.ocp(model).keep_out_extra == 0.8 + given.obstacle_margin
+
+
+@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize(
+    "controller", [kind for kind in ControllerType if kind is not ControllerType.THRUST_PLAYBACK]
+)
+def test_a_filled_config_always_has_a_vehicle_radius(preset, controller):
+    model = load_vehicle(preset)
+    filled = ControllerConfig(type=controller).for_vehicle(model)
+    assert isinstance(filled.vehicle_radius, float) and filled.vehicle_radius > 0
+    assert filled.ocp(model).keep_out_extra == filled.vehicle_radius + filled.obstacle_margin
+
+
+@pytest.mark.parametrize("name", list(builtin_scenarios()))
+def test_every_built_in_scenario_runs_with_a_vehicle_radius(name):
+    """What the session, the clearance, the figures and run.json read: never None."""
+    resolved = load_scenario(name)
+    controller = resolved.scenario.controller
+    if isinstance(resolved, ResolvedDepthScenario):  # no obstacles, no radius
+        assert "vehicle_radius" not in type(controller).model_fields
+        return
+    radius = controller.vehicle_radius
+    assert isinstance(radius, float) and radius > 0

@@ -33,6 +33,7 @@ __all__ = [
     "DepthControllerConfig",
     "DepthObserverConfig",
     "DEFAULT_SAMPLE_TIME_S",
+    "DEFAULT_VEHICLE_RADIUS_M",
     "HEADING_PER_SAMPLE_RAD",
     "DisturbanceBound",
     "NmpcMode",
@@ -42,6 +43,7 @@ __all__ = [
     "ThrustPenalty",
     "default_sample_time",
     "default_sqp_iterations",
+    "default_vehicle_radius",
     "default_thrust_weights",
     "stable_model_substeps",
     "velocity_change_time",
@@ -122,6 +124,28 @@ class PlaybackConfig(StrictModel):
 # The validation context of a scenario read back from a run folder's run.json.
 SAVED_RUN = "saved_run"
 
+# controller.vehicle_radius for a vehicle file without ``size`` (m): the value every vehicle
+# had before the radius came from the size, and the paper's r_auv (paper-model.md sec. 7).
+DEFAULT_VEHICLE_RADIUS_M = 0.5
+
+
+def default_vehicle_radius(model: VehicleParams) -> float:
+    """``controller.vehicle_radius`` when the scenario gives none (m): half the diagonal of
+    the vehicle's planform, hypot(length, width) / 2; DEFAULT_VEHICLE_RADIUS_M without size.
+
+    Why the diagonal: the obstacle constraint (and the clearance measured) keeps a disc round
+    the vehicle's reference point, its (x, y), out of every keep-out disc, whatever the
+    heading. The disc therefore has to hold the hull at any heading, and the smallest disc
+    round the centre of a length x width box that does is the one through its corners. Half
+    the length alone (the hull's nose) would let a corner into the obstacle when the vehicle
+    passes it sideways. It takes the reference point at the middle of the size box (the
+    body origin of the presets is the hull's centre, near enough); the height does not
+    enter, the constraint is in the horizontal plane.
+    """
+    if model.size is None:
+        return DEFAULT_VEHICLE_RADIUS_M
+    return math.hypot(model.size.length, model.size.width) / 2.0
+
 
 def _registered_types(schema: dict[str, Any]) -> None:
     """The file schema of ``controller.type``: the names registered when it is written (in a
@@ -188,8 +212,12 @@ class ControllerConfig(StrictModel):
         "h half the thrust range, so that (with the increment penalty) a thruster's move by h "
         "costs the same on any vehicle, see docs/tuning.md",
     )
-    vehicle_radius: NonNegative = Field(
-        default=0.5, description="vehicle envelope disc for obstacle constraints and clearance (m)"
+    vehicle_radius: NonNegative | None = Field(
+        default=None,
+        description="radius of the disc round the vehicle's reference point that is kept out "
+        "of every obstacle's disc and from which clearance is measured; omitted: half the "
+        "diagonal of the vehicle's size, length x width, the disc that holds the hull at any "
+        f"heading, or {DEFAULT_VEHICLE_RADIUS_M:g} for a vehicle file without size (m)",
     )
     thrust_penalty: ThrustPenalty = Field(
         default=ThrustPenalty.INCREMENT,
@@ -353,6 +381,8 @@ class ControllerConfig(StrictModel):
             update["model_substeps"] = stable_model_substeps(model, sample_time)
         if self.R is None:
             update["R"] = default_thrust_weights(model)
+        if self.vehicle_radius is None:
+            update["vehicle_radius"] = default_vehicle_radius(model)
         if self._linearises_along_a_plan and self.trust_region_weight is None:
             update["trust_region_weight"] = TRUST_REGION_WEIGHTS[self.type]
         if (
@@ -417,6 +447,19 @@ class ControllerConfig(StrictModel):
                 f"({(model.thrust_max - model.thrust_min) / 2.0:.4g} N): moving a thruster by h "
                 "costs the same on any vehicle",
             }
+        if self.vehicle_radius is None:
+            if model.size is None:
+                why = (
+                    f"{model.name} has no size: the {DEFAULT_VEHICLE_RADIUS_M:g} m of a "
+                    "vehicle without one (give size {length, width, height} in its file)"
+                )
+            else:
+                why = (
+                    f"half the diagonal of its {model.size.length:g} x {model.size.width:g} m "
+                    "planform (size): the disc round its reference point that holds the hull "
+                    "at any heading"
+                )
+            chosen["vehicle_radius"] = {"value": filled.vehicle_radius, "why": why}
         if self.type is ControllerType.NMPC and "linearisation_iterations" not in given:
             change = velocity_change_time(model)
             chosen["linearisation_iterations"] = {
@@ -450,12 +493,13 @@ class ControllerConfig(StrictModel):
         """The tracking problem this configuration poses for ``model``'s horizontal thrusters."""
         from auvmpc.controllers.base import horizontal_limits
 
+        filled = self.for_vehicle(model)
         return TrackingOcp.from_config(
-            self.for_vehicle(model),
+            filled,
             model.n_thrusters,
             horizontal_limits(model),
-            slack_penalty=self.obstacle_slack_penalty,
-            keep_out_extra=self.vehicle_radius + self.obstacle_margin,
+            slack_penalty=filled.obstacle_slack_penalty,
+            keep_out_extra=filled.vehicle_radius + filled.obstacle_margin,
         )
 
     def move_schedule(self) -> tuple[int, ...]:

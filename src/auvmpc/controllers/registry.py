@@ -97,7 +97,7 @@ def build_controller(
     )
     if config.type in RECOVERED_TYPES:
         controller.recovery = StabilisingFeedback(
-            model, controller.sample_time, config.vehicle_radius + config.obstacle_margin
+            model, controller.sample_time, filled.vehicle_radius + filled.obstacle_margin
         )
     elif config.type == DEPTH_MPC:
         controller.recovery = DepthFeedback(controller.heave, controller.sample_time)

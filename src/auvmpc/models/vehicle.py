@@ -122,8 +122,9 @@ class HeaveParams(StrictModel):
 class VehicleSize(StrictModel):
     """The hull's outer envelope: the smallest box round the vehicle, body axes (m).
 
-    Optional in a vehicle file and read by nothing that simulates or controls: it documents
-    the vehicle and is what ``auvmpc vehicle new`` estimates a model from."""
+    Optional in a vehicle file and read by no model: it documents the vehicle, is what
+    ``auvmpc vehicle new`` estimates a model from, and sets ``controller.vehicle_radius``
+    when a scenario omits it (controllers/config.py, default_vehicle_radius)."""
 
     length: PositiveFloat = Field(description="along x, forward (m)")
     width: PositiveFloat = Field(description="along y, starboard (m)")
@@ -145,8 +146,8 @@ class VehicleParams(StrictModel):
     mass: PositiveFloat = Field(description="rigid-body mass (kg)")
     size: VehicleSize | None = Field(
         default=None,
-        description="outer envelope {length, width, height} (m), if known; documentation "
-        "only: no model or controller reads it",
+        description="outer envelope {length, width, height} (m), if known; no model reads "
+        "it; an omitted controller.vehicle_radius is half its length x width diagonal",
     )
     m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
     m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")
