@@ -248,3 +248,79 @@ def test_a_run_shorter_than_the_transient_is_judged_on_what_there_is(vehicle):
 def test_longest_run():
     assert longest_run(np.array([], dtype=bool)) == 0
     assert longest_run(np.array([0, 1, 1, 0, 1, 1, 1, 0], dtype=bool)) == 3
+
+
+# A detour round an obstacle on the circle: the reference at t = 60 s passes 0.1 m from the
+# centre of a 1 m disc; keep-out radius 1 + 0.5 (vehicle) + 0.1 (margin) = 1.6 m.
+OBSTACLE_RADIUS, VEHICLE_RADIUS, MARGIN = 1.0, 0.5, 0.1
+KEEP_OUT = OBSTACLE_RADIUS + VEHICLE_RADIUS + MARGIN
+
+
+def _obstacle_at(t_s: float, inward_m: float):
+    from auvmpc.environment.obstacles import ObstacleConfig
+
+    angle = SPEED / RADIUS * t_s
+    centre = (RADIUS - inward_m) * np.array([math.cos(angle), math.sin(angle)])
+    return ObstacleConfig(center=tuple(centre), radius=OBSTACLE_RADIUS)
+
+
+def _round_the_disc(log, obstacle, distance_m: float) -> None:
+    """Wherever the reference is closer than ``distance_m`` to the obstacle's centre, put
+    the vehicle at that distance from it, straight out from the centre through the
+    reference: the shortest way round the disc."""
+    centre = np.array(obstacle.center)
+    away = log.reference[:, :2] - centre
+    reach = np.hypot(*away.T)
+    inside = reach < distance_m
+    log.state[inside, :2] = centre + distance_m * away[inside] / reach[inside, None]
+
+
+def _judged(log, params, obstacles):
+    log.clearance_m[:] = [
+        min(math.dist(p, o.center) - o.radius - VEHICLE_RADIUS for o in obstacles)
+        for p in log.state[:, :2]
+    ]
+    return compute_metrics(log, params, TRANSIENT_S, MARGIN, obstacles, VEHICLE_RADIUS)
+
+
+def test_going_round_an_obstacle_on_the_path_is_a_detour_not_tracking_error(jmse):
+    obstacle = _obstacle_at(60.0, inward_m=0.1)
+    log = circle_log(jmse)
+    _round_the_disc(log, obstacle, KEEP_OUT + 0.05)  # up to 1.55 m off the reference
+    metrics = _judged(log, jmse, [obstacle])
+    assert metrics["max_position_error_after_transient_m"] == pytest.approx(1.55, abs=0.01)
+    assert metrics["max_position_error_after_transient_m"] > characteristic_length_m(jmse)
+    assert metrics["max_tracking_error_after_transient_m"] == pytest.approx(0.0, abs=1e-9)
+    assert metrics["verdict"] == "ok"
+    detour = "went round an obstacle up to 1.55 m off the reference (clearance 0.15 m)"
+    assert detour in metrics["verdict_reason"]
+
+
+def test_touching_the_obstacle_on_a_detour_is_degraded(jmse):
+    obstacle = _obstacle_at(60.0, inward_m=0.1)
+    log = circle_log(jmse)
+    _round_the_disc(log, obstacle, OBSTACLE_RADIUS + VEHICLE_RADIUS - 0.05)
+    metrics = _judged(log, jmse, [obstacle])
+    assert metrics["verdict"] == "degraded"
+    assert metrics["verdict_reason"] == "touched an obstacle (clearance -0.05 m)"
+
+
+def test_an_error_beside_an_obstacle_the_reference_passes_is_tracking_error(jmse):
+    """The reference passes 0.3 m outside the keep-out disc: the obstacle does not stand in
+    its way, so 1.5 m off next to it is tracking error."""
+    obstacle = _obstacle_at(65.0, inward_m=-(KEEP_OUT + 0.3))
+    log = circle_log(jmse)
+    _offset_after_transient(log, -1.5)  # 60-70 s, inwards, away from the obstacle
+    metrics = _judged(log, jmse, [obstacle])
+    assert metrics["verdict"] == "degraded"
+    assert metrics["verdict_reason"].startswith("position error 1.5 m after the transient (")
+
+
+def test_more_than_the_discs_width_off_near_an_obstacle_is_tracking_error(jmse):
+    obstacle = _obstacle_at(65.0, inward_m=0.1)
+    log = circle_log(jmse)
+    _offset_after_transient(log, -(2.0 * KEEP_OUT + 0.2))  # 3.4 m inwards over 60-70 s
+    metrics = _judged(log, jmse, [obstacle])
+    assert metrics["max_position_error_after_transient_m"] == pytest.approx(3.4)
+    assert metrics["verdict"] == "degraded"
+    assert metrics["verdict_reason"].startswith("position error 3.4 m after the transient (")
