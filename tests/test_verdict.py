@@ -149,7 +149,7 @@ def test_the_same_error_is_judged_against_the_vehicle_size(vehicle_name, expecte
 
     params = load_vehicle(vehicle_name)
     log = circle_log(params)
-    _offset_after_transient(log, 0.6)  # 0.7 jmse2210 lengths, 1.6 BlueROV2 lengths
+    _offset_after_transient(log, 0.6)  # 0.6 jmse2210 lengths, 1.3 BlueROV2 lengths
     metrics = metrics_of(log, params)
     assert metrics["max_position_error_after_transient_m"] == pytest.approx(0.6)
     assert metrics["verdict"] == expected
@@ -191,7 +191,7 @@ def test_a_vehicle_stopped_at_an_obstacle_while_the_reference_moves_on_is_called
 
 
 def test_a_small_path_lowers_the_distance_that_counts_as_lost(jmse):
-    # A 1 m square of waypoints is smaller than five jmse2210 lengths (4.2 m): 2 m off it
+    # A 1 m square of waypoints is smaller than five jmse2210 lengths (5 m): 2 m off it
     # is lost (a quarter of the 1.41 m diagonal is the limit), not merely degraded.
     log = circle_log(jmse)
     log.reference[:, :2] = np.clip(log.reference[:, :2] / RADIUS, 0.0, 1.0)
@@ -208,6 +208,21 @@ def test_a_yaw_rate_excursion_is_degraded(vehicle):
     assert metrics["max_abs_yaw_rate_rad_per_s"] == pytest.approx(0.6 * top)
     assert metrics["verdict"] == "degraded"
     assert metrics["verdict_reason"].startswith(f"yaw rate {0.6 * top:.2f} rad/s")
+
+
+@pytest.mark.parametrize(
+    ("vehicle_name", "length_m", "without_size_m"),
+    [("jmse2210", 1.0, 0.849), ("bluerov2-heavy", 0.457, 0.381), ("rexrov", 2.56, 1.30)],
+)
+def test_the_vehicle_length_is_the_size_blocks_else_the_thruster_span(
+    vehicle_name, length_m, without_size_m
+):
+    from auvmpc.models.vehicle import load_vehicle
+
+    params = load_vehicle(vehicle_name)
+    assert characteristic_length_m(params) == length_m
+    unsized = params.model_copy(update={"size": None})
+    assert characteristic_length_m(unsized) == pytest.approx(without_size_m, abs=0.005)
 
 
 def test_top_yaw_rate_balances_damping_against_the_largest_yaw_moment(jmse):

@@ -119,7 +119,8 @@ class VehicleSize(StrictModel):
     """The hull's outer envelope: the smallest box round the vehicle, body axes (m).
 
     Optional in a vehicle file and read by nothing that simulates or controls: it documents
-    the vehicle and is what ``auvmpc vehicle new`` estimates a model from."""
+    the vehicle, is what ``auvmpc vehicle new`` estimates a model from, and its ``length`` is
+    the vehicle length the run verdict scales with (``auvmpc.sim.verdict``)."""
 
     length: PositiveFloat = Field(description="along x, forward (m)")
     width: PositiveFloat = Field(description="along y, starboard (m)")
@@ -141,8 +142,8 @@ class VehicleParams(StrictModel):
     mass: PositiveFloat = Field(description="rigid-body mass (kg)")
     size: VehicleSize | None = Field(
         default=None,
-        description="outer envelope {length, width, height} (m), if known; documentation "
-        "only: no model or controller reads it",
+        description="outer envelope {length, width, height} (m), if known; no model or "
+        "controller reads it, the run verdict scales with its length",
     )
     m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
     m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")

@@ -68,13 +68,17 @@ class Verdict:
 
 
 def characteristic_length_m(params: VehicleParams) -> float:
-    """A vehicle's size (m): the span of its thruster layout or the side of the cube of
-    water it displaces, whichever is larger.
+    """A vehicle's length (m): ``size.length`` from its vehicle file, or without a ``size``
+    the span of its thruster layout or the side of the cube of water it displaces,
+    whichever is larger.
 
-    jmse2210 0.85 m, bluerov2-heavy 0.38 m, rexrov 1.30 m: the layout span tracks the
-    hull length of thruster-driven vehicles; the cube root keeps a vehicle with
-    thrusters bunched at the centre from looking tiny.
+    The presets all have a size: jmse2210 1.0 m, bluerov2-heavy 0.457 m, rexrov 2.56 m,
+    videoray-pro3 0.30 m. Without one, the layout span tracks the hull length of
+    thruster-driven vehicles (0.85, 0.38, 1.30, 0.27 m for the same four) and the cube root
+    keeps a vehicle with thrusters bunched at the centre from looking tiny.
     """
+    if params.size is not None:
+        return params.size.length
     span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
     cube = (params.mass / SEA_WATER_DENSITY) ** (1.0 / 3.0)
     return max(span, cube)
