@@ -225,7 +225,8 @@ class HorizontalKind(RunKind):
     name = "horizontal"
     result_type = RunResult
     log_format = HorizontalPlant.log_format
-    measure = staticmethod(compute_metrics)  # (log, model, transient_s, obstacle_margin)
+    # (log, model, transient_s, obstacle_margin, obstacles, vehicle_radius)
+    measure = staticmethod(compute_metrics)
 
     def seeds(self, scenario) -> dict[str, np.random.SeedSequence]:
         """The run's random streams by what they drive: children 0, 1 and 2 of the scenario
@@ -278,8 +279,14 @@ class HorizontalKind(RunKind):
 
     def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
         scenario = resolved.scenario
+        controller = scenario.controller
         return self.measure(
-            log, resolved.model, scenario.transient_s, scenario.controller.obstacle_margin
+            log,
+            resolved.model,
+            scenario.transient_s,
+            controller.obstacle_margin,
+            scenario.obstacles,
+            controller.vehicle_radius,
         )
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:

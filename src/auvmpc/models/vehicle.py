@@ -123,8 +123,9 @@ class VehicleSize(StrictModel):
     """The hull's outer envelope: the smallest box round the vehicle, body axes (m).
 
     Optional in a vehicle file and read by no model: it documents the vehicle, is what
-    ``auvmpc vehicle new`` estimates a model from, and sets ``controller.vehicle_radius``
-    when a scenario omits it (controllers/config.py, default_vehicle_radius)."""
+    ``auvmpc vehicle new`` estimates a model from, sets ``controller.vehicle_radius`` when a
+    scenario omits it (controllers/config.py, default_vehicle_radius), and its ``length`` is
+    the vehicle length the run verdict scales with (``auvmpc.sim.verdict``)."""
 
     length: PositiveFloat = Field(description="along x, forward (m)")
     width: PositiveFloat = Field(description="along y, starboard (m)")
@@ -147,7 +148,8 @@ class VehicleParams(StrictModel):
     size: VehicleSize | None = Field(
         default=None,
         description="outer envelope {length, width, height} (m), if known; no model reads "
-        "it; an omitted controller.vehicle_radius is half its length x width diagonal",
+        "it; an omitted controller.vehicle_radius is half its length x width diagonal, the "
+        "run verdict scales with its length",
     )
     m11: PositiveFloat = Field(description="surge mass incl. added mass, m - X_udot (kg)")
     m22: PositiveFloat = Field(description="sway mass incl. added mass, m - Y_vdot (kg)")

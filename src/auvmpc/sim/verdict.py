@@ -15,7 +15,9 @@ lost, if any of
 degraded, if not lost and any of
     * a solver fallback, or an obstacle constraint relaxed;
     * after the transient, a position error above ``DEGRADED_LENGTHS`` vehicle lengths (at
-      most ``DEGRADED_EXTENT_FRACTION`` of the reference's size);
+      most ``DEGRADED_EXTENT_FRACTION`` of the reference's size), leaving out the samples of
+      a detour round an obstacle (``metrics.detour_samples``): those are judged by the
+      clearance, below;
     * after the transient, a heading error above ``DEGRADED_HEADING_RAD`` (fully actuated
       vehicles only: an underactuated one steers sideways with its heading);
     * after the transient, a yaw rate above both ``YAW_RATE_REFERENCE_FACTOR`` times the
@@ -66,13 +68,17 @@ class Verdict:
 
 
 def characteristic_length_m(params: VehicleParams) -> float:
-    """A vehicle's size (m): the span of its thruster layout or the side of the cube of
-    water it displaces, whichever is larger.
+    """A vehicle's length (m): ``size.length`` from its vehicle file, or without a ``size``
+    the span of its thruster layout or the side of the cube of water it displaces,
+    whichever is larger.
 
-    jmse2210 0.85 m, bluerov2-heavy 0.38 m, rexrov 1.30 m: the layout span tracks the
-    hull length of thruster-driven vehicles; the cube root keeps a vehicle with
-    thrusters bunched at the centre from looking tiny.
+    The presets all have a size: jmse2210 1.0 m, bluerov2-heavy 0.457 m, rexrov 2.56 m,
+    videoray-pro3 0.30 m. Without one, the layout span tracks the hull length of
+    thruster-driven vehicles (0.85, 0.38, 1.30, 0.27 m for the same four) and the cube root
+    keeps a vehicle with thrusters bunched at the centre from looking tiny.
     """
+    if params.size is not None:
+        return params.size.length
     span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
     cube = (params.mass / SEA_WATER_DENSITY) ** (1.0 / 3.0)
     return max(span, cube)
@@ -95,6 +101,11 @@ class RunFacts:
 
     sample_time: float
     max_error_after_transient_m: float | None  # None: the run ended within the transient
+    # The same, leaving out the samples of a detour round an obstacle (metrics.detour_samples;
+    # 0 when every sample after the transient is one), and the largest error among those
+    # (None: no detour after the transient).
+    max_tracking_error_after_transient_m: float | None
+    max_detour_error_m: float | None
     max_heading_error_after_transient_rad: float | None
     max_abs_yaw_rate_after_transient: float | None
     max_abs_reference_yaw_rate: float
@@ -119,6 +130,8 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
         DEGRADED_LENGTHS * length, DEGRADED_EXTENT_FRACTION, facts.reference_extent_m
     )
     error = facts.max_error_after_transient_m
+    tracking, detour = facts.max_tracking_error_after_transient_m, facts.max_detour_error_m
+    away = "" if detour is None else " outside detours"
     if error is not None and error > lost_distance:
         lost.append(
             f"left the path: {error:.3g} m off after the transient (limit {lost_distance:.3g} m)"
@@ -128,9 +141,10 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
                 f"blocked: stopped at an obstacle's keep-out edge for {facts.blocked_s:.3g} s "
                 "while the reference moved on"
             )
-    elif error is not None and error > degraded_distance:
+    elif tracking is not None and tracking > degraded_distance:
         degraded.append(
-            f"position error {error:.3g} m after the transient (limit {degraded_distance:.3g} m)"
+            f"position error {tracking:.3g} m after the transient{away} "
+            f"(limit {degraded_distance:.3g} m)"
         )
     if facts.heading_turns >= 1.0:
         lost.append(f"spun: heading wound {facts.heading_turns:.1f} turns against the reference")
@@ -170,9 +184,16 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
         return Verdict.DEGRADED, "; ".join(degraded)
     if error is None:
         return Verdict.OK, "no trouble found (the run ended within the transient)"
-    return Verdict.OK, (
-        f"tracked within {error:.3g} m ({error / length:.2g} vehicle lengths) after the transient"
+    reason = (
+        f"tracked within {tracking:.3g} m ({tracking / length:.2g} vehicle lengths) "
+        f"after the transient{away}"
     )
+    if detour is not None:
+        reason += (
+            f"; went round an obstacle up to {detour:.3g} m off the reference "
+            f"(clearance {facts.min_obstacle_clearance_m:.3g} m)"
+        )
+    return Verdict.OK, reason
 
 
 def _capped(distance: float, fraction: float, extent: float) -> float:
