@@ -322,6 +322,9 @@ def output_error(
     )
     stats = solver.stats()
     optimum = np.asarray(solution["x"]).ravel()
+    # IPOPT may end a hair outside a bound (it relaxes them by ~1e-8 internally): a damping
+    # of +2e-9 is not a damping the vehicle file accepts. The optimum is projected back.
+    optimum[:9] = np.clip(optimum[:9], lower, upper)
     jacobian_of = ca.Function("J", [x], [residual, ca.jacobian(residual, x)])
     r_value, j_value = (np.asarray(value) for value in jacobian_of(optimum))
     r_value = r_value.ravel()
