@@ -191,7 +191,7 @@ def test_excite_refuses_bad_input_in_one_line(tmp_path, monkeypatch, capsys, arg
 
 def test_a_run_folder_longer_than_a_yaml_file_may_be_is_read(tmp_path):
     """A 300 s log.csv is about 0.8 MB, more than the 512 kB a YAML file may have: the log
-    reader has its own bound (identification/logs.py, MAX_LOG_BYTES)."""
+    reader has its own bound (sim/log.py, MAX_LOG_BYTES)."""
     from auvmpc.identification.logs import read_run_folder
     from auvmpc.safe_yaml import MAX_YAML_BYTES
 

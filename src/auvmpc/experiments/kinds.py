@@ -40,7 +40,7 @@ from auvmpc.scenario import (
     scenario_to_dict,
 )
 from auvmpc.scenario.loader import SCENARIO_KINDS
-from auvmpc.sim.log import LogFormat, SimLog
+from auvmpc.sim.log import LogFormat, LogTable, SimLog
 from auvmpc.sim.loop import Sensor
 from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
 from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
@@ -207,8 +207,9 @@ class RunKind(ABC):
         limits are drawn; ``plant``: the simulated one)."""
 
     @abstractmethod
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        """The log of a saved run folder of this kind (``info``: its run.json)."""
+    def read_log(self, table: LogTable, info: dict[str, Any]) -> SimLog:
+        """The log of a saved run folder of this kind from its log.csv's ``table`` (read by
+        ``experiments/run_folder.py``; ``info``: its run.json, checked there)."""
 
     def finished(
         self, resolved, log: SimLog, provenance: dict[str, Any], warnings: list[str]
@@ -296,8 +297,8 @@ class HorizontalKind(RunKind):
         radius = scenario.controller.vehicle_radius
         return run_figures(log, scenario.obstacles, radius, model, title)
 
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        log = SimLog.read_csv(Path(run_dir) / "log.csv", format=self.log_format)
+    def read_log(self, table: LogTable, info: dict[str, Any]) -> SimLog:
+        log = SimLog.from_table(table, format=self.log_format)
         # (a 6-DOF run's log.csv read as a horizontal one has its vertical thrusters too)
         log.initial_thrust = padded(info["scenario"].get("initial_thrust"), log.n_thrusters)
         return log
@@ -365,11 +366,10 @@ class SixDofKind(HorizontalKind):
         drawn = super().figures(log.horizontal(), scenario, model, plant)
         return {**drawn, **six_dof_figures(log, model, run_title(scenario, model.name))}
 
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
+    def read_log(self, table: LogTable, info: dict[str, Any]) -> SimLog:
         model = VehicleParams.model_validate(info["model"])
         initial = padded(info["scenario"].get("initial_thrust"), model.six_dof.n_thrusters)
-        path = Path(run_dir) / "log.csv"
-        return SimLog.read_csv(path, initial, self.log_format, model.n_thrusters)
+        return SimLog.from_table(table, initial, self.log_format, model.n_thrusters)
 
 
 class DepthKind(RunKind):
@@ -420,8 +420,8 @@ class DepthKind(RunKind):
         title = f"{scenario.name}: {scenario.controller.type}"
         return {"depth": figure_depth(log, plant.heave, title=title)}
 
-    def read_log(self, run_dir: Path, info: dict[str, Any]) -> SimLog:
-        return SimLog.read_csv(Path(run_dir) / "log.csv", format=self.log_format)
+    def read_log(self, table: LogTable, info: dict[str, Any]) -> SimLog:
+        return SimLog.from_table(table, format=self.log_format)
 
 
 KINDS: dict[str, RunKind] = {

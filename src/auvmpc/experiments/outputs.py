@@ -305,6 +305,12 @@ def require_own_folder(path: Path | str, kind: OutputKind, option: str) -> Path:
     if not folder.is_dir():
         raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder (no such folder)")
     if own_kind(folder) is not kind:
+        marker = folder / MARKER
+        if marker.is_file() and _marker(folder) is None:
+            raise ConfigError(
+                option, str(marker), f"the marker {MARKER} is damaged (not auvmpc's JSON record "
+                "of what it wrote): auvmpc cannot tell this folder is its own",
+            )  # fmt: skip
         raise ConfigError(option, str(path), f"not a {_NOUN[kind]} folder written by auvmpc")
     return folder
 

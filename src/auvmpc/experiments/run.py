@@ -13,7 +13,6 @@ from threadpoolctl import threadpool_limits
 
 from auvmpc import interrupts
 from auvmpc.controllers.base import Controller
-from auvmpc.controllers.config import SAVED_RUN
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.kinds import (
     KINDS,
@@ -25,6 +24,7 @@ from auvmpc.experiments.kinds import (
 )
 from auvmpc.experiments.outputs import OutputKind, adding, atomic_write_text, staged_folder
 from auvmpc.experiments.provenance import Stopwatch
+from auvmpc.experiments.run_folder import read_run_folder
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
 from auvmpc.scenario.depth import DepthScenario
@@ -229,13 +229,9 @@ def redraw(run_dir: Path, fmt: str = "png", dpi: int = 120) -> None:
     from auvmpc.plots import save_figures
 
     run_dir = Path(run_dir)
-    info = json.loads((run_dir / "run.json").read_text())
-    kind = kind_of(info["scenario"])
-    figures = kind.figures(
-        kind.read_log(run_dir, info),
-        kind.scenario_type.model_validate(info["scenario"], context={SAVED_RUN: True}),
-        VehicleParams.model_validate(info["model"]),
-        VehicleParams.model_validate(info["plant"]),
+    folder = read_run_folder(run_dir, ("scenario", "model", "plant"))
+    figures = folder.kind.figures(
+        folder.log(), folder.scenario(), folder.vehicle("model"), folder.vehicle("plant")
     )
     with adding(run_dir, [f"{name}.{fmt}" for name in figures], "RUN_DIR"):
         save_figures(figures, run_dir, dpi=dpi, fmt=fmt)
@@ -246,24 +242,20 @@ def read_planar_run(
 ) -> tuple[dict[str, Any], Scenario, VehicleParams, SimLog]:
     """A saved run as ``command`` (animate, compare) reads it: run.json, its scenario and
     nominal model, and the horizontal log (a 6-DOF run's horizontal view). A folder that is
-    not a run, or a depth run, is refused with one line."""
-    run_dir = Path(run_dir)
-    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
-        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    info = json.loads((run_dir / "run.json").read_text())
-    kind = kind_of(info["scenario"])
+    not a run, a damaged one (:mod:`auvmpc.experiments.run_folder`), or a depth run, is
+    refused with one line."""
+    folder = read_run_folder(run_dir, ("scenario", "model"))
+    kind = folder.kind
     if not kind.has_horizontal:
         raise ConfigError(
             "RUN_DIR", str(run_dir), f"a {kind.name} run; {command} takes horizontal and 6-DOF runs"
         )
-    scenario = kind.scenario_type.model_validate(info["scenario"], context={SAVED_RUN: True})
-    model = VehicleParams.model_validate(info["model"])
-    return info, scenario, model, kind.read_log(run_dir, info).horizontal()
+    scenario, model = folder.scenario(), folder.vehicle("model")
+    return folder.info, scenario, model, folder.log().horizontal()
 
 
 def read_run(run_dir: Path) -> tuple[dict[str, Any], SimLog]:
     """run.json contents and the horizontal columns of a saved run folder's log (a 6-DOF
-    run's with every thruster)."""
-    run_dir = Path(run_dir)
-    info = json.loads((run_dir / "run.json").read_text())
-    return info, KINDS["horizontal"].read_log(run_dir, info)
+    run's with every thruster), both checked (:mod:`auvmpc.experiments.run_folder`)."""
+    folder = read_run_folder(run_dir)
+    return folder.info, folder.log(KINDS["horizontal"])

@@ -1,8 +1,15 @@
-"""A saved run folder read by column name: ``run.json`` as a dict, ``log.csv`` as a DataFrame.
+"""A saved run folder, read once and checked: ``run.json``, ``log.csv`` and what they hold.
 
-For tools that must work on every kind of log (horizontal, depth, later 6-DOF) and on
-columns added later: the bag export, the Python API. ``runner.read_run`` gives the
-horizontal log as a :class:`~auvmpc.sim.log.SimLog` instead.
+The one reader of a run folder for every command that reads one (``plot``, ``animate``,
+``compare``, ``export``, ``verify-c``; ``identify`` reads log.csv with the same table checks,
+:class:`~auvmpc.sim.log.LogTable`) and for the Python API. What auvmpc cannot have written
+is one :class:`~auvmpc.errors.ConfigError` line naming the file and the damage (exit 2
+from the CLI): run.json that is not UTF-8 JSON, not an object or without a key the command
+needs, or whose scenario or vehicle does not validate; log.csv as
+:meth:`SimLog.read_csv <auvmpc.sim.log.SimLog.read_csv>` checks it, and longer than
+run.json's scenario can have run. :func:`read_run_tables` gives the log by column name, as
+a DataFrame (the bag export and ``auvmpc.load_run`` read every kind of log and columns added
+later that way).
 """
 
 from __future__ import annotations
@@ -16,13 +23,133 @@ from typing import Any, TextIO
 
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
-from auvmpc.errors import ConfigError
+from auvmpc.controllers.config import SAVED_RUN
+from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.experiments.kinds import RunKind, kind_of
+from auvmpc.models.vehicle import VehicleParams
+from auvmpc.safe_yaml import read_text_file
+from auvmpc.sim.log import MAX_LOG_BYTES, LogTable, SimLog, read_log_table
 
-__all__ = ["RunTables", "read_log_frame", "read_run_tables"]
+__all__ = ["RunFolder", "RunTables", "read_log_frame", "read_run_folder", "read_run_tables"]
 
 _HORIZONTAL_THRUST = re.compile(r"^F\d+$")
 _VERTICAL_THRUST = re.compile(r"^Fz\d+$")
+# What run.json holds (docs/run-folder.md): the keys whose values are objects.
+_OBJECT_KEYS = ("scenario", "plant", "model", "metrics")
+
+
+@dataclass
+class RunFolder:
+    """A run folder's run.json (``info``, an object holding the keys asked for) and, read
+    when first asked for, its log.csv (``table``) and what they hold, each checked."""
+
+    path: Path
+    info: dict[str, Any]
+    field: str = "RUN_DIR"  # what the errors name: the command's argument
+    _table: LogTable | None = None  # log.csv, read once
+
+    @property
+    def run_json(self) -> Path:
+        return self.path / "run.json"
+
+    @property
+    def kind(self) -> RunKind:
+        try:
+            return kind_of(self.info["scenario"])
+        except ConfigError as error:
+            reason = f"{error.reason} ({self.run_json})"
+            raise ConfigError(error.field, error.value, reason) from None
+
+    def scenario(self):
+        """run.json's scenario, validated (as it was resolved: every default filled in)."""
+        kind = self.kind
+        try:
+            return kind.scenario_type.model_validate(
+                self.info["scenario"], context={SAVED_RUN: True}
+            )
+        except ValidationError as error:
+            raise format_validation_error(error, "scenario", str(self.run_json)) from None
+
+    def vehicle(self, key: str) -> VehicleParams:
+        """run.json's ``model`` (the controller's vehicle) or ``plant`` (the simulated one)."""
+        if key not in self.info:
+            raise ConfigError(self.field, str(self.run_json), f"run.json has no {key!r}")
+        try:
+            return VehicleParams.model_validate(self.info[key])
+        except ValidationError as error:
+            raise format_validation_error(error, key, str(self.run_json)) from None
+
+    def table(self) -> LogTable:
+        if self._table is None:
+            self._table = read_log_table(self.path / "log.csv", self.field)
+        return self._table
+
+    def log(self, kind: RunKind | None = None) -> SimLog:
+        """log.csv as a log of ``kind`` (default: the run's own), checked as
+        :meth:`SimLog.read_csv` checks it and against the length of run.json's scenario."""
+        own = self.kind
+        if own.name == "six-dof" or (kind or own).name == "six-dof":
+            self.vehicle("model")  # its inputs are the model's (one line if it is damaged)
+        log = (kind or own).read_log(self.table(), self.info)
+        self._check_length(log)
+        return log
+
+    def _check_length(self, log: SimLog) -> None:
+        """A log longer than its run's scenario allows (duration / sample time commands) was
+        not written by that run. A shorter one may be whole (a session closed early): what
+        shows a cut there is a final row with a command (:meth:`LogTable.final_row_empty`)."""
+        scenario = self.info["scenario"]
+        controller = scenario.get("controller")
+        duration = scenario.get("duration")
+        sample_time = controller.get("sample_time") if isinstance(controller, dict) else None
+        numbers = (int, float)
+        if not (isinstance(duration, numbers) and isinstance(sample_time, numbers)):
+            return
+        if not (duration > 0 and sample_time > 0):
+            return
+        steps = int(round(duration / sample_time))
+        if log.steps > steps:
+            raise self.table().damaged(
+                f"has {log.steps} commands, more than {steps}, all that run.json's scenario "
+                f"runs ({duration:g} s at {sample_time:g} s): not this run's log"
+            )
+
+
+def read_run_folder(
+    run_dir: str | Path, keys: tuple[str, ...] = ("scenario",), field: str = "RUN_DIR"
+) -> RunFolder:
+    """A run folder's run.json, checked: UTF-8 JSON, an object, holding ``scenario`` and
+    ``keys`` (its ``scenario``, ``plant``, ``model`` and ``metrics`` objects); log.csv must
+    be there. Anything else is one line naming ``field`` and the file."""
+    path = Path(run_dir)
+    if not (path / "run.json").is_file() or not (path / "log.csv").is_file():
+        raise ConfigError(field, str(run_dir), "not a run folder (needs run.json and log.csv)")
+    file = path / "run.json"
+    text = read_text_file(file, field, "run.json", MAX_LOG_BYTES)
+    try:
+        info = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ConfigError(
+            field, str(file), f"run.json is not valid JSON (line {error.lineno}: {error.msg})"
+        ) from None
+    except RecursionError:
+        raise ConfigError(field, str(file), "run.json nests too deep to be a run's") from None
+    if not isinstance(info, dict):
+        raise ConfigError(
+            field, str(file), f"run.json holds a {type(info).__name__}, not a run's record"
+        )
+    for key in ("scenario", *keys):
+        if key not in info:
+            raise ConfigError(field, str(file), f"run.json has no {key!r}")
+    for key in _OBJECT_KEYS:
+        if key in info and not isinstance(info[key], dict):
+            raise ConfigError(
+                field, str(file), f"run.json's {key!r} is a {type(info[key]).__name__}, "
+                "not an object",
+            )  # fmt: skip
+    return RunFolder(path, info, field)
 
 
 @dataclass(frozen=True)
@@ -41,15 +168,13 @@ class RunTables:
 
 
 def read_run_tables(run_dir: Path) -> RunTables:
-    """run.json and log.csv of a run folder; a folder that is not one is a ConfigError."""
-    run_dir = Path(run_dir)
-    if not (run_dir / "run.json").is_file() or not (run_dir / "log.csv").is_file():
-        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs run.json and log.csv)")
-    info = json.loads((run_dir / "run.json").read_text())
-    log = read_log_frame(run_dir / "log.csv")
-    if "t" not in log.columns or log.empty:
-        raise ConfigError("RUN_DIR", str(run_dir), "log.csv has no rows or no t column")
-    return RunTables(info, log)
+    """run.json and log.csv of a run folder, both checked (:class:`RunFolder`), log.csv as
+    a DataFrame of every column it has."""
+    folder = read_run_folder(run_dir)
+    folder.scenario()  # checked: what the bag reads of it (obstacles, horizon) is valid
+    folder.log()
+    table = folder.table()
+    return RunTables(folder.info, _frame(table.header, table.rows))
 
 
 def read_log_frame(source: Path | TextIO) -> pd.DataFrame:
@@ -63,7 +188,10 @@ def read_log_frame(source: Path | TextIO) -> pd.DataFrame:
             rows = list(csv.reader(handle))
     else:
         rows = list(csv.reader(source))
-    header, body = rows[0], rows[1:]
+    return _frame(rows[0], rows[1:])
+
+
+def _frame(header: list[str], body: list[list[str]]) -> pd.DataFrame:
     columns = {}
     for i, name in enumerate(header):
         cells = [row[i] if i < len(row) else "" for row in body]

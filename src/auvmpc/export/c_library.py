@@ -30,14 +30,16 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+from pydantic import ValidationError
 
 from auvmpc.controllers.base import horizontal_limits
 from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
 from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
 from auvmpc.environment.obstacles import visible_obstacles
-from auvmpc.errors import ConfigError, RunFailed
+from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.estimation import covariance_bounds
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
+from auvmpc.experiments.run_folder import RunFolder, read_run_folder
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
@@ -51,6 +53,7 @@ from auvmpc.ocp.multiple_shooting import (
 )
 from auvmpc.ocp.stage_qp import stage_qp
 from auvmpc.references import make_reference
+from auvmpc.safe_yaml import read_text_file
 from auvmpc.solvers.blasfeo_target import (
     LIBRARY,
     blasfeo_folder,
@@ -374,23 +377,60 @@ class VerifyResult:
         return self.max_difference_n <= COMMAND_TOLERANCE_N
 
 
-def _check_run(export: Path, run_dir: Path) -> None:
-    """The run must be the exported controller's, on the same vehicle, without sensor noise."""
-    record = json.loads((export / _RECORD).read_text())
+@dataclass(frozen=True)
+class _ExportRecord:
+    """What an export's export.json says it exported (checked by :func:`_export_record`)."""
+
+    model: VehicleParams
+    model_data: dict  # as written: a run's run.json ``model`` is compared with it
+    controller: ControllerConfig
+    blasfeo: str | None
+    blasfeo_features: tuple[str, ...]
+
+
+def _export_record(export: Path) -> _ExportRecord:
+    """export.json, checked: a JSON object whose model and controller validate; anything
+    else is one line naming the file (an edited or damaged export)."""
+    file = export / _RECORD
+    text = read_text_file(file, "DIR", "export.json")
     try:
-        run = json.loads((run_dir / "run.json").read_text())
-    except (OSError, ValueError) as error:
-        raise ConfigError("RUN_DIR", str(run_dir), f"no readable run.json ({error})") from None
-    scenario = run.get("scenario", {})
-    if any(scenario.get("sensing", {}).get("std", [0.0])):
+        record = json.loads(text)
+    except json.JSONDecodeError as error:
         raise ConfigError(
-            "RUN_DIR", str(run_dir), "the run has sensor noise; log.csv holds the true states"
+            "DIR", str(file), f"export.json is not valid JSON (line {error.lineno}: {error.msg})"
+        ) from None
+    except RecursionError:
+        raise ConfigError("DIR", str(file), "export.json nests too deep to be one") from None
+    if not isinstance(record, dict):
+        raise ConfigError("DIR", str(file), f"export.json holds a {type(record).__name__}")
+    for key in ("model", "controller"):
+        if key not in record:
+            raise ConfigError("DIR", str(file), f"export.json has no {key!r}")
+    features = record.get("blasfeo_features") or []
+    blasfeo = record.get("blasfeo")
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise ConfigError("DIR", str(file), "export.json's blasfeo_features is not a list of names")
+    if blasfeo is not None and not isinstance(blasfeo, str):
+        raise ConfigError("DIR", str(file), "export.json's blasfeo is not a folder's name")
+    try:
+        model = VehicleParams.model_validate(record["model"])
+        controller = ControllerConfig.model_validate(record["controller"])
+    except ValidationError as error:
+        raise format_validation_error(error, "export.json", str(file)) from None
+    return _ExportRecord(model, record["model"], controller, blasfeo, tuple(features))
+
+
+def _check_run(record: _ExportRecord, run: RunFolder) -> None:
+    """The run must be the exported controller's, on the same vehicle, without sensor noise."""
+    scenario = run.scenario()
+    if any(scenario.sensing.std):
+        raise ConfigError(
+            "RUN_DIR", str(run.path), "the run has sensor noise; log.csv holds the true states"
         )
-    controller = ControllerConfig.model_validate(scenario.get("controller", {}))
+    controller = scenario.controller
     # Both filled in for the vehicle: a run of the exported type has the defaults of that
     # type (nmpc's trust region) filled in, an export of a preset of another type does not.
-    model = VehicleParams.model_validate(record["model"])
-    exported = ControllerConfig.model_validate(record["controller"])
+    model, exported = record.model, record.controller
     ran = json.loads(exported_config(controller).for_vehicle(model).model_dump_json())
     if (
         controller.control_horizon not in (None, controller.prediction_horizon)
@@ -399,41 +439,43 @@ def _check_run(export: Path, run_dir: Path) -> None:
         or controller.nmpc_mode is not NmpcMode.REAL_TIME
     ):
         raise ConfigError(
-            "RUN_DIR", str(run_dir),
+            "RUN_DIR", str(run.path),
             "its controller is not the exported one (run the exported scenario with --set "
             "controller.type=nmpc --set controller.control_horizon=null)",
         )  # fmt: skip
-    if run.get("model") != record["model"]:
-        raise ConfigError("RUN_DIR", str(run_dir), "its vehicle model is not the exported one")
+    if run.info["model"] != record.model_data:
+        raise ConfigError("RUN_DIR", str(run.path), "its vehicle model is not the exported one")
 
 
-def _check_blasfeo(export: Path) -> None:
+def _check_blasfeo(export: Path, record: _ExportRecord) -> None:
     """Refuse to replay an export whose BLASFEO needs CPU features this machine lacks."""
-    record = json.loads((export / _RECORD).read_text())
-    missing = missing_features(tuple(record.get("blasfeo_features") or ()))
+    missing = missing_features(record.blasfeo_features)
     if missing:
         raise ConfigError(
             "DIR", str(export),
-            f"links {record['blasfeo']}/{LIBRARY}, built for CPU features this machine lacks "
+            f"links {record.blasfeo}/{LIBRARY}, built for CPU features this machine lacks "
             f"({', '.join(missing)}): its replay would stop on an illegal instruction",
         )  # fmt: skip
 
 
 def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     """Build ``export`` with the system C compiler (in a temporary folder), replay
-    ``run_dir``'s log.csv through it and compare its commands with the logged ones."""
+    ``run_dir``'s log.csv through it and compare its commands with the logged ones.
+
+    The run folder is read by the one reader (:mod:`auvmpc.experiments.run_folder`): a log
+    that is not whole (cut mid-row or at a row boundary, edited) is refused in one line
+    before anything is built, as is a damaged export.json."""
     export, run_dir = Path(export), Path(run_dir)
     if not own_export(export):
         raise ConfigError("DIR", str(export), "not a folder written by auvmpc export-c")
-    if not (run_dir / "log.csv").is_file():
-        raise ConfigError("RUN_DIR", str(run_dir), "not a run folder (needs log.csv)")
-    _check_run(export, run_dir)
-    _check_blasfeo(export)
+    record = _export_record(export)
+    run = read_run_folder(run_dir, ("scenario", "model"))
+    log = run.log()
+    _check_run(record, run)
+    _check_blasfeo(export, record)
     cc = compiler()
     if cc is None or shutil.which("make") is None:
         raise ConfigError("DIR", str(export), "needs a C compiler and make on the PATH")
-    with open(run_dir / "log.csv", newline="") as stream:
-        rows = list(csv.DictReader(stream))
     with tempfile.TemporaryDirectory(prefix="auvmpc-verify-c-") as scratch:
         build = Path(scratch) / "build"
         shutil.copytree(export, build)
@@ -444,9 +486,8 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
             lines = made.stderr.strip().splitlines()
             first = next((line for line in lines if "error" in line), "make failed")
             raise RunFailed(f"the export did not build: {first}")
-        steps = len(rows) - 1  # the last row is the final state, without a command
         replay = subprocess.run(
-            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(steps)],
+            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(log.steps)],
             capture_output=True, text=True,
         )  # fmt: skip
         if replay.returncode:
@@ -455,7 +496,7 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     stats = dict(zip(*[iter(replay.stderr.split())] * 2, strict=True))
     thrusters = [name for name in commands[0] if name.startswith("F")]
     c_thrust = np.array([[float(r[name]) for name in thrusters] for r in commands])
-    py_thrust = np.array([[float(r[name]) for name in thrusters] for r in rows[: len(commands)]])
+    py_thrust = np.column_stack([log.column(name) for name in thrusters])[: len(commands)]
     difference = np.abs(c_thrust - py_thrust).max(axis=1)
     return VerifyResult(
         steps=len(commands),

@@ -9,15 +9,13 @@ short is one :class:`~auvmpc.errors.ConfigError` line naming it (exit 2 from the
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from auvmpc.errors import ConfigError
-from auvmpc.safe_yaml import read_text_file
+from auvmpc.sim.log import read_log_table
 
 __all__ = ["MIN_SAMPLES", "VelocityLog", "read_run_folder"]
 
@@ -48,13 +46,11 @@ class VelocityLog:
         )
 
 
-# A log.csv read whole: an hour at 0.05 s with 8 thrusters is about 60 MB; four times that
-# stays well inside memory (the rows are parsed once).
-MAX_LOG_BYTES = 256 * 1024 * 1024
-
-
 def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
-    """The velocities and thrusts in a run folder's log.csv (columns t, u, v, r, F1..Fn)."""
+    """The velocities and thrusts in a run folder's log.csv (columns t, u, v, r, F1..Fn),
+    read by the log's own table reader (sim/log.py, :class:`~auvmpc.sim.log.LogTable`): a
+    file that is not a log, a cut or edited row, a cell that is not a number, a NaN or t
+    not increasing is one line naming the file and the line."""
     path = Path(folder)
     field = "RUN_DIR"
     if not path.is_dir():
@@ -62,13 +58,9 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
     log_file = path / "log.csv"
     if not log_file.is_file():
         raise ConfigError(field, str(folder), "has no log.csv (not an auvmpc run folder)")
-    text = read_text_file(log_file, field, "log.csv", MAX_LOG_BYTES)
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows:
-        raise ConfigError(field, str(log_file), "is empty")
-    header = [name.strip() for name in rows[0]]
+    table = read_log_table(log_file, field)
     inputs = tuple(f"F{i + 1}" for i in range(n_thrusters))
-    missing = [name for name in ("t", *VELOCITY_NAMES, *inputs) if name not in header]
+    missing = [name for name in ("t", *VELOCITY_NAMES, *inputs) if name not in table.header]
     if missing:
         raise ConfigError(
             field,
@@ -77,37 +69,27 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
             f"{', '.join(inputs)}: the start vehicle has {n_thrusters} thrusters)",
         )
     extra = f"F{n_thrusters + 1}"
-    if extra in header:
+    if extra in table.header:
         raise ConfigError(
             field,
             str(log_file),
             f"has a column {extra}: more thrusters than the start vehicle's {n_thrusters}",
         )
-    body = rows[1:]
-    if len(body) < MIN_SAMPLES + 1:
+    rows = len(table.rows)
+    if rows < MIN_SAMPLES + 1:
         raise ConfigError(
             field,
             str(log_file),
-            f"has {len(body)} rows, too short: need at least {MIN_SAMPLES + 1} samples",
+            f"has {rows} rows, too short: need at least {MIN_SAMPLES + 1} samples",
         )
-    columns = {name: header.index(name) for name in ("t", *VELOCITY_NAMES, *inputs)}
-
-    def numbers(names, rows_):
-        try:
-            return np.array([[float(row[columns[n]]) for n in names] for row in rows_])
-        except (ValueError, IndexError):
-            raise ConfigError(
-                field, str(log_file), f"a value in {', '.join(names)} is missing or not a number"
-            ) from None
-
-    t = numbers(("t",), body)[:, 0]
-    velocity = numbers(VELOCITY_NAMES, body)
-    thrust = numbers(inputs, body[:-1])  # the last row has no command
-    if not (np.all(np.isfinite(velocity)) and np.all(np.isfinite(thrust))):
-        raise ConfigError(field, str(log_file), "holds a velocity or thrust that is not finite")
+    t = table.numbers("t")
+    table.increasing("t", t)
+    velocity = np.column_stack([table.numbers(name) for name in VELOCITY_NAMES])
+    commands = slice(0, rows - 1)  # the last row has no command
+    thrust = np.column_stack([table.numbers(name, commands) for name in inputs])
     steps = np.diff(t)
     sample_time = float(np.median(steps))
-    if sample_time <= 0 or np.max(np.abs(steps - sample_time)) > _TIME_JITTER * sample_time:
+    if np.max(np.abs(steps - sample_time)) > _TIME_JITTER * sample_time:
         raise ConfigError(field, str(log_file), "t is not evenly sampled")
     if np.ptp(thrust, axis=0).max() == 0.0:
         raise ConfigError(field, str(log_file), "the thrust never changes: nothing to identify")

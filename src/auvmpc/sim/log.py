@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from auvmpc.controllers.shell import BACKOFF_KEYS, ESTIMATE_KEYS, LOGGED_INFO
+from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
 
@@ -36,12 +37,16 @@ __all__ = [
     "CURRENT_NAMES",
     "DEPTH_LOG",
     "ESTIMATE_NAMES",
+    "FINITE_FIELDS",
     "HORIZONTAL_LOG",
+    "MAX_LOG_BYTES",
     "REFERENCE_NAMES",
     "SIX_DOF_LOG",
     "LiveLog",
     "LogFormat",
+    "LogTable",
     "SimLog",
+    "read_log_table",
 ]
 
 STATE_NAMES = HORIZONTAL.names
@@ -337,34 +342,73 @@ class SimLog:
         format: LogFormat | None = None,
         horizontal_inputs: int | None = None,
         input_names: Sequence[str] | None = None,
+        *,
+        field: str = "log",
     ) -> SimLog:
         """Load a log written by ``to_csv_text`` (values round-trip exactly), of a horizontal
         run unless ``format`` says otherwise; its inputs are ``input_names`` or, without
-        them, the columns named by the format's prefix and a number."""
+        them, the columns named by the format's prefix and a number. What the writer cannot
+        have written is one line naming ``field`` and the file (:meth:`from_table`)."""
+        table = read_log_table(path, field)
+        return cls.from_table(table, initial_thrust, format, horizontal_inputs, input_names)
+
+    @classmethod
+    def from_table(
+        cls,
+        table: LogTable,
+        initial_thrust: np.ndarray | None = None,
+        format: LogFormat | None = None,
+        horizontal_inputs: int | None = None,
+        input_names: Sequence[str] | None = None,
+    ) -> SimLog:
+        """The log of a log.csv's ``table`` (:func:`read_log_table`), as :meth:`read_csv`.
+
+        What the writer cannot have written is a one-line :class:`~auvmpc.errors.ConfigError`
+        naming the file and the first damage: a column of the format missing, a cell that is
+        not a number, a non-finite value where the log never holds one
+        (:data:`FINITE_FIELDS`), t not increasing, an empty command before the final row,
+        and a final row with a command (a log cut at a row boundary)."""
         format = HORIZONTAL_LOG if format is None else format
-        rows = _csv_rows(path)
+        if len(table.rows) < 2:
+            raise table.damaged(
+                f"has {len(table.rows)} rows after its header; a run logs at least two samples"
+            )
         prefix = format.input_prefix
         inputs = input_names or [
-            name for name in rows[0] if name.startswith(prefix) and name[len(prefix) :].isdigit()
+            name
+            for name in table.header
+            if name.startswith(prefix) and name[len(prefix) :].isdigit()
         ]
-        steps = len(rows) - 1
-        sample_time = float(rows[1]["t"]) - float(rows[0]["t"]) if steps else 0.0
-        log = cls.allocate(steps, inputs, sample_time, format, horizontal_inputs)
-        for column in log.csv_columns():
-            if column.field is None or (column.optional and column.names[0] not in rows[0]):
-                continue
+        steps = len(table.rows) - 1
+        log = cls.allocate(steps, inputs, 0.0, format, horizontal_inputs)
+        blocks = [
+            column
+            for column in log.csv_columns()
+            if column.field is not None
+            and not (column.optional and column.names[0] not in table.header)
+        ]
+        table.require([name for column in blocks for name in column.names], format.name)
+        for column in blocks:
             values = log._values(column.field)
-            for k, row in enumerate(rows[:steps] if log._per_command(column.field) else rows):
-                cells = [row[name] for name in column.names]
-                if column.text:
-                    values[k] = cells[0]
-                elif values.ndim == 1:
-                    empty = column.empty_is_inf and not cells[0]
-                    values[k] = math.inf if empty else float(cells[0])
-                elif column.part is None:
-                    values[k] = [float(cell) for cell in cells]
-                else:
-                    values[k, column.part] = [float(cell) for cell in cells]
+            per_command = log._per_command(column.field)
+            if column.field in PER_COMMAND:  # the command itself (a diagnostic's is not read)
+                table.final_row_empty(column.names)
+            rows = slice(0, steps) if per_command else slice(None)
+            if column.text:
+                values[:] = table.texts(column.names[0], rows)
+                continue
+            finite = column.field in FINITE_FIELDS
+            read = np.column_stack(
+                [table.numbers(name, rows, finite, column.empty_is_inf) for name in column.names]
+            )
+            if values.ndim == 1:
+                values[:] = read[:, 0]
+            elif column.part is None:
+                values[:] = read
+            else:
+                values[:, column.part] = read
+        table.increasing("t", log.t)
+        log.sample_time = float(log.t[1] - log.t[0])
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log
@@ -484,8 +528,6 @@ class LiveLog:
     Opened exclusively: an existing file is never replaced."""
 
     def __init__(self, path: str | Path, log: SimLog) -> None:
-        from auvmpc.errors import ConfigError
-
         try:
             self._file = open(path, "x", newline="")  # open until close()
         except FileExistsError:
@@ -524,10 +566,133 @@ def csv_number(value: float) -> str:
     return repr(float(value))
 
 
-def _csv_rows(path: Path) -> list[dict[str, str]]:
-    """The rows of a log.csv by column name; an empty log is an error naming the file."""
-    with open(path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
+# A log.csv read whole: an hour at 0.05 s with 8 thrusters is about 60 MB; four times that
+# stays well inside memory (the rows are parsed once).
+MAX_LOG_BYTES = 256 * 1024 * 1024
+
+#: The fields a log only ever holds finite numbers of: the session checks every time,
+#: measurement and truth it is handed, a run whose plant diverged is not written, and the
+#: shell checks every command. A controller's own diagnostics (the estimate, the back-off)
+#: are written as they come; ``clearance_m`` is empty without obstacles (``empty_is_inf``).
+FINITE_FIELDS = frozenset(
+    {"t", "state", "reference", "thrust", "solve_ms", "environment", "measured", "clearance_m"}
+)
+
+
+@dataclass(frozen=True)
+class LogTable:
+    """log.csv's text checked as a table: a header with ``t`` and rows of as many fields
+    (:func:`read_log_table`). Its methods read columns with the same checks for every reader
+    of a log (:meth:`SimLog.read_csv`, identification's): each damage is one line naming
+    ``field``, the file, the line and the column."""
+
+    path: Path
+    field: str
+    header: list[str]
+    rows: list[list[str]]  # the data rows; row i is the file's line i + 2
+
+    def damaged(self, reason: str) -> ConfigError:
+        return ConfigError(self.field, str(self.path), f"{self.path.name} {reason}")
+
+    def require(self, names: Sequence[str], what: str) -> None:
+        """Every one of ``names`` must be a column (``what``: whose log has them)."""
+        missing = [name for name in names if name not in self.header]
+        if missing:
+            raise self.damaged(f"has no column {', '.join(missing)}, which a {what} run's log has")
+
+    def _cells(self, name: str, rows: slice) -> list[str]:
+        i = self.header.index(name)
+        return [row[i] for row in self.rows[rows]]
+
+    def texts(self, name: str, rows: slice = slice(None)) -> list[str]:
+        """Column ``name`` as text; an empty cell is damage (a status is never empty)."""
+        cells = self._cells(name, rows)
+        for k, cell in enumerate(cells):
+            if not cell:
+                raise self.damaged(f"line {k + 2}, column {name}: empty, where a value belongs")
+        return cells
+
+    def numbers(
+        self,
+        name: str,
+        rows: slice = slice(None),
+        finite: bool = True,
+        empty_is_inf: bool = False,
+    ) -> np.ndarray:
+        """Column ``name`` as floats (exactly as written); ``finite``: NaN or inf is damage;
+        ``empty_is_inf``: an empty cell is inf (no obstacle), the only non-finite value."""
+        values = np.empty(len(self.rows[rows]))
+        for k, cell in enumerate(self._cells(name, rows)):
+            if empty_is_inf and not cell:
+                values[k] = math.inf
+                continue
+            try:
+                values[k] = float(cell)
+            except ValueError:
+                where = f"line {k + 2}, column {name}"
+                raise self.damaged(
+                    f"{where}: empty, where a number belongs"
+                    if not cell
+                    else f"{where}: {cell[:20]!r} is not a number"
+                ) from None
+            if (finite or empty_is_inf) and not math.isfinite(values[k]):
+                raise self.damaged(
+                    f"line {k + 2}, column {name}: {cell!r}, a value the log never holds there"
+                )
+        return values
+
+    def increasing(self, name: str, values: np.ndarray) -> None:
+        """Column ``name``'s ``values`` (read by :meth:`numbers`) must increase row by row."""
+        later = np.diff(values) > 0
+        if not later.all():
+            k = int(np.argmin(later)) + 1
+            raise self.damaged(
+                f"line {k + 2}, column {name}: {float(values[k])!r} is not after the line "
+                f"before's {float(values[k - 1])!r}"
+            )
+
+    def final_row_empty(self, names: Sequence[str]) -> None:
+        """Per-command ``names`` are empty on the final row (the state after the last
+        command); a final row with a command is a log cut at a row boundary."""
+        last = self.rows[-1]
+        if any(last[self.header.index(name)] for name in names):
+            raise self.damaged(
+                f"ends at line {len(self.rows) + 1} with a command: its final row (the state "
+                "after the last command, no command) is missing, so the log was cut short"
+            )
+
+
+def read_log_table(path: str | Path, field: str = "log") -> LogTable:
+    """A log.csv's header and rows, or one :class:`~auvmpc.errors.ConfigError` line naming
+    ``field``, the file and what is damaged: no such file, a folder, a binary file or one not
+    UTF-8, larger than :data:`MAX_LOG_BYTES`, not CSV, empty, a first line without ``t``
+    (not a log's header), a row with another number of fields than the header, a last line
+    without its end (a file cut mid-row: the writer ends every row)."""
+    from auvmpc.safe_yaml import read_text_file
+
+    path = Path(path)
+    text = read_text_file(path, field, "log.csv", MAX_LOG_BYTES)
+    table = LogTable(path, field, [], [])
+    try:
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as error:
+        raise table.damaged(f"is not a CSV table ({error})") from None
     if not rows:
-        raise ValueError(f"{path}: empty log")
-    return rows
+        raise table.damaged("is empty")
+    header = rows[0]
+    if "t" not in header:
+        raise table.damaged(
+            "does not start with a log's header (its first line has no column t): "
+            "not a log auvmpc wrote"
+        )
+    if not text.endswith("\n"):
+        raise table.damaged(
+            f"ends in the middle of line {len(rows)} (no line end): the file was cut short"
+        )
+    for line, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise table.damaged(
+                f"line {line} has {len(row)} fields, its header {len(header)}: "
+                "the file was cut short or edited"
+            )
+    return replace(table, header=header, rows=rows[1:])

@@ -6,7 +6,6 @@ Part of :mod:`auvmpc.experiments.campaign` (docs/campaigns.md).
 from __future__ import annotations
 
 import ast
-import contextlib
 import hashlib
 import json
 import math
@@ -49,8 +48,8 @@ from auvmpc.experiments.campaign.spec import (
     Campaign,
 )
 from auvmpc.experiments.campaign.store import (
-    _connect,
-    _results_path,
+    _campaign_row,
+    _reading,
     stored_campaign,
     stored_sessions,
 )
@@ -67,22 +66,18 @@ def load_results(out_dir: str | Path) -> pd.DataFrame:
     """
     import pandas as pd
 
-    path = _results_path(Path(out_dir))
-    with contextlib.closing(_connect(path, read_only=True)) as db:
+    with _reading(Path(out_dir)) as db:
         parameter_columns, metric_columns = (
             json.loads(text)
-            for text in db.execute(
-                "SELECT parameter_columns, metric_columns FROM campaign"
-            ).fetchone()
+            for text in _campaign_row(db, out_dir, "parameter_columns, metric_columns")
         )
         rows = db.execute(
             'SELECT "index", seed, status, error, parameters, metrics, wall_s, worker_deaths '
             'FROM runs ORDER BY "index"'
         ).fetchall()
+        stored = [(row, json.loads(row[4]), json.loads(row[5])) for row in rows]
     records = []
-    for index, seed, status, error, parameters, metrics, wall_s, deaths in rows:
-        values = json.loads(parameters)
-        measured = json.loads(metrics)
+    for (index, seed, status, error, _, _, wall_s, deaths), values, measured in stored:
         record = {"index": index, "seed": seed, "status": status, "error": error}
         for name in parameter_columns:
             value = values.get(name)

@@ -8,14 +8,17 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import sqlite3
 from collections.abc import Iterator, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from auvmpc import __version__
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, format_validation_error
 from auvmpc.experiments.campaign.spec import (
     LOCK_FILE,
     RESULTS_FILE,
@@ -70,9 +73,7 @@ CREATE TABLE IF NOT EXISTS worker_deaths (
 
 def _connect(path: Path, read_only: bool = False) -> sqlite3.Connection:
     if read_only:
-        connection = sqlite3.connect(
-            f"{path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None
-        )
+        connection = sqlite3.connect(_read_only_uri(path), uri=True, isolation_level=None)
     else:
         connection = sqlite3.connect(path, isolation_level=None)
         connection.execute("PRAGMA journal_mode=WAL")
@@ -80,6 +81,42 @@ def _connect(path: Path, read_only: bool = False) -> sqlite3.Connection:
         connection.execute("PRAGMA synchronous=FULL")
     connection.execute("PRAGMA busy_timeout=10000")
     return connection
+
+
+def _read_only_uri(path: Path) -> str:
+    """The store opened to read. In a folder nobody can write (a read-only mount), SQLite
+    cannot create the write-ahead log's index (``-shm``) a reader needs: there the file is
+    read as immutable (no locks, no index), which is safe when no write-ahead log holds rows
+    beyond it, as after every finished or resumed campaign."""
+    uri = f"{path.resolve().as_uri()}?mode=ro"
+    wal = path.with_name(path.name + "-wal")
+    shm = path.with_name(path.name + "-shm")
+    frozen = not os.access(path.parent, os.W_OK) and not shm.exists()
+    if frozen and (not wal.exists() or wal.stat().st_size == 0):
+        uri += "&immutable=1"
+    return uri
+
+
+@contextlib.contextmanager
+def _reading(out_dir: Path) -> Iterator[sqlite3.Connection]:
+    """The results of a campaign folder opened to read. A file SQLite cannot read (not a
+    database, cut short, a table missing) or a stored row that does not parse is one line
+    naming it: damaged, or not a campaign's results."""
+    path = _results_path(out_dir)
+    try:
+        with contextlib.closing(_connect(path, read_only=True)) as db:
+            yield db
+    except (sqlite3.Error, json.JSONDecodeError) as error:
+        raise _unreadable(path, str(error)) from None
+    except ValidationError as error:
+        raise _unreadable(path, str(format_validation_error(error, "campaign"))) from None
+
+
+def _unreadable(path: Path, problem: str, field: str = "DIR") -> ConfigError:
+    return ConfigError(
+        field, str(path), f"{path.name} cannot be read ({problem}): it is damaged or not a "
+        "campaign's results",
+    )  # fmt: skip
 
 
 # SQLite's primary result codes for a file the system does not let it write: PERM,
@@ -116,12 +153,18 @@ class _Store:
 
     def __init__(self, out_dir: Path, campaign: Campaign) -> None:
         self.path = out_dir / RESULTS_FILE
-        with _storage_errors(self.path):
-            self.connection = _connect(self.path)
+        try:
+            with _storage_errors(self.path):
+                self.connection = _connect(self.path)
+        except sqlite3.DatabaseError as error:  # a damaged file, or not SQLite's at all
+            raise _unreadable(self.path, str(error), "--out") from None
         self.campaign = campaign
         try:
             with _storage_errors(self.path):
                 self._open(out_dir, campaign)
+        except sqlite3.DatabaseError as error:  # a damaged file, or not SQLite's at all
+            self.connection.close()
+            raise _unreadable(self.path, str(error), "--out") from None
         except BaseException:
             self.connection.close()
             raise
@@ -129,6 +172,8 @@ class _Store:
     def _open(self, out_dir: Path, campaign: Campaign) -> None:
         """Create the tables, or check that they hold this campaign."""
         with _transaction(self.connection) as db:
+            if _has_table(db, "campaign") and not _has_table(db, "runs"):
+                raise _unreadable(self.path, "no such table: runs", "--out")
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
                     db.execute(statement)
@@ -298,7 +343,7 @@ def count_finished(out_dir: str | Path) -> int:
     path = Path(out_dir) / RESULTS_FILE
     if not path.is_file():
         return 0
-    with contextlib.closing(_connect(path, read_only=True)) as db:
+    with _reading(Path(out_dir)) as db:
         try:
             return int(db.execute("SELECT COUNT(*) FROM runs").fetchone()[0])
         except sqlite3.OperationalError:  # created, tables not yet
@@ -307,48 +352,53 @@ def count_finished(out_dir: str | Path) -> int:
 
 def stored_sessions(out_dir: str | Path) -> list[dict[str, Any]]:
     """Provenance of every session that ran runs of a campaign folder, oldest first."""
-    with contextlib.closing(_connect(_results_path(Path(out_dir)), read_only=True)) as db:
-        try:
-            rows = db.execute("SELECT provenance, new_runs FROM sessions ORDER BY rowid").fetchall()
-        except sqlite3.OperationalError:  # a folder written before sessions were recorded
+    with _reading(Path(out_dir)) as db:
+        if not _has_table(db, "sessions"):  # a folder written before sessions were recorded
             return []
-    return [{**json.loads(text), "new_runs": new_runs} for text, new_runs in rows]
+        rows = db.execute("SELECT provenance, new_runs FROM sessions ORDER BY rowid").fetchall()
+        return [{**json.loads(text), "new_runs": new_runs} for text, new_runs in rows]
+
+
+def _has_table(db: sqlite3.Connection, name: str) -> bool:
+    found = db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,))
+    return found.fetchone() is not None
 
 
 def stored_campaign(out_dir: Path) -> Campaign:
     """The campaign a results folder was written by (as stored, not as the file is now)."""
-    spec_text, source, base_source, base_data, base_dir = _campaign_row(
-        out_dir, "spec, source, base_source, base_data, base_dir"
-    )
-    spec = CampaignSpec.model_validate(json.loads(spec_text))
-    return _with_implicit_overrides(
-        Campaign(
-            spec,
-            source,
-            None if spec.cases is not None else base_source,
-            json.loads(base_data),
-            base_dir,
-            controller_overrides=expand_controller(spec.controller),
+    with _reading(Path(out_dir)) as db:
+        spec_text, source, base_source, base_data, base_dir = _campaign_row(
+            db, out_dir, "spec, source, base_source, base_data, base_dir"
         )
-    )
+        spec = CampaignSpec.model_validate(json.loads(spec_text))
+        return _with_implicit_overrides(
+            Campaign(
+                spec,
+                source,
+                None if spec.cases is not None else base_source,
+                json.loads(base_data),
+                base_dir,
+                controller_overrides=expand_controller(spec.controller),
+            )
+        )
 
 
 def stored_version(out_dir: Path) -> str:
     """The auvmpc version that created a results folder."""
-    return _campaign_row(out_dir, "auvmpc_version")[0]
+    with _reading(Path(out_dir)) as db:
+        return _campaign_row(db, out_dir, "auvmpc_version")[0]
 
 
 def stored_metrics(out_dir: Path) -> dict[int, dict[str, Any]]:
     """Run index -> metrics, of the runs stored with status ``ok`` (floats exactly as the
     runs computed them: the JSON is parsed by Python)."""
-    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
+    with _reading(Path(out_dir)) as db:
         rows = db.execute('SELECT "index", metrics FROM runs WHERE status = ?', ("ok",)).fetchall()
-    return {index: json.loads(text) for index, text in rows}
+        return {index: json.loads(text) for index, text in rows}
 
 
-def _campaign_row(out_dir: Path, columns: str) -> tuple[Any, ...]:
-    with contextlib.closing(_connect(_results_path(out_dir), read_only=True)) as db:
-        row = db.execute(f"SELECT {columns} FROM campaign").fetchone()
+def _campaign_row(db: sqlite3.Connection, out_dir: Path, columns: str) -> tuple[Any, ...]:
+    row = db.execute(f"SELECT {columns} FROM campaign").fetchone()
     if row is None:
         raise ConfigError("DIR", str(out_dir), "no campaign stored in results.sqlite")
     return row
