@@ -639,21 +639,100 @@ def excite(
     )
 
 
+def _channel_list(text: str | None, flag: str) -> tuple[int, ...]:
+    """``1,2,3,4`` -> (1, 2, 3, 4); one line naming the flag for anything else."""
+    if not text:
+        return ()
+    try:
+        return tuple(int(item) for item in text.split(","))
+    except ValueError:
+        raise ConfigError(flag, text, "a comma-separated list of channel numbers") from None
+
+
 @app.command()
 def identify(
-    run_dirs: Annotated[list[str], typer.Argument(help="auvmpc run folders (log.csv)")],
+    logs: Annotated[
+        list[str],
+        typer.Argument(
+            help="auvmpc run folders, ROS 2 bags (folder, .mcap, .db3), ArduSub DataFlash "
+            "logs (.bin, .log)",
+            metavar="LOG...",
+        ),
+    ],
     vehicle: Annotated[str, typer.Option("--vehicle", help="start vehicle: preset or file")],
     out: Annotated[Path, typer.Option("--out", help="identified vehicle file to write (.yaml)")],
     holdout: Annotated[
         float, typer.Option("--holdout", help="share at the end of each log kept to validate")
     ] = 0.2,
+    sample_time: Annotated[
+        float | None,
+        typer.Option(
+            "--sample-time",
+            help="bags, DataFlash: resampling step (s); default the commands' median interval",
+        ),
+    ] = None,  # fmt: skip
+    odometry_topic: Annotated[
+        str, typer.Option("--odometry-topic", help="bags: nav_msgs/msg/Odometry topic")
+    ] = "/odom",
+    thrust_topic: Annotated[
+        str,
+        typer.Option(
+            "--thrust-topic",
+            help="bags: std_msgs/msg/Float64MultiArray topic of "
+            "the thrusters' forces (N), in the vehicle's order",
+        ),
+    ] = "/thrust",  # fmt: skip
+    wrench_topic: Annotated[
+        str | None,
+        typer.Option(
+            "--wrench-topic",
+            help="bags: geometry_msgs/msg/WrenchStamped topic of "
+            "the body wrench, used instead of the thrust topic",
+        ),
+    ] = None,  # fmt: skip
+    body_frame: Annotated[
+        str,
+        typer.Option(
+            "--body-frame",
+            help="bags: frd (x fwd, y starboard: auvmpc export) or flu (REP 103 base_link)",
+        ),
+    ] = "frd",  # fmt: skip
+    thruster_curve: Annotated[
+        str,
+        typer.Option(
+            "--thruster-curve",
+            help="DataFlash: PWM to force, t200-16v, t200-12v or a CSV file (pwm_us, force_n)",
+        ),
+    ] = "t200-16v",  # fmt: skip
+    channels: Annotated[
+        str | None,
+        typer.Option(
+            "--channels",
+            help="DataFlash: RCOU channels of the vehicle's thrusters "
+            "in its order, e.g. 1,2,3,4 (default 1..n)",
+        ),
+    ] = None,  # fmt: skip
+    reversed_channels: Annotated[
+        str | None,
+        typer.Option("--reversed", help="DataFlash: channels whose thrust is reversed, e.g. 2,3"),
+    ] = None,
     overwrite: Overwrite = False,
 ) -> None:
     """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
     file, identification.json, identification.md and a fit figure beside it."""
-    from auvmpc.identification import write_identification
+    from auvmpc.identification import LogOptions, write_identification
 
-    found = write_identification(run_dirs, vehicle, out, holdout, overwrite)
+    options = LogOptions(
+        sample_time=sample_time,
+        odometry_topic=odometry_topic,
+        thrust_topic=thrust_topic,
+        wrench_topic=wrench_topic,
+        body_frame=body_frame,
+        thruster_curve=thruster_curve,
+        channels=_channel_list(channels, "--channels"),
+        reversed_channels=_channel_list(reversed_channels, "--reversed"),
+    )
+    found = write_identification(logs, vehicle, out, holdout, overwrite, options)
     table = Table(title=f"identified from {len(found.logs)} log(s)")
     for column in ("parameter", "start", "identified", "95 % interval", "excited"):
         table.add_column(column)

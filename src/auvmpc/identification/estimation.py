@@ -145,7 +145,9 @@ def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
 
 
 def applied_force(log: VelocityLog, vehicle: VehicleParams) -> np.ndarray:
-    """tau = T F per command, (N, 3)."""
+    """The body force [X, Y, N] per command, (N, 3): the log's own, or tau = T F."""
+    if log.force is not None:  # the log holds the body force itself: no allocation
+        return log.force
     return log.thrust @ vehicle.T.T
 
 
@@ -417,19 +419,19 @@ def identify(
     """Identify :data:`PARAMETERS` from ``logs`` starting from ``vehicle`` (module
     docstring); the last ``holdout`` share of each log validates."""
     if not logs:
-        raise ConfigError("RUN_DIR", None, "give at least one log")
+        raise ConfigError("LOG", None, "give at least one log")
     sample_time = logs[0].sample_time
     for log in logs:
         if abs(log.sample_time - sample_time) > 1e-6 * sample_time:
             raise ConfigError(
-                "RUN_DIR",
+                "LOG",
                 log.name,
                 f"sampled every {log.sample_time:g} s, the first log "
                 f"every {sample_time:g} s: give logs of one sample time",
             )
-        if log.thrust.shape[1] != vehicle.n_thrusters:
+        if log.thrust is not None and log.thrust.shape[1] != vehicle.n_thrusters:
             raise ConfigError(
-                "RUN_DIR",
+                "LOG",
                 log.name,
                 f"has {log.thrust.shape[1]} thrusters, the start vehicle {vehicle.n_thrusters}",
             )
@@ -440,7 +442,7 @@ def identify(
         cut = round((1.0 - holdout) * log.steps)
         if cut < MIN_SAMPLES or log.steps - cut < MIN_SAMPLES // 4:
             raise ConfigError(
-                "RUN_DIR",
+                "LOG",
                 log.name,
                 f"has {log.steps} samples, too short: need "
                 f"{math.ceil(MIN_SAMPLES / (1 - holdout))} to fit and validate",

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import Identification
-from auvmpc.identification.logs import VELOCITY_NAMES
+from auvmpc.identification.logs import VELOCITY_NAMES, LogOptions
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
 
@@ -156,13 +156,19 @@ def fit_figure(found: Identification) -> Figure:
 
 
 def write_identification(
-    run_dirs: list[str], vehicle: str, out: Path, holdout: float = 0.2, overwrite: bool = False
+    log_paths: list[str],
+    vehicle: str,
+    out: Path,
+    holdout: float = 0.2,
+    overwrite: bool = False,
+    options: LogOptions | None = None,
 ) -> Identification:
-    """``auvmpc identify``: identify from run folders starting from ``vehicle`` (preset or
-    file) and write ``out`` with identification.json, identification.md and
-    identification-fit.png beside it."""
+    """``auvmpc identify``: identify from logs (run folders, ROS 2 bags, DataFlash logs:
+    :func:`~auvmpc.identification.logs.read_log`, read as ``options`` say) starting from
+    ``vehicle`` (preset or file) and write ``out`` with identification.json,
+    identification.md and identification-fit.png beside it."""
     from auvmpc.identification.estimation import identify
-    from auvmpc.identification.logs import read_run_folder
+    from auvmpc.identification.logs import read_log
 
     out = Path(out)
     if out.suffix not in (".yaml", ".yml"):
@@ -174,9 +180,9 @@ def write_identification(
             raise ConfigError("--out", str(path), "exists; pass --overwrite to replace it")
     start_data, source = vehicle_data(vehicle, "--vehicle")
     start = validated_vehicle(start_data, source, "--vehicle")
-    if not run_dirs:
-        raise ConfigError("RUN_DIR", None, "give at least one run folder")
-    logs = [read_run_folder(path, start.n_thrusters) for path in run_dirs]
+    if not log_paths:
+        raise ConfigError("LOG", None, "give at least one log")
+    logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
     found = identify(logs, start, holdout)
     text = vehicle_file_text(start_data, found, vehicle)
     load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
