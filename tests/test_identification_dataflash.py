@@ -87,11 +87,11 @@ def _pwm_for(force_n: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
-    """A 60 s excitation of the BlueROV2 Heavy through the T200 curve, as a .bin."""
+    """A 40 s excitation of the BlueROV2 Heavy through the T200 curve, as a .bin."""
     from auvmpc.models.vehicle import load_vehicle
 
     vehicle = load_vehicle(VEHICLE)
-    excitation = design_excitation(vehicle, 60.0)
+    excitation = design_excitation(vehicle, 40.0)
     pwm = _pwm_for(excitation.thrust)
     thrust = thruster_curve("t200-16v").force(pwm)  # what the vehicle really got
     states = simulate_open_loop(vehicle, thrust, excitation.sample_time)
@@ -146,7 +146,7 @@ def test_the_dataflash_log_reads_back_as_the_flight(flight):
 def test_identify_from_the_dataflash_log_recovers_the_vehicle(flight):
     vehicle, _, _, _, path = flight
     found = identify([read_log(path, vehicle.n_thrusters)], vehicle)
-    assert not found.unexcited  # 60 s excite every parameter (measured: all within 0.1 %)
+    assert not found.unexcited  # 40 s excite every parameter (measured: all within 0.1 %)
     for estimate in found.parameters:
         truth = getattr(vehicle, estimate.name)
         if estimate.excited:

@@ -1,7 +1,7 @@
 """`auvmpc identify` from ROS 2 bags (issue 27 item 3): a short excite -> run -> export
 --format rosbag2 (MCAP) read back equals the run folder's log, a SQLite3 bag with a body
 wrench in REP 103 axes (written by rosbags' own writer) reads back to the same velocities
-and the allocation's force, and identify from the bag finds what it finds from the folder.
+and the allocation's force, and identify from the bag recovers the vehicle.
 The resampling against analytic truth; bad bags refused in one line."""
 
 from __future__ import annotations
@@ -27,8 +27,6 @@ VEHICLE = "jmse2210"
 # with round(t * 1e9) ns; on that grid the reader's interpolation returns the stored values
 # exactly. 1e-12 only allows for another summation order.
 BAG_VELOCITY_TOL = 1e-12
-# identify on bit-identical inputs: the same numbers, up to a different BLAS path.
-SAME_INPUT_REL_TOL = 1e-9
 
 
 def _cli(*args: str) -> None:
@@ -111,24 +109,24 @@ def test_the_exported_bag_reads_back_as_the_run_folder(run, tmp_path):
     np.testing.assert_allclose(mirrored.velocity * [1, -1, -1], bag.velocity, atol=1e-15)
 
 
-def test_identify_from_the_bag_finds_what_it_finds_from_the_run_folder(
-    run, tmp_path, monkeypatch, capsys
-):
-    found = {}
-    for label, log in (("folder", run), ("bag", run / "rosbag2")):
-        out = tmp_path / label / "vehicle.yaml"
-        code, _, err = run_cli(monkeypatch, capsys, "identify", str(log), "--vehicle",
-                               VEHICLE, "--out", str(out))  # fmt: skip
-        assert code == 0, err
-        found[label] = json.loads((out.parent / "identification.json").read_text())
+def test_identify_from_the_bag_recovers_the_vehicle(run, tmp_path, monkeypatch, capsys):
+    """The bag's log is the run folder's bit for bit (the test above), so identify finds the
+    same values from either (identification is deterministic); test_identification.py's
+    round trip checks the folder, this one the bag through the CLI."""
+    out = tmp_path / "vehicle.yaml"
+    code, _, err = run_cli(monkeypatch, capsys, "identify", str(run / "rosbag2"), "--vehicle",
+                           VEHICLE, "--out", str(out))  # fmt: skip
+    assert code == 0, err
+    found = json.loads((out.parent / "identification.json").read_text())
+    assert found["logs"] == [str(run / "rosbag2")]
     truth = load_vehicle(VEHICLE)
-    for name, entry in found["bag"]["parameters"].items():
-        same = found["folder"]["parameters"][name]
-        assert entry["excited"] == same["excited"], name
-        assert entry["value"] == pytest.approx(same["value"], rel=SAME_INPUT_REL_TOL), name
-        if entry["excited"]:
-            assert entry["value"] == pytest.approx(getattr(truth, name), rel=0.1), name
-    assert found["bag"]["logs"] == [str(run / "rosbag2")]
+    assert not found["not_excited"]
+    for name, entry in found["parameters"].items():
+        low, high = entry["ci95"]
+        true_value = getattr(truth, name)
+        assert abs(entry["value"] - true_value) <= 0.1 * abs(true_value) or (
+            low <= true_value <= high
+        ), name
 
 
 def test_resample_holds_commands_and_interpolates_velocities():
