@@ -656,7 +656,7 @@ def identify(
         typer.Argument(
             help="auvmpc run folders, ROS 2 bags (folder, .mcap, .db3), ArduSub DataFlash "
             "logs (.bin, .log)",
-            metavar="LOG...",
+            metavar="LOG",
         ),
     ],
     vehicle: Annotated[str, typer.Option("--vehicle", help="start vehicle: preset or file")],
