@@ -15,7 +15,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev,compare,ros,video,docs]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,compare,ros,ardupilot,video,docs]"
 	touch $(STAMP)
 
 reproduce: $(STAMP)
