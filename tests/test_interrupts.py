@@ -114,7 +114,7 @@ def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch):
 
 @pytest.mark.slow
 def test_interrupted_campaign_keeps_rows_and_resumes_to_the_same_rows(tmp_path):
-    runs = 16
+    runs = 8  # enough to stop mid-campaign (2 workers, stopped after 2 rows) and resume
     base = ("campaign", "paper-robustness", "--runs", str(runs), "--workers", "2", "--no-report")
     process = _cli(*base, "--out", "camp", cwd=tmp_path)
     returncode, stderr, elapsed = _interrupt(
