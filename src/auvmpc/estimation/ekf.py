@@ -24,7 +24,6 @@ import math
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
 from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
@@ -39,6 +38,7 @@ __all__ = [
     "ObserverConfig",
     "condition_covariance",
     "covariance_bounds",
+    "ekf_functions",
     "world_disturbance_dynamics",
 ]
 
@@ -162,6 +162,10 @@ class AugmentedEkf:
     first ``measured`` entries of z are measured directly (H = [I 0]). The covariance
     is updated in Joseph form and kept symmetric with bounded eigenvalues (module
     docstring), so it stays positive definite however long the filter runs.
+
+    The update and the propagation are CasADi functions (:attr:`update`, :attr:`propagation`,
+    :func:`ekf_functions`): evaluated here, generated to C by ``export-c``, so the exported
+    estimator computes what this one does, operation for operation.
     """
 
     def __init__(
@@ -173,21 +177,22 @@ class AugmentedEkf:
         prior_covariance: np.ndarray,
         angle_index: int | None = None,
     ) -> None:
-        self._step = step
         self._measured = measured
-        self._process = process_covariance
-        self._measurement = measurement_covariance
-        self._prior = prior_covariance
+        self.prior = prior_covariance
         self._angle_index = angle_index
-        self._floor, self._ceiling = covariance_bounds(
+        self.bounds = covariance_bounds(
             process_covariance, measurement_covariance, prior_covariance
+        )
+        self._floor, self._ceiling = self.bounds
+        self.update, self.propagation = ekf_functions(
+            step, measured, process_covariance, measurement_covariance
         )
         self.restarts = 0
         self.reset(np.zeros(prior_covariance.shape[0]))
 
     def reset(self, initial_estimate: np.ndarray) -> None:
         self.estimate = np.array(initial_estimate, dtype=float)
-        self.covariance = self._prior.copy()
+        self.covariance = self.prior.copy()
         self._initialised = False
 
     def correct(self, measurement: np.ndarray) -> np.ndarray:
@@ -202,15 +207,9 @@ class AugmentedEkf:
         if self._angle_index is not None:
             i = self._angle_index
             innovation[i] = math.remainder(innovation[i], 2.0 * math.pi)
-        P = self.covariance
-        S = P[:m, :m] + self._measurement  # H P H' + R, positive definite
-        gain = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S), P[:m, :]).T  # P H' S^-1
-        self.estimate = self.estimate + gain @ innovation
-        # Joseph form: (I - K H) P (I - K H)' + K R K', with H = [I 0].
-        keep = np.eye(len(P))
-        keep[:, :m] -= gain
-        joseph = keep @ P @ keep.T + gain @ self._measurement @ gain.T
-        self.covariance = condition_covariance(joseph, self._floor, self._ceiling)
+        estimate, joseph = self.update(self.estimate, self.covariance, innovation)
+        self.estimate = np.asarray(estimate).ravel()
+        self.covariance = condition_covariance(np.asarray(joseph), self._floor, self._ceiling)
         return self.estimate.copy()
 
     def predict(self, applied_input: np.ndarray) -> None:
@@ -221,11 +220,11 @@ class AugmentedEkf:
         measurement with its prior covariance, keeping the unmeasured part of the
         estimate if it is finite; ``restarts`` counts these.
         """
-        next_estimate, jacobian = self._step(self.estimate, applied_input)
-        A = np.asarray(jacobian)
-        next_estimate = np.asarray(next_estimate).ravel()
-        with np.errstate(invalid="ignore", over="ignore"):  # non-finite is handled below
-            propagated = A @ self.covariance @ A.T + self._process
+        next_estimate, propagated = (
+            np.asarray(value)
+            for value in self.propagation(self.estimate, self.covariance, applied_input)
+        )
+        next_estimate = next_estimate.ravel()
         if not (np.all(np.isfinite(next_estimate)) and np.all(np.isfinite(propagated))):
             self.restarts += 1
             kept = self.estimate.copy()
@@ -234,6 +233,81 @@ class AugmentedEkf:
             return
         self.estimate = next_estimate
         self.covariance = condition_covariance(propagated, self._floor, self._ceiling)
+
+
+def ekf_functions(
+    step: ca.Function,
+    measured: int,
+    process_covariance: np.ndarray,
+    measurement_covariance: np.ndarray,
+) -> tuple[ca.Function, ca.Function]:
+    """The EKF's two steps on an estimate z (n) and covariance P (n x n), with H = [I 0]:
+
+    ``ekf_update`` (z, P, innovation) -> (z + K innovation, the Joseph form
+    (I - K H) P (I - K H)' + K R K'), K = P H' (H P H' + R)^-1 by a Cholesky factorisation;
+    ``ekf_propagation`` (z, P, u) -> (step(z, u), A P A' + Q), A the step's Jacobian.
+
+    Both are written once, symbolically, so that Python (CasADi's virtual machine) and the
+    exported C (CasADi's generated code) evaluate the same operations in the same order.
+    """
+    n, m = step.size1_in(0), measured
+    z, P = ca.SX.sym("z", n), ca.SX.sym("P", n, n)
+    innovation, u = ca.SX.sym("innovation", m), ca.SX.sym("u", step.size1_in(1))
+    R = ca.SX(measurement_covariance)
+    S = P[:m, :m] + R  # H P H' + R, positive definite
+    # K' = S^-1 P[:m, :], column by column through S = L L'.
+    L = _cholesky(S)
+    gain_t = ca.horzcat(*(_cholesky_solve(L, P[:m, j]) for j in range(n)))
+    gain = gain_t.T
+    keep = ca.SX.eye(n)
+    keep[:, :m] -= gain
+    joseph = keep @ P @ keep.T + gain @ R @ gain.T
+    update = ca.Function(
+        "ekf_update", [z, P, innovation], [z + gain @ innovation, ca.densify(joseph)],
+        ["z", "P", "innovation"], ["z_corrected", "P_joseph"],
+    )  # fmt: skip
+    following, A = step(z, u)
+    propagated = A @ P @ A.T + ca.SX(process_covariance)
+    propagation = ca.Function(
+        "ekf_propagation", [z, P, u], [ca.densify(following), ca.densify(propagated)],
+        ["z", "P", "u"], ["z_next", "P_next"],
+    )  # fmt: skip
+    return update, propagation
+
+
+def _cholesky(S: ca.SX) -> ca.SX:
+    """The lower Cholesky factor of the symmetric positive definite S (m x m), symbolically."""
+    m = S.size1()
+    L = ca.SX(m, m)
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        L[j, j] = ca.sqrt(d)
+        for i in range(j + 1, m):
+            e = S[i, j]
+            for k in range(j):
+                e -= L[i, k] * L[j, k]
+            L[i, j] = e / L[j, j]
+    return L
+
+
+def _cholesky_solve(L: ca.SX, b: ca.SX) -> ca.SX:
+    """x with L L' x = b: forward, then back substitution."""
+    m = L.size1()
+    y = [None] * m
+    for i in range(m):
+        e = b[i]
+        for k in range(i):
+            e -= L[i, k] * y[k]
+        y[i] = e / L[i, i]
+    x = [None] * m
+    for i in reversed(range(m)):
+        e = y[i]
+        for k in range(i + 1, m):
+            e -= L[k, i] * x[k]
+        x[i] = e / L[i, i]
+    return ca.vertcat(*x)
 
 
 # Times the vehicle's thrust authority (per axis) above which a disturbance estimate is
@@ -267,6 +341,11 @@ class DisturbanceObserver:
         self._plausible_force = PLAUSIBLE_AUTHORITY_MULTIPLE * float(force)
         self._plausible_moment = PLAUSIBLE_AUTHORITY_MULTIPLE * float(moment)
         self.restarts = 0
+
+    @property
+    def filter(self) -> AugmentedEkf:
+        """The filter on [x; d_world] (its functions and covariances are what export-c writes)."""
+        return self._filter
 
     def reset(self, initial_state: np.ndarray) -> None:
         self._filter.reset(np.concatenate([np.asarray(initial_state, float), np.zeros(ND)]))

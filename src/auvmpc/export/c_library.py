@@ -37,10 +37,9 @@ from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode
 from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
-from auvmpc.estimation import covariance_bounds
+from auvmpc.estimation.ekf import AugmentedEkf, DisturbanceObserver
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.experiments.run_folder import RunFolder, read_run_folder
-from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
@@ -240,37 +239,27 @@ def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfi
     return "\n".join(lines)
 
 
-def _observer(model, config: ControllerConfig) -> ca.Function:
-    """The estimator's step of [x; d] with its Jacobian, as DisturbanceObserver builds it, the
-    Jacobian dense (column-major 9 x 9) for the C code."""
-    step = horizontal_model(model, config.sample_time, config.model_substeps).augmented_step
-    augmented = ca.SX.sym("z", step.size1_in(0))
-    thrust = ca.SX.sym("F", step.size1_in(1))
-    following, jacobian = step(augmented, thrust)
-    return ca.Function(
-        "observer_step", [augmented, thrust], [ca.densify(following), ca.densify(jacobian)]
-    )
+def _observer(model, config: ControllerConfig) -> AugmentedEkf:
+    """The estimator the Python controller builds (DisturbanceObserver): its update and
+    propagation functions are generated to C, its prior and bounds are the C's constants."""
+    return DisturbanceObserver(
+        model, config.sample_time, config.observer, config.model_substeps
+    ).filter
 
 
 def _observer_macros(model, config: ControllerConfig) -> dict[str, object]:
-    """The EKF's covariances and bounds, as DisturbanceObserver computes them."""
-    observer = config.observer.for_vehicle(model)
-    rate = np.array(observer.disturbance_rate_std) ** 2 * config.sample_time
-    measurement = np.square(observer.measurement_std)
-    process = np.concatenate([np.square(observer.state_process_std), rate])
-    prior = np.concatenate([measurement, np.square(observer.initial_disturbance_std)])
-    floor, ceiling = covariance_bounds(np.diag(process), np.diag(measurement), np.diag(prior))
-    step = _observer(model, config)
+    """The EKF's prior covariance, eigenvalue bounds and work sizes."""
+    ekf = _observer(model, config)
+    floor, ceiling = ekf.bounds
+    functions = (ekf.update, ekf.propagation)
     return {
-        "AUVMPC_PROCESS_COVARIANCE": _array(process),
-        "AUVMPC_MEASUREMENT_COVARIANCE": _array(measurement),
-        "AUVMPC_PRIOR_COVARIANCE": _array(prior),
+        "AUVMPC_PRIOR_COVARIANCE": _array(np.diag(ekf.prior)),
         "AUVMPC_COVARIANCE_FLOOR": f"{floor:.17g}",
         "AUVMPC_COVARIANCE_CEILING": f"{ceiling:.17g}",
-        "AUVMPC_OBSERVER_SZ_ARG": step.sz_arg(),
-        "AUVMPC_OBSERVER_SZ_RES": step.sz_res(),
-        "AUVMPC_OBSERVER_SZ_IW": step.sz_iw(),
-        "AUVMPC_OBSERVER_SZ_W": step.sz_w(),
+        "AUVMPC_OBSERVER_SZ_ARG": max(f.sz_arg() for f in functions),
+        "AUVMPC_OBSERVER_SZ_RES": max(f.sz_res() for f in functions),
+        "AUVMPC_OBSERVER_SZ_IW": max(f.sz_iw() for f in functions),
+        "AUVMPC_OBSERVER_SZ_W": max(f.sz_w() for f in functions),
     }
 
 
@@ -323,8 +312,10 @@ def export_c(
         generator.add(qp.stage)
         generator.add(qp.terminal)
         generator.add(program.step)  # rk4_step: the cold-start rollout and the shift
-        if config.offset_free:
-            generator.add(_observer(model, config))  # observer_step: the EKF's prediction
+        if config.offset_free:  # the EKF's update and propagation (estimation/ekf.py)
+            ekf = _observer(model, config)
+            generator.add(ekf.update)
+            generator.add(ekf.propagation)
         generator.generate(str(folder) + os.sep)
         generated = folder / "rti_qp_data.c"
         generated.write_text(_warning_clean(generated.read_text()))

@@ -2,8 +2,9 @@
  * every move free, its sparse real-time iteration (solvers/real_time_iteration.py) and the safety
  * shell (controllers/shell.py), step for step, so that it reproduces the Python commands.
  *
- * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost
- * and the RK4 step, from the same expressions the Python uses) and auvmpc_config.h (sizes,
+ * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost,
+ * the RK4 step and the estimator's update and propagation, the functions the Python
+ * evaluates) and auvmpc_config.h (sizes,
  * weights, limits, settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
  * Python controller compiles, built here with a static arena for HPIPM's workspace (the
  * Makefile's ARENA). Static memory only (README.md).
@@ -47,8 +48,6 @@ static const double stage_weight[NX] = AUVMPC_STAGE_WEIGHT;
 static const double hpipm_settings[] = AUVMPC_HPIPM_SETTINGS;
 #if AUVMPC_OFFSET_FREE
 #define NA (NX + 3) /* the estimator's state [x, y, psi, u, v, r, X, Y, N] */
-static const double process_covariance[NA] = AUVMPC_PROCESS_COVARIANCE;  /* diagonal */
-static const double measurement_covariance[NX] = AUVMPC_MEASUREMENT_COVARIANCE;
 static const double prior_covariance[NA] = AUVMPC_PRIOR_COVARIANCE;
 #endif
 
@@ -225,89 +224,47 @@ static void condition_covariance(double m[NA][NA]) {
         for (int j = 0; j < NA; ++j) c.covariance[i][j] = 0.5 * (work[i][j] + work[j][i]);
 }
 
+/* Evaluate a generated EKF function (ekf_update or ekf_propagation: estimation/ekf.py,
+ * ekf_functions) on (z, P, x): into z_out and P_out (column-major). 0 on success. The
+ * covariance is symmetric (condition_covariance), so its rows are its columns. */
+static int observer_call(int (*function)(const casadi_real **, casadi_real **, casadi_int *,
+                                         casadi_real *, int),
+                         const double *x, double *z_out, double *P_out) {
+    c.observer_arg[0] = c.estimate;
+    c.observer_arg[1] = c.covariance[0];
+    c.observer_arg[2] = x;
+    c.observer_res[0] = z_out;
+    c.observer_res[1] = P_out;
+    return function(c.observer_arg, c.observer_res, c.observer_iw, c.observer_w, 0);
+}
+
+/* m[i][j] = P[i + NA j]: a column-major result as rows. */
+static void from_columns(const double *P, double m[NA][NA]) {
+    for (int i = 0; i < NA; ++i)
+        for (int j = 0; j < NA; ++j) m[i][j] = P[i + NA * j];
+}
+
 /* Fuse a measurement of [x, y, psi, u, v, r] (AugmentedEkf.correct, Joseph form). */
 static void observer_correct(const double *measured) {
-    double innovation[NX], Sy[NX][NX], L[NX][NX], gain[NA][NX];
+    double innovation[NX], corrected[NA], joseph[NA * NA], m[NA][NA];
     if (!c.initialised) {
         memcpy(c.estimate, measured, sizeof(double) * NX);
         c.initialised = 1;
     }
     for (int i = 0; i < NX; ++i) innovation[i] = measured[i] - c.estimate[i];
     innovation[2] = remainder(innovation[2], TWO_PI);
-    for (int i = 0; i < NX; ++i)
-        for (int j = 0; j < NX; ++j)
-            Sy[i][j] = c.covariance[i][j] + (i == j ? measurement_covariance[i] : 0.0);
-    /* Sy = L L', then gain' = Sy^-1 P[:NX, :] column by column */
-    for (int j = 0; j < NX; ++j) {
-        double d = Sy[j][j];
-        for (int k = 0; k < j; ++k) d -= L[j][k] * L[j][k];
-        L[j][j] = sqrt(d);
-        for (int i = j + 1; i < NX; ++i) {
-            double e = Sy[i][j];
-            for (int k = 0; k < j; ++k) e -= L[i][k] * L[j][k];
-            L[i][j] = e / L[j][j];
-        }
-    }
-    for (int col = 0; col < NA; ++col) {
-        double y[NX];
-        for (int i = 0; i < NX; ++i) {
-            double e = c.covariance[i][col];
-            for (int k = 0; k < i; ++k) e -= L[i][k] * y[k];
-            y[i] = e / L[i][i];
-        }
-        for (int i = NX - 1; i >= 0; --i) {
-            double e = y[i];
-            for (int k = i + 1; k < NX; ++k) e -= L[k][i] * gain[col][k];
-            gain[col][i] = e / L[i][i];
-        }
-    }
-    for (int i = 0; i < NA; ++i) {
-        double sum = 0.0;
-        for (int j = 0; j < NX; ++j) sum += gain[i][j] * innovation[j];
-        c.estimate[i] = c.estimate[i] + sum;
-    }
-    /* (I - K H) P (I - K H)' + K R K' */
-    double keep[NA][NA], keepP[NA][NA], joseph[NA][NA];
-    for (int i = 0; i < NA; ++i)
-        for (int j = 0; j < NA; ++j) keep[i][j] = (i == j) - (j < NX ? gain[i][j] : 0.0);
-    for (int i = 0; i < NA; ++i)
-        for (int j = 0; j < NA; ++j) {
-            double sum = 0.0;
-            for (int k = 0; k < NA; ++k) sum += keep[i][k] * c.covariance[k][j];
-            keepP[i][j] = sum;
-        }
-    for (int i = 0; i < NA; ++i)
-        for (int j = 0; j < NA; ++j) {
-            double sum = 0.0, noise = 0.0;
-            for (int k = 0; k < NA; ++k) sum += keepP[i][k] * keep[j][k];
-            for (int k = 0; k < NX; ++k) noise += gain[i][k] * measurement_covariance[k] * gain[j][k];
-            joseph[i][j] = sum + noise;
-        }
-    condition_covariance(joseph);
+    observer_call(ekf_update, innovation, corrected, joseph);
+    memcpy(c.estimate, corrected, sizeof corrected);
+    from_columns(joseph, m);
+    condition_covariance(m);
 }
 
 /* Propagate over one sample with the applied thrust (AugmentedEkf.predict); a non-finite
  * prediction restarts the filter from its prior, keeping the finite unmeasured estimate. */
 static void observer_predict(const double *thrust) {
-    double next[NA], A[NA * NA], AP[NA][NA], propagated[NA][NA];
-    c.observer_arg[0] = c.estimate;
-    c.observer_arg[1] = thrust;
-    c.observer_res[0] = next;
-    c.observer_res[1] = A; /* column-major: A[i + NA j] */
-    int failed = observer_step(c.observer_arg, c.observer_res, c.observer_iw, c.observer_w, 0);
-    for (int i = 0; i < NA; ++i)
-        for (int j = 0; j < NA; ++j) {
-            double sum = 0.0;
-            for (int k = 0; k < NA; ++k) sum += A[i + NA * k] * c.covariance[k][j];
-            AP[i][j] = sum;
-        }
-    for (int i = 0; i < NA; ++i)
-        for (int j = 0; j < NA; ++j) {
-            double sum = 0.0;
-            for (int k = 0; k < NA; ++k) sum += AP[i][k] * A[j + NA * k];
-            propagated[i][j] = sum + (i == j ? process_covariance[i] : 0.0);
-        }
-    if (failed || !all_finite(next, NA) || !all_finite(propagated[0], NA * NA)) {
+    double next[NA], propagated[NA * NA], m[NA][NA];
+    int failed = observer_call(ekf_propagation, thrust, next, propagated);
+    if (failed || !all_finite(next, NA) || !all_finite(propagated, NA * NA)) {
         double kept[NX];
         for (int i = 0; i < NX; ++i) kept[i] = 0.0;
         double disturbance[3];
@@ -318,7 +275,8 @@ static void observer_predict(const double *thrust) {
         return;
     }
     memcpy(c.estimate, next, sizeof next);
-    condition_covariance(propagated);
+    from_columns(propagated, m);
+    condition_covariance(m);
 }
 #endif
 
