@@ -52,6 +52,12 @@ def files(tmp_path):
         "name: c\nduration: 10\nreference: {type: csv, path: steps.csv}\n"
         "initial_state: [0, 0, 0, 0, 0, 0]\n"
     )
+    (tmp_path / "surrogate.yaml").write_text('name: s\n"\\ud800\\udc00": 1\n')
+    (tmp_path / "newline.yaml").write_text('name: s\n"a\\nb": 1\n')
+    (tmp_path / "nul.yaml").write_text(
+        'name: n\nduration: 10\nreference: {type: csv, path: "a\\0b"}\n'
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
     os.mkfifo(tmp_path / "pipe.csv")  # a pipe as the track: opening it waited forever
     (tmp_path / "pipe.yaml").write_text(
         "name: p\nduration: 10\nreference: {type: csv, path: pipe.csv}\n"
@@ -107,6 +113,26 @@ CASES = [
         ("run", "{d}/csv.yaml"),
         "reference.path:3: t must be at least 1e-06 s after the row before (previous t = 0.0)",
         "1e-300",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/surrogate.yaml"),  # a UnicodeEncodeError traceback before
+        "scenario: not valid YAML at line 2: '\\ud800' is half of a UTF-16 surrogate pair",
+        "surrogate.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/newline.yaml"),  # the key's newline split the line before
+        "a\\nb: unknown key",
+        "1",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "a\n.0=1"),  # the line was split before
+        "--set: the field holds a control character",
+        "a\\n.0=1",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/nul.yaml"),  # a ValueError traceback before
+        "reference.path: holds a NUL character, which no file name can",
+        "\\x00",
     ),  # fmt: skip
     (
         ("run", "{d}/pipe.yaml"),

@@ -206,6 +206,10 @@ def _scenario_check(monkeypatch, capsys, folder, path, run: bool) -> None:
 
 
 @settings(FUZZ, max_examples=EXAMPLES["scenario"])
+# a key "\ud800\udc00" (two lone surrogates): a UnicodeEncodeError traceback in pydantic
+@example(
+    document=Pairs((*HORIZONTAL.items(), ("\U00010000", []))), ascii_only=True, damage=None, run=0
+)
 @given(
     document=mutated_document(SCENARIOS, SCENARIO_EXTRA),
     ascii_only=st.booleans(),
@@ -215,7 +219,8 @@ def _scenario_check(monkeypatch, capsys, folder, path, run: bool) -> None:
 def test_fuzz_scenario_files(monkeypatch, capsys, quiet_cwd, document, ascii_only, damage, run):
     GENERATED["scenario"] += 1
     path = quiet_cwd / "scenario.yaml"
-    path.write_bytes(damage.draw(damaged_text(yaml_document(document, ascii_only))))
+    text = yaml_document(document, ascii_only)
+    path.write_bytes(text.encode() if damage is None else damage.draw(damaged_text(text)))
     _scenario_check(monkeypatch, capsys, quiet_cwd, path, run == 0)
 
 
@@ -330,6 +335,7 @@ CSV_PATHS = st.sampled_from(
 # a pipe or a device as the track: open() waited forever before
 @example(track="t,x,y\n0,0,0\n1,1,0\n2,2,0\n3,3,0\n", where="fifo.csv", damage=None)
 @example(track="t,x,y\n0,0,0\n1,1,0\n2,2,0\n3,3,0\n", where="/dev/zero", damage=None)
+@example(track="t,x,y\n0,0,0\n1,1,0\n2,2,0\n3,3,0\n", where="\x00", damage=None)  # ValueError
 @given(track=csv_tracks(), where=CSV_PATHS, damage=st.data())
 def test_fuzz_csv_tracks(monkeypatch, capsys, quiet_cwd, track, where, damage):
     GENERATED["csv"] += 1
@@ -351,6 +357,8 @@ def test_fuzz_csv_tracks(monkeypatch, capsys, quiet_cwd, track, where, damage):
 @settings(FUZZ, max_examples=EXAMPLES["set"])
 # 1e308 s at 0.5 s is inf samples: an OverflowError traceback before
 @example(scenario="paper-ideal", overrides=[("duration", "1e308")], separator="=", controller=None)
+# newlines in the path split the error into several lines
+@example(scenario="paper-ideal", overrides=[("\n.\n.0", "1e308")], separator="=", controller=None)
 @given(
     scenario=st.sampled_from(["paper-ideal", "paper-obstacles", "paper-depth-calm", "paper-6dof"]),
     overrides=st.lists(st.tuples(SET_PATHS, SET_VALUES), min_size=1, max_size=3),

@@ -1049,6 +1049,8 @@ def load_track_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     where = str(path)
     if path.exists() and not (path.is_file() or path.is_dir()):  # open() would wait forever
         raise ConfigError(_CSV_FIELD, where, "is a pipe or device, expected a CSV file")
+    if "\x00" in where:  # open() raises ValueError
+        raise ConfigError(_CSV_FIELD, where, "holds a NUL character, which no file name can")
     try:
         with path.open(newline="", encoding="utf-8") as handle:
             reader = csv.reader(handle)
