@@ -149,7 +149,8 @@ def test_fuzz_run_folders(made, tmp_path_factory, monkeypatch, capsys, file, com
         "animate": ["animate", str(folder), "--out", str(work / "a.gif")],
     }[command]
     code, stderr = run_cli(monkeypatch, capsys, *args)
-    assert_clean(code, stderr)
+    # an edited state or command is replayed, and differs: verify-c's documented verdict
+    assert_clean(code, stderr, verdict="above the tolerance of" if command == "verify-c" else None)
     shutil.rmtree(work)
 
 
