@@ -26,7 +26,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 # The long fuzz profile (tests/fuzzing.py, docs/safety.md): >= 10,000 generated hostile
-# inputs through the command line, each answered cleanly within 10 s; about 20 min on two
+# inputs through the command line, each answered cleanly within 10 s; about 17 min on two
 # cores. FUZZ_SEED=N draws another sequence; the short profile runs within `make test`.
 FUZZ_SEED ?= 28
 fuzz: $(STAMP)
