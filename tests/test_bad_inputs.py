@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -50,6 +51,20 @@ def files(tmp_path):
     (tmp_path / "csv.yaml").write_text(
         "name: c\nduration: 10\nreference: {type: csv, path: steps.csv}\n"
         "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    (tmp_path / "surrogate.yaml").write_text('name: s\n"\\ud800\\udc00": 1\n')
+    (tmp_path / "newline.yaml").write_text('name: s\n"a\\nb": 1\n')
+    (tmp_path / "nul.yaml").write_text(
+        'name: n\nduration: 10\nreference: {type: csv, path: "a\\0b"}\n'
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    os.mkfifo(tmp_path / "pipe.csv")  # a pipe as the track: opening it waited forever
+    (tmp_path / "pipe.yaml").write_text(
+        "name: p\nduration: 10\nreference: {type: csv, path: pipe.csv}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    (tmp_path / "many.yaml").write_text(
+        "name: m\nbase: paper-ideal\nruns: 100000000\nseed: 1\nparameters: {}\n"
     )
     return tmp_path
 
@@ -98,6 +113,36 @@ CASES = [
         ("run", "{d}/csv.yaml"),
         "reference.path:3: t must be at least 1e-06 s after the row before (previous t = 0.0)",
         "1e-300",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/surrogate.yaml"),  # a UnicodeEncodeError traceback before
+        "scenario: not valid YAML at line 2: '\\ud800' is half of a UTF-16 surrogate pair",
+        "surrogate.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/newline.yaml"),  # the key's newline split the line before
+        "a\\nb: unknown key",
+        "1",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "a\n.0=1"),  # the line was split before
+        "--set: the field holds a control character",
+        "a\\n.0=1",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/nul.yaml"),  # a ValueError traceback before
+        "reference.path: holds a NUL character, which no file name can",
+        "\\x00",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/pipe.yaml"),
+        "reference.path: is a pipe or device, expected a CSV file",
+        "pipe.csv",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", "duration=1e308"),  # inf samples: an OverflowError
+        "duration: is inf samples of 0.5 s",
+        "1e+308",
     ),  # fmt: skip
     (
         ("run", "{d}/typo.yaml"),
@@ -243,6 +288,19 @@ def test_a_campaign_file_goes_through_the_same_loader(monkeypatch, capsys, files
     assert code == 2
     assert _one_error_line(stderr).startswith(
         "error: campaign: not valid YAML at line 3: duplicate key 'runs'"
+    )
+    assert not (files / "c").exists()
+
+
+def test_absurdly_many_runs_are_refused(monkeypatch, capsys, files):
+    """Each run is checked before the first starts (about 1 ms each): 10^8 runs were hours
+    of silent checking (found by tests/test_fuzz_inputs.py)."""
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "campaign", str(files / "many.yaml"), "--out", str(files / "c")
+    )
+    assert code == 2
+    assert _one_error_line(stderr) == (
+        "error: runs: input should be less than or equal to 1000000 (got 100000000)"
     )
     assert not (files / "c").exists()
 

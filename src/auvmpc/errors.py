@@ -15,7 +15,7 @@ class ConfigError(ValueError):
         self.field = field
         self.value = value
         self.reason = reason
-        super().__init__(f"{field}: {reason} (got {_short(value)})")
+        super().__init__(f"{_printable(field)}: {reason} (got {_short(value)})")
 
 
 class RunFailed(RuntimeError):
@@ -33,6 +33,12 @@ class FieldError(ValueError):
         self.value = value
         self.reason = reason
         super().__init__(f"{field}: {reason}")
+
+
+def _printable(field: str) -> str:
+    """A field named by the user (a key, a --set path) on one line: a newline, another
+    control character or a lone surrogate escaped as repr() would (``\n``, ``\ud800``)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(field))
 
 
 def _short(value: object, limit: int = 80) -> str:

@@ -1040,12 +1040,17 @@ def load_track_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     ConfigError
-        Field ``reference.path`` for file-level problems (missing, unreadable, no header,
-        missing column, too few rows), ``reference.path:<line>`` for a bad row (not a number,
+        Field ``reference.path`` for file-level problems (missing, a pipe or device,
+        unreadable, no header, missing column, too few rows), ``reference.path:<line>`` for
+        a bad row (not a number,
         not finite, beyond the limits above, wrong field count, t not increasing or rows
         under 1 us apart), with the offending value.
     """
     where = str(path)
+    if path.exists() and not (path.is_file() or path.is_dir()):  # open() would wait forever
+        raise ConfigError(_CSV_FIELD, where, "is a pipe or device, expected a CSV file")
+    if "\x00" in where:  # open() raises ValueError
+        raise ConfigError(_CSV_FIELD, where, "holds a NUL character, which no file name can")
     try:
         with path.open(newline="", encoding="utf-8") as handle:
             reader = csv.reader(handle)

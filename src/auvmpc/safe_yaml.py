@@ -10,6 +10,7 @@ Every refusal is a ``yaml.YAMLError`` that :func:`yaml_problem` says in a few wo
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -128,7 +129,26 @@ def _bounded_int(loader: _SafeLoader, node: yaml.ScalarNode) -> int:
     return SafeConstructor.construct_yaml_int(loader, node)
 
 
+# "\ud800" in a double-quoted string is a lone UTF-16 surrogate, not a character: no UTF-8
+# file, terminal or pydantic can take one (a UnicodeEncodeError traceback before, issue 28).
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _text(loader: _SafeLoader, node: yaml.ScalarNode) -> str:
+    value = SafeConstructor.construct_yaml_str(loader, node)
+    found = _SURROGATE.search(value)
+    if found:
+        raise ConstructorError(
+            None, None,
+            f"{found.group()!r} is half of a UTF-16 surrogate pair, not a character (write a "
+            "character beyond U+FFFF as \\U0001F600)",
+            node.start_mark,
+        )  # fmt: skip
+    return value
+
+
 _SafeLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+_SafeLoader.add_constructor("tag:yaml.org,2002:str", _text)
 _SafeLoader.add_constructor("tag:yaml.org,2002:int", _bounded_int)
 
 

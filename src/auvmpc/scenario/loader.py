@@ -129,6 +129,8 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     path, separator, raw_value = override.partition("=")
     if not separator or not path:
         raise ConfigError("--set", override, "expected field=value")
+    if not path.isprintable():  # a newline in it made the error several lines
+        raise ConfigError("--set", override, "the field holds a control character")
     try:
         value = load_yaml(raw_value)
     except yaml.YAMLError as error:

@@ -105,6 +105,8 @@ def whole_samples(duration: float, sample_time: float) -> tuple[float, str | Non
     """``duration`` rounded up to a whole number of samples, and a note when it had to be
     (None when it already was one, to round-off)."""
     steps = duration / sample_time
+    if not math.isfinite(steps):  # 1e308 s at 0.5 s: round() would raise OverflowError
+        raise ConfigError("duration", duration, f"is {steps} samples of {sample_time:g} s")
     if abs(steps - round(steps)) <= 1e-9 * max(1.0, steps):
         return duration, None
     rounded = math.ceil(steps) * sample_time

@@ -59,6 +59,10 @@ SAMPLING_RULES = "auvmpc-campaign/1"
 # A run whose worker process died this many times is recorded as failed, not retried.
 MAX_WORKER_DEATHS = 2
 
+# Every run is checked before the first starts, about 1 ms each: 10^6 runs take minutes to
+# check (and days to run); `runs: 1e8` was an hours-long silent check before (issue 28).
+MAX_RUNS = 1_000_000
+
 
 # Wall-clock measurements: stored, but they differ between two runs of the same campaign.
 TIMING_METRICS = ("solve_ms_median", "solve_ms_p99", "solve_ms_max")
@@ -351,7 +355,7 @@ class CampaignSpec(StrictModel):
         description="field=value overrides applied last to a second simulation of every run "
         "(e.g. the converged OCP); its metrics are stored with a yardstick_ prefix",
     )
-    runs: Annotated[int, Field(ge=1)] = Field(description="number of runs")
+    runs: Annotated[int, Field(ge=1, le=MAX_RUNS)] = Field(description="number of runs")
     seed: Annotated[int, Field(ge=0)] = Field(description="master seed of every run's draws")
     parameters: dict[str, Distribution] = Field(
         default_factory=dict, description="scenario field path -> distribution"
