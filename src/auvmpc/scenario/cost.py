@@ -175,9 +175,10 @@ def check_cost(resolved, confirmed: bool = False) -> CostEstimate:
         raise ConfigError(
             field,
             value,
-            f"the run would take about {_duration(estimate.seconds)} (an estimate: "
-            f"{estimate.summary()}), over the {MAX_RUN_HOURS:g} h limit; --yes-long runs it "
-            "anyway",
+            f"the run would take about {_duration(estimate.seconds)} (an estimate, for "
+            f"{estimate.samples} samples of {_step_ms(config):.3g} ms and "
+            f"{estimate.plant_steps} plant steps), over the {MAX_RUN_HOURS:g} h limit; "
+            "--yes-long runs it anyway",
         )
     return estimate
 
