@@ -56,6 +56,8 @@ def _main() -> None:
         errors.print(f"error: {error}", highlight=False, soft_wrap=True, markup=False)
         sys.exit(USER_ERROR_EXIT)
     except RunFailed as error:
+        if interrupts.requested() is not None:
+            _interrupted()  # the signal, not the run, ended it (interrupts.py)
         if os.environ.get("AUVMPC_TRACEBACK"):
             raise
         errors.print(
@@ -69,6 +71,12 @@ def _main() -> None:
         if interrupts.requested() is not None:
             _interrupted()
         raise
+    except Exception:
+        # Whatever a signal's exception became on its way out of native code (SWIG turns
+        # it into NotImplementedError or SystemError), a requested stop is a stop.
+        if interrupts.requested() is not None:
+            _interrupted()
+        raise
 
 
 def _interrupted() -> None:
@@ -79,6 +87,15 @@ def _interrupted() -> None:
     )
     sys.exit(128 + signum)
 
+
+YesLong = Annotated[
+    bool,
+    typer.Option(
+        "--yes-long",
+        help="run even beyond the cost limits (1e7 plant steps, 4 h a run, 48 h a campaign: "
+        "estimates); memory beyond what is available is still refused",
+    ),
+]
 
 Overwrite = Annotated[
     bool,
@@ -138,6 +155,7 @@ def run(
         bool, typer.Option("--yardstick", help="with --from-campaign: the run's yardstick twin")
     ] = False,
     overwrite: Overwrite = False,
+    yes_long: YesLong = False,
 ) -> None:
     """Simulate one scenario (or one run of a campaign) and write log.csv, run.json and figures."""
     from auvmpc.api import controller_overrides
@@ -172,7 +190,9 @@ def run(
     with progress_bar() as progress:
         task = progress.add_task(f"{name}", total=None)
         result = simulate(
-            resolved, on_step=lambda k, n: progress.update(task, completed=k, total=n)
+            resolved,
+            on_step=lambda k, n: progress.update(task, completed=k, total=n),
+            long_ok=yes_long,
         )
     _warn(result.warnings)
     write_run(
@@ -370,6 +390,7 @@ def campaign(
             "copy its yardstick twins instead of simulating them again",
         ),
     ] = None,
+    yes_long: YesLong = False,
 ) -> None:
     """Run (or resume) a robustness campaign: many runs with sampled parameters, in parallel."""
     from auvmpc.experiments.campaign import campaign_report as make_report
@@ -402,12 +423,19 @@ def campaign(
             on_progress=advance,
             overwrite=overwrite,
             yardstick_from=yardstick_from,
+            long_ok=yes_long,
         )
     console.print(
         f"{summary.total} runs: {summary.ok} ok, {summary.failed} failed "
         f"({summary.new} run now in {summary.wall_s:.1f} s)",
         highlight=False,
     )
+    if summary.ok == 0:
+        # Nothing to report on: every run failed or was refused (the store says why).
+        raise RunFailed(
+            f"campaign {loaded.spec.name}: none of its {summary.total} runs finished; "
+            f"first error: {summary.first_error}"
+        )
     if report:
         result = make_report(out, criterion, workers=workers or 1)
         console.print(result.markdown, highlight=False, markup=False)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import functools
+import types
 from collections.abc import Mapping
 from importlib import resources
-from typing import Annotated, Any
+from typing import Annotated, Any, Union, get_args, get_origin
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -44,6 +45,7 @@ class StrictModel(BaseModel):
             for key, value in data.items():
                 if key not in cls.model_fields:
                     raise FieldError(str(key), value, unknown_key(key, cls.model_fields))
+                _no_bool_for_number(str(key), value, cls.model_fields[key].annotation)
         return data
 
     def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False):
@@ -55,6 +57,47 @@ class StrictModel(BaseModel):
             for name in _cached_properties(type(self)):
                 copied.__dict__.pop(name, None)
         return copied
+
+
+def _no_bool_for_number(field: str, value: Any, annotation: Any) -> None:
+    """pydantic reads ``true`` as 1 for a number (``duration: true`` was a 1 s run): a
+    bool where the field, or the items of a list of numbers, take only numbers is refused."""
+    if isinstance(value, bool):
+        if _numbers_only(annotation):
+            raise FieldError(field, value, "a number is needed, not true/false")
+        return
+    if isinstance(value, list | tuple):
+        items = _item_annotations(annotation)
+        for index, item in enumerate(value):
+            if (
+                isinstance(item, bool)
+                and items
+                and _numbers_only(items[min(index, len(items) - 1)])
+            ):
+                raise FieldError(f"{field}.{index}", item, "a number is needed, not true/false")
+
+
+def _arms(annotation: Any) -> list[Any]:
+    """The types an annotation allows, Annotated and Optional taken apart."""
+    origin = get_origin(annotation)
+    if origin is Annotated:
+        return _arms(get_args(annotation)[0])
+    if origin in (Union, types.UnionType):
+        return [arm for part in get_args(annotation) for arm in _arms(part)]
+    return [annotation]
+
+
+def _numbers_only(annotation: Any) -> bool:
+    arms = [arm for arm in _arms(annotation) if arm is not type(None)]
+    return bool(arms) and all(arm in (int, float) for arm in arms)
+
+
+def _item_annotations(annotation: Any) -> list[Any]:
+    """The item types of a tuple or list annotation (one per place, or one for all)."""
+    for arm in _arms(annotation):
+        if get_origin(arm) in (tuple, list):
+            return [a for a in get_args(arm) if a is not Ellipsis]
+    return []
 
 
 @functools.cache

@@ -8,7 +8,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from threadpoolctl import threadpool_limits
 
 from auvmpc import interrupts
@@ -28,8 +27,9 @@ from auvmpc.experiments.run_folder import read_run_folder
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.scenario import ResolvedDepthScenario, ResolvedScenario, Scenario
 from auvmpc.scenario.depth import DepthScenario
+from auvmpc.sim.divergence import likely_cause
 from auvmpc.sim.log import SimLog
-from auvmpc.sim.loop import Sensor, run_session
+from auvmpc.sim.loop import PlantDiverged, Sensor, run_session
 from auvmpc.sim.plant import Plant
 from auvmpc.sim.session import Session
 
@@ -60,18 +60,24 @@ def make_controller(scenario: Scenario | DepthScenario, model: VehicleParams) ->
 def simulate(
     resolved: ResolvedScenario | ResolvedDepthScenario,
     on_step: Callable[[int, int], None] | None = None,
+    *,
+    long_ok: bool = False,
 ) -> Finished:
     """Run the scenario once. Randomness comes from children of the scenario seed.
 
-    Checked first (:mod:`auvmpc.scenario.sanity`): the sizes fit in memory and the scenario is
-    physically possible; what is doubtful but possible becomes ``warnings``. A SIGINT or
-    SIGTERM stops the loop after the current step (:mod:`auvmpc.interrupts`), even one a
-    compiled solver swallowed, so no result is ever built from an interrupted run.
+    Checked first (:mod:`auvmpc.scenario.sanity`): the sizes fit in memory, the estimated
+    cost is within the limits of :mod:`auvmpc.scenario.cost` (or ``long_ok``: the caller
+    confirmed it) and the scenario is physically possible; what is doubtful but possible
+    becomes ``warnings``. A SIGINT or SIGTERM stops the loop after the current step
+    (:mod:`auvmpc.interrupts`), even one a compiled solver swallowed or turned into another
+    exception, so no result is ever built from an interrupted run. A plant whose state
+    stops being finite ends the run there, verdict ``lost``, the likely cause named
+    (:mod:`auvmpc.sim.divergence`).
     """
     from auvmpc.scenario.sanity import preflight
 
     stopwatch = Stopwatch()
-    warnings = preflight(resolved)
+    warnings = preflight(resolved, long_ok=long_ok)
 
     reached = [0]
 
@@ -89,9 +95,17 @@ def simulate(
 def _failures_named(scenario, reached: list[int]):
     try:
         yield
-    except (ConfigError, RunFailed, KeyboardInterrupt):
+    except KeyboardInterrupt:
         raise
     except Exception as error:
+        # A signal handler's exception raised inside CasADi's Python layer comes out as
+        # another one (SWIG: NotImplementedError "Function_call", SystemError from
+        # DM.__array__; measured: 1 SIGTERM in 10 on bluerov2-helix): the signal, not
+        # the solver, ended the run.
+        if interrupts.requested() is not None:
+            raise interrupts.Interrupted(interrupts.requested()) from error
+        if isinstance(error, (ConfigError, RunFailed)):
+            raise
         k = reached[0]
         t = k * scenario.controller.sample_time
         text = str(error).strip().splitlines()
@@ -109,9 +123,27 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]) -> Fini
     with threadpool_limits(limits=1, user_api="blas"):
         session = RunSession(resolved, warnings, stopwatch)
         plant, sensor = run_plant(resolved)
-        run_session(session, plant, sensor, step)
-    _check_finite(session.log.state, resolved.scenario)
+        try:
+            run_session(session, plant, sensor, step)
+        except PlantDiverged as diverged:
+            return _lost(session, resolved, diverged)
     return session.result()
+
+
+def _lost(session: RunSession, resolved, diverged: PlantDiverged) -> Finished:
+    """The run up to the last finite state, verdict ``lost`` with the likely cause; with
+    fewer than two samples to keep, a failed run saying the same."""
+    scenario = resolved.scenario
+    t = diverged.k * scenario.controller.sample_time
+    reason = (
+        f"the plant diverged at t = {t:g} s (step {diverged.k}: its state became "
+        f"non-finite); likely cause: {likely_cause(resolved)}"
+    )
+    if session.k < 2:
+        raise RunFailed(f"{scenario.name} with {scenario.controller.type} lost: {reason}")
+    result = session.result()
+    result.metrics["verdict"], result.metrics["verdict_reason"] = "lost", reason
+    return result
 
 
 def run_plant(resolved: ResolvedScenario | ResolvedDepthScenario) -> tuple[Plant, Sensor]:
@@ -144,7 +176,9 @@ class RunSession(Session):
         self.resolved = resolved
         self.kind = kind_of(resolved.scenario)
         self._stopwatch = stopwatch or Stopwatch()
-        warnings = preflight(resolved) if warnings is None else warnings
+        # long_ok: a session's caller steps it as long as it likes; the cost limits are for
+        # the batch run (simulate).
+        warnings = preflight(resolved, long_ok=True) if warnings is None else warnings
         controller = make_controller(resolved.scenario, resolved.model)
         # getattr: a controller need not derive from base.Controller (a user's own, a test's).
         self.warnings = [*warnings, *getattr(controller, "build_warnings", ())]
@@ -170,20 +204,6 @@ class RunSession(Session):
             write_run(result, Path(out_dir), figures=figures, overwrite=overwrite)
         self.closed = True
         return result
-
-
-def _check_finite(states: np.ndarray, scenario: Scenario) -> None:
-    """A plant integration that diverged (e.g. from an initial speed far beyond what the
-    vehicle's damping allows at the plant's step) is a failed run, not a result."""
-    finite = np.isfinite(states).all(axis=1)
-    if not finite.all():
-        k = int(np.argmin(finite))
-        raise RunFailed(
-            f"{scenario.name} with {scenario.controller.type} failed at "
-            f"t = {k * scenario.controller.sample_time:g} s (step {k}): the simulated state "
-            "became non-finite (the plant integration diverged; check initial_state and "
-            "plant.max_step)"
-        )
 
 
 def write_run(

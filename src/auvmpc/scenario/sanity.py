@@ -6,6 +6,8 @@ run) when the run could not mean anything, and a warning (printed, stored in run
 with their reasons, are in ``docs/safety.md`` (Physical sanity checks):
 
 - sizes beyond the available memory: error (the run could only crash);
+- a run estimated beyond the cost limits (plant steps, hours: :mod:`auvmpc.scenario.cost`):
+  error unless the caller confirms it (``--yes-long``);
 - start inside an obstacle's keep-out disc (radius + ``vehicle_radius``): warning (the
   run starts in contact; the MPCs relax the constraint and leave, a recovery that is
   worth simulating, e.g. an obstacle appearing on top of the vehicle);
@@ -61,6 +63,7 @@ from auvmpc.scenario import (
 __all__ = [
     "available_memory_bytes",
     "check_memory",
+    "memory_needs",
     "feasible_forces",
     "largest_surge_thrust",
     "preflight",
@@ -76,7 +79,30 @@ _MEMORY_SHARE = 0.8
 
 
 def available_memory_bytes() -> int:
-    """Memory available to a new allocation now (Linux MemAvailable), else physical memory."""
+    """Memory a new allocation can get now: the least of Linux MemAvailable (else physical
+    memory), what this process's address-space limit leaves (``ulimit -v``: the build of
+    a 3000-step nmpc passed a check on MemAvailable alone and died with MemoryError under
+    it) and what its cgroup's memory.max leaves."""
+    limits = [_meminfo_available()]
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            limits.append(max(0, soft - _status_bytes("VmSize:")))
+    except (ImportError, OSError, ValueError):
+        pass
+    try:
+        cgroup = Path("/sys/fs/cgroup")
+        limit = (cgroup / "memory.max").read_text().strip()
+        if limit != "max":
+            limits.append(max(0, int(limit) - int((cgroup / "memory.current").read_text())))
+    except (OSError, ValueError):
+        pass
+    return min(limits)
+
+
+def _meminfo_available() -> int:
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():
             if line.startswith("MemAvailable:"):
@@ -89,6 +115,17 @@ def available_memory_bytes() -> int:
         return 2**63
 
 
+def _status_bytes(key: str) -> int:
+    """A size from /proc/self/status (kB there), 0 where there is none."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(key):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
 def _size(n_bytes: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n_bytes < 1024 or unit == "PiB":
@@ -97,40 +134,57 @@ def _size(n_bytes: float) -> str:
     return f"{n_bytes:.3g} PiB"  # pragma: no cover
 
 
-def check_memory(
-    resolved: ResolvedScenario | ResolvedDepthScenario, available: int | None = None
-) -> None:
-    """Refuse sizes that cannot fit: the log (duration / sample_time samples) and what
-    building the controller's problem takes (``memory_need`` of its class: the condensed
-    QP of the linear MPCs grows as ny x nc x n^2, the nonlinear program as ny^2)."""
+def memory_needs(
+    resolved: ResolvedScenario | ResolvedDepthScenario,
+) -> list[tuple[str, object, float, str]]:
+    """``(field, value, bytes, what)`` of the run's largest allocations: the log
+    (duration / sample_time samples) and what building the controller's problem takes
+    (``memory_need`` of its class: the condensed QP of the linear MPCs grows as
+    ny x nc x n^2, the nonlinear program as ny^2)."""
     scenario = resolved.scenario
     config = scenario.controller
-    budget = _MEMORY_SHARE * (available_memory_bytes() if available is None else available)
     steps = scenario.duration / config.sample_time
     n, nx = resolved.controlled_inputs.size, resolved.controlled_layout.size
     # log: state, reference, disturbance, thrust, clearance, solve time, status per sample
     log_bytes = steps * (FLOAT_BYTES * (3 * nx + n + 4) + 64)
-    if log_bytes > budget:
-        raise ConfigError(
+    needs = [
+        (
             "duration",
             scenario.duration,
-            f"{steps:.3g} samples of {config.sample_time} s need about {_size(log_bytes)} "
-            f"of log, more than the {_size(budget)} of memory available",
+            log_bytes,
+            f"{steps:.3g} samples of {config.sample_time} s need about {_size(log_bytes)} of log",
         )
-    # What building the controller's problem takes, as its class declares it.
+    ]
     need = class_of(config.type).memory_need(config, n, nx)
-    if need is not None and need.n_bytes > budget:
-        raise ConfigError(
-            need.field,
-            need.value,
-            f"{need.what} needs about {_size(need.n_bytes)}, more than the {_size(budget)} "
-            "of memory available",
+    if need is not None:
+        needs.append(
+            (need.field, need.value, need.n_bytes, f"{need.what} needs about {_size(need.n_bytes)}")
         )
+    return needs
 
 
-def preflight(resolved: ResolvedScenario | ResolvedDepthScenario) -> list[str]:
-    """All checks of the module docstring; returns the warnings, raises the errors."""
+def check_memory(
+    resolved: ResolvedScenario | ResolvedDepthScenario, available: int | None = None
+) -> None:
+    """Refuse sizes that cannot fit (:func:`memory_needs`) in a share of the memory
+    available (:func:`available_memory_bytes`)."""
+    budget = _MEMORY_SHARE * (available_memory_bytes() if available is None else available)
+    for field, value, n_bytes, what in memory_needs(resolved):
+        if n_bytes > budget:
+            raise ConfigError(
+                field, value, f"{what}, more than the {_size(budget)} of memory available"
+            )
+
+
+def preflight(
+    resolved: ResolvedScenario | ResolvedDepthScenario, long_ok: bool = False
+) -> list[str]:
+    """All checks of the module docstring; returns the warnings, raises the errors.
+    ``long_ok``: the caller confirmed a run beyond the cost limits (:mod:`.cost`)."""
+    from auvmpc.scenario.cost import check_cost
+
     check_memory(resolved)
+    check_cost(resolved, confirmed=long_ok)
     if not resolved.has_horizontal_path:
         return list(resolved.notes)
     return (

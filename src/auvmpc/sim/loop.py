@@ -85,6 +85,21 @@ def closed_loop(
     return run_session(session, plant, sensor, on_step)
 
 
+# A state entry this large (m, m/s, rad, rad/s) is an integration that has blown up: no
+# vehicle goes 1e9 m or m/s; stopping here, before it overflows to inf and NaN, keeps the
+# controller from being handed it (it would fail on it and hide the cause).
+DIVERGED_MAGNITUDE = 1e9
+
+
+class PlantDiverged(ArithmeticError):
+    """The plant's state after sample ``k - 1`` is not finite or beyond DIVERGED_MAGNITUDE;
+    the session holds samples ``0..k-1``."""
+
+    def __init__(self, k: int) -> None:
+        super().__init__(f"the plant state became non-finite at step {k}")
+        self.k = k
+
+
 def run_session(
     session: Session,
     plant: Plant,
@@ -92,7 +107,9 @@ def run_session(
     on_step: Callable[[int, int], None] | None = None,
 ) -> SimLog:
     """Step ``session`` through its run against the built-in ``plant``: measure, step, hold
-    the command over the sample; the session's log gets the plant's truth as well."""
+    the command over the sample; the session's log gets the plant's truth as well. A plant
+    state that stops being finite raises :class:`PlantDiverged` before it reaches the
+    controller or the log."""
     if plant.sample_time != session.sample_time:
         raise ValueError(
             f"run_session: the plant steps {plant.sample_time} s, the controller samples "
@@ -113,6 +130,8 @@ def run_session(
         detections = None if perception is None else perception.observe(t, state[position])
         result = session.step(t, measured, detections, truth, trusted=True)
         state = plant.step(state, result.u, t)
+        if not (np.abs(state) < DIVERGED_MAGNITUDE).all():  # also NaN
+            raise PlantDiverged(k + 1)
         if on_step is not None:
             on_step(k + 1, steps)
     return log

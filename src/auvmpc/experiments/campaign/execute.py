@@ -89,7 +89,8 @@ def execute_run(payload: str, index: int, twin: Mapping[str, Any] | None = None)
     error = trace = None
     try:
         _, _, data = plan_run(campaign, index)
-        result = simulate(_resolve(campaign, data))
+        # long_ok: the campaign's cost was checked (or confirmed) before any run started.
+        result = simulate(_resolve(campaign, data), long_ok=True)
         metrics = result.metrics
         if campaign.spec.yardstick is not None:
             metrics = {**metrics, **paired_columns(campaign, index, result, twin)}
@@ -145,6 +146,8 @@ class CampaignSummary:
         Runs executed by this call (the rest were already stored).
     wall_s : float
         Wall time of this call.
+    first_error : str or None
+        The one-line error of the first failed run, if any.
     """
 
     out_dir: Path
@@ -153,6 +156,7 @@ class CampaignSummary:
     failed: int
     new: int
     wall_s: float
+    first_error: str | None = None
 
 
 def run_campaign(
@@ -165,6 +169,7 @@ def run_campaign(
     on_progress: Callable[[int, int], None] | None = None,
     overwrite: bool = False,
     yardstick_from: str | Path | None = None,
+    long_ok: bool = False,
 ) -> CampaignSummary:
     """Run (or resume) a campaign into ``out_dir``.
 
@@ -193,6 +198,9 @@ def run_campaign(
         k's yardstick twin is copied from it where it finished there, instead of simulated
         (:func:`paired.reusable_twins`). Not part of the campaign's identity: the copied twin
         is the one a simulation would give. The session records the folder and the runs.
+    long_ok : bool
+        Run even when a run or the whole campaign is estimated beyond the cost limits
+        (:mod:`auvmpc.scenario.cost`); memory beyond what is available is still refused.
 
     Raises
     ------
@@ -219,7 +227,7 @@ def run_campaign(
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ConfigError("--workers", workers, "need a whole number >= 1")
     twins = {} if yardstick_from is None else reusable_twins(campaign, yardstick_from)
-    validate_campaign(campaign, total)
+    validate_campaign(campaign, total, workers, long_ok)
     out = Path(out_dir)
     new = 0
     copied: list[int] = []  # runs whose stored twin came from yardstick_from
@@ -252,6 +260,10 @@ def run_campaign(
                     'SELECT status, COUNT(*) FROM runs WHERE "index" < ? GROUP BY status', (total,)
                 ).fetchall()
             )
+            first_error = store.connection.execute(
+                'SELECT error FROM runs WHERE "index" < ? AND status = ? ORDER BY "index" LIMIT 1',
+                (total, "failed"),
+            ).fetchone()
         finally:
             with contextlib.suppress(Exception):  # also after an interrupt: who ran what
                 provenance = stopwatch.record(("osqp", "daqp", "proxsuite"))
@@ -261,7 +273,13 @@ def run_campaign(
                 store.record_session(provenance, new)
             store.close()
     return CampaignSummary(
-        out, total, counts.get("ok", 0), counts.get("failed", 0), new, time.perf_counter() - started
+        out,
+        total,
+        counts.get("ok", 0),
+        counts.get("failed", 0),
+        new,
+        time.perf_counter() - started,
+        None if first_error is None else first_error[0],
     )
 
 

@@ -101,7 +101,7 @@ def _simulate_twin(campaign: Campaign, index: int) -> dict[str, Any]:
 
     try:
         _, _, data = plan_run(campaign, index, yardstick=True)
-        finished = simulate(_resolve(campaign, data))
+        finished = simulate(_resolve(campaign, data), long_ok=True)  # checked up front
     except Exception as exc:  # the yardstick's failure is data; the tested run still counts
         from auvmpc.experiments.campaign.execute import _one_line
 
@@ -315,7 +315,10 @@ def _resimulate(payload: str, index: int, yardstick: bool) -> tuple[dict[str, An
     from auvmpc.experiments.campaign.execute import _campaign_from_payload
     from auvmpc.experiments.run import simulate
 
-    result = simulate(scenario_for_run(_campaign_from_payload(payload), index, yardstick=yardstick))
+    result = simulate(
+        scenario_for_run(_campaign_from_payload(payload), index, yardstick=yardstick),
+        long_ok=True,  # a run the campaign ran
+    )
     return result.metrics, result.log.horizontal()
 
 

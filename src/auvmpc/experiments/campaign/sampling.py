@@ -278,7 +278,9 @@ def scenario_for_run(
     return _resolve(campaign, data)
 
 
-def validate_campaign(campaign: Campaign, runs: int | None = None) -> None:
+def validate_campaign(
+    campaign: Campaign, runs: int | None = None, workers: int = 1, long_ok: bool = False
+) -> None:
     """Reject a campaign that would produce an invalid scenario, before any run starts.
 
     Checked, in order: the base scenario with the fixed overrides (fully resolved); run 0
@@ -296,12 +298,17 @@ def validate_campaign(campaign: Campaign, runs: int | None = None) -> None:
     """
     count = campaign.spec.runs if runs is None else runs
     twins = (False, True) if campaign.spec.yardstick is not None else (False,)
+    from auvmpc.scenario.cost import check_campaign_cost
+
     _check_fixed(campaign)
+    seconds = {False: 0.0, True: 0.0}
     for yardstick in twins:
-        _check_plan(campaign, 0, None, "run 0", yardstick)
+        seconds[yardstick] = _check_plan(campaign, 0, None, "run 0", yardstick, long_ok)
     for path, distribution in campaign.spec.parameters.items():
         for label, value in distribution.extremes():
-            _check_plan(campaign, 0, (path, value), f"at {label}")
+            cost = _check_plan(campaign, 0, (path, value), f"at {label}", long_ok=long_ok)
+            seconds[False] = max(seconds[False], cost)
+    check_campaign_cost(seconds[False] + seconds[True], count, workers, long_ok)
     for index in range(1, count):
         for yardstick in twins:
             where = f"run {index}{' yardstick' if yardstick else ''}"
@@ -318,12 +325,19 @@ def _check_plan(
     replaced: tuple[str, Any] | None,
     where: str,
     yardstick: bool = False,
-) -> None:
+    long_ok: bool = False,
+) -> float:
+    """Resolve one planned run and check its memory and cost; its estimated seconds."""
+    from auvmpc.scenario.cost import check_cost
+    from auvmpc.scenario.sanity import check_memory
+
     try:
         _, _, data = plan_run(
             campaign, index, dict([replaced]) if replaced else None, yardstick=yardstick
         )
-        _resolve(campaign, data)
+        resolved = _resolve(campaign, data)
+        check_memory(resolved)
+        return check_cost(resolved, confirmed=long_ok).seconds
     except ConfigError as error:
         if yardstick:
             where += " yardstick"
