@@ -139,7 +139,9 @@ def test_program_constraints_use_the_package_rk4_map_and_exact_distances(preset,
     sample = program.sample(states[0], previous, reference, disturbance, obstacles)
     w = np.concatenate([states.ravel(), thrust.ravel(), slack.ravel()])
     g = np.asarray(
-        ca.Function("g", [program.w, program.p], [program.g])(w, program.parameters(sample))
+        ca.Function("g", [program.nlp.w, program.nlp.p], [program.nlp.g])(
+            w, program.parameters(sample)
+        )
     ).ravel()
 
     held = np.searchsorted(config.move_schedule(), np.arange(ny), side="right") - 1
@@ -185,7 +187,9 @@ def test_program_cost_is_linear_mpc_cost(penalty):
     sample = program.sample(states[0], previous, reference, np.zeros(3), ())
     w = np.concatenate([states.ravel(), thrust.ravel(), slack.ravel()])
     cost = float(
-        ca.Function("J", [program.w, program.p], [program.cost])(w, program.parameters(sample))
+        ca.Function("J", [program.nlp.w, program.nlp.p], [program.nlp.cost])(
+            w, program.parameters(sample)
+        )
     )
 
     error = states[1:] - reference[1:]

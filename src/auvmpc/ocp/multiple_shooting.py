@@ -13,7 +13,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -42,6 +42,15 @@ _POSITION = HORIZONTAL.position
 DISTANCE_SMOOTHING_M2 = 1e-6
 # Where an unused obstacle slot is parked, from the vehicle (m); its rows are unbounded anyway.
 _PARKED_OBSTACLE_M = 1e4
+
+
+class Nlp(NamedTuple):
+    """The nonlinear program: variables w, parameters p, cost, constraint rows g."""
+
+    w: ca.SX
+    p: ca.SX
+    cost: ca.SX
+    g: ca.SX
 
 
 @dataclass
@@ -111,8 +120,8 @@ class MultipleShootingProgram:
         self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
 
     @functools.cached_property
-    def nlp(self) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-        """(w, p, cost, g) as expanded SX, built on first use: IPOPT needs them, the real-time
+    def nlp(self) -> Nlp:
+        """The program as expanded SX, built on first use: IPOPT needs it, the real-time
         iterations do not (~25 ms a controller on paper-obstacles)."""
         config, ocp = self.config, self.ocp
         n, ny, n_slots = self.n_thrusters, self.horizon, self.n_slots
@@ -149,23 +158,7 @@ class MultipleShootingProgram:
             cost += sum(ca.bilin(R, dF, dF) for dF in changes)
         cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
         cost += SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)
-        return w, p, cost, g
-
-    @property
-    def w(self) -> ca.SX:
-        return self.nlp[0]
-
-    @property
-    def p(self) -> ca.SX:
-        return self.nlp[1]
-
-    @property
-    def cost(self) -> ca.SX:
-        return self.nlp[2]
-
-    @property
-    def g(self) -> ca.SX:
-        return self.nlp[3]
+        return Nlp(w, p, cost, g)
 
     # -- packing -------------------------------------------------------------------------
     def pack(self, iterate: Iterate) -> np.ndarray:

@@ -335,22 +335,11 @@ class SimLog:
         return [csv_number(v) for v in part]
 
     @classmethod
-    def read_csv(
-        cls,
-        path: Path,
-        initial_thrust: np.ndarray | None = None,
-        format: LogFormat | None = None,
-        horizontal_inputs: int | None = None,
-        input_names: Sequence[str] | None = None,
-        *,
-        field: str = "log",
-    ) -> SimLog:
-        """Load a log written by ``to_csv_text`` (values round-trip exactly), of a horizontal
-        run unless ``format`` says otherwise; its inputs are ``input_names`` or, without
-        them, the columns named by the format's prefix and a number. What the writer cannot
-        have written is one line naming ``field`` and the file (:meth:`from_table`)."""
-        table = read_log_table(path, field)
-        return cls.from_table(table, initial_thrust, format, horizontal_inputs, input_names)
+    def read_csv(cls, path: Path, *options: Any, field: str = "log", **named: Any) -> SimLog:
+        """Load a log written by ``to_csv_text`` (values round-trip exactly): the log of
+        :func:`read_log_table` ``(path, field)`` with :meth:`from_table`'s options. What the
+        writer cannot have written is one line naming ``field`` and the file."""
+        return cls.from_table(read_log_table(path, field), *options, **named)
 
     @classmethod
     def from_table(
@@ -361,7 +350,9 @@ class SimLog:
         horizontal_inputs: int | None = None,
         input_names: Sequence[str] | None = None,
     ) -> SimLog:
-        """The log of a log.csv's ``table`` (:func:`read_log_table`), as :meth:`read_csv`.
+        """The log of a log.csv's ``table`` (:func:`read_log_table`), of a horizontal run
+        unless ``format`` says otherwise; its inputs are ``input_names`` or, without them, the
+        columns named by the format's prefix and a number.
 
         What the writer cannot have written is a one-line :class:`~auvmpc.errors.ConfigError`
         naming the file and the first damage: a column of the format missing, a cell that is

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -343,12 +344,7 @@ DEGRADED_TILT_RAD = math.radians(30.0)
 
 
 def compute_six_dof_metrics(
-    log,
-    limits: VehicleParams,
-    transient_s: float = 20.0,
-    obstacle_margin_m: float = 0.0,
-    obstacles: Sequence[ObstacleConfig] = (),
-    vehicle_radius_m: float = 0.0,
+    log, limits: VehicleParams, transient_s: float = 20.0, *surroundings: Any
 ) -> dict[str, float | int | str | None]:
     """:func:`compute_metrics` of the horizontal part, then every thruster's limits (vertical
     ones against the ``heave`` section's), depth, roll and pitch.
@@ -359,10 +355,10 @@ def compute_six_dof_metrics(
         A 6-DOF run's (``SIX_DOF_LOG``).
     limits : VehicleParams
         The nominal vehicle, with ``six_dof`` and ``heave`` sections.
+    surroundings
+        :func:`compute_metrics`'s obstacle margin, obstacles and vehicle radius.
     """
-    metrics = compute_metrics(
-        log.horizontal(), limits, transient_s, obstacle_margin_m, obstacles, vehicle_radius_m
-    )
+    metrics = compute_metrics(log.horizontal(), limits, transient_s, *surroundings)
     bounds = limits.six_dof_actuators.limits
     every_thruster = actuation_metrics(log, (bounds.lower, bounds.upper), bounds.rate)
     steady = log.t >= transient_s - 1e-9

@@ -57,7 +57,8 @@ class IpoptSolver:
             "warm_start_bound_push": 1e-8,
             "warm_start_mult_bound_push": 1e-8,
         }
-        nlp = {"x": program.w, "p": program.p, "f": program.cost, "g": program.g}
+        w, p, cost, g = program.nlp
+        nlp = {"x": w, "p": p, "f": cost, "g": g}
         self._warm = ca.nlpsol(
             "nmpc_ipopt", "ipopt", nlp, {"print_time": False, "ipopt": {**common, **warm}}
         )
@@ -68,7 +69,7 @@ class IpoptSolver:
         self.reset()
 
     def reset(self) -> None:
-        self._lam_g = np.zeros(self.program.g.numel())
+        self._lam_g = np.zeros(self.program.nlp.g.numel())
         self._lam_w = np.zeros(self.program.n_w)
 
     def solve(self, guess: Iterate, sample: Sample, iterations: int, cold: bool) -> Solution:
