@@ -102,6 +102,13 @@ def _run_folder(tmp_path, monkeypatch, capsys):
     return run
 
 
+# identify --then-run: the identified model's RMS on the scenario against the start file's.
+# Both are offset-free and track a circle in a 2 N current; the start file is 30 % off in
+# every parameter, the identified one within 10 %: it must not track worse (5 % leaves room
+# for two different closed loops that both track well).
+THEN_RUN_NOT_WORSE = 1.05
+
+
 def test_excite_run_identify_round_trip(tmp_path, monkeypatch, capsys):
     run = _run_folder(tmp_path, monkeypatch, capsys)
     truth = load_vehicle("jmse2210")
@@ -111,8 +118,16 @@ def test_excite_run_identify_round_trip(tmp_path, monkeypatch, capsys):
     start_file = tmp_path / "start.yaml"
     start_file.write_text(yaml.safe_dump(start, sort_keys=False))
     out = tmp_path / "identified" / "vehicle.yaml"
+    scenario = tmp_path / "circle.yaml"  # for --then-run: the truth (jmse2210) as the plant
+    scenario.write_text(
+        "name: circle\nduration: 30\nvehicle: jmse2210\n"
+        "initial_state: [5, 0, 1.5708, 0, 0, 0]\n"
+        "reference: {type: circle, center: [0, 0], radius: 5, speed: 0.5}\n"
+        "disturbance: {current_force_world: [2.0, 0.0]}\n"
+    )
     code, text, err = run_cli(monkeypatch, capsys, "identify", str(run), "--vehicle",
-                              str(start_file), "--out", str(out))  # fmt: skip
+                              str(start_file), "--out", str(out),
+                              "--then-run", str(scenario))  # fmt: skip
     assert code == 0, err
     identified = load_vehicle(str(out))  # loads as-is
     assert set(yaml.safe_load(out.read_text())) >= set(start)
@@ -130,6 +145,16 @@ def test_excite_run_identify_round_trip(tmp_path, monkeypatch, capsys):
             assert name in identified.estimated
     assert (out.parent / "identification.md").is_file()
     assert (out.parent / "identification-fit.png").is_file()
+    # --then-run: the scenario flown with each model, the scenario's vehicle the plant.
+    flown = out.parent / "vehicle-flown"
+    rms = {}
+    for label in ("identified", "start"):
+        info = json.loads((flown / label / "run.json").read_text())
+        assert info["scenario"]["plant"]["vehicle"] == "jmse2210"
+        assert f"with the {label} model" in text
+        rms[label] = info["metrics"]["rms_position_error_after_transient_m"]
+    assert (flown / "compare" / "metrics.md").is_file()
+    assert rms["identified"] <= rms["start"] * THEN_RUN_NOT_WORSE
     # A second log of another vehicle's thrusters is refused by name.
     code, _, err = run_cli(monkeypatch, capsys, "identify", str(run), "--vehicle",
                            "videoray-pro3", "--out", str(tmp_path / "v.yaml"))  # fmt: skip

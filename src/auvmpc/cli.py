@@ -744,6 +744,15 @@ def identify(
         str | None,
         typer.Option("--reversed", help="DataFlash: channels whose thrust is reversed, e.g. 2,3"),
     ] = None,
+    then_run: Annotated[
+        str | None,
+        typer.Option(
+            "--then-run",
+            help="then fly this scenario (its vehicle the plant) with the identified and the "
+            "start vehicle as the model; both runs and their comparison in OUT-STEM-flown/",
+            metavar="SCENARIO",
+        ),
+    ] = None,
     overwrite: Overwrite = False,
 ) -> None:
     """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
@@ -779,6 +788,19 @@ def identify(
             highlight=False,
         )
     console.print(f"wrote {out} and identification.json, .md, -fit.png beside it")
+    if then_run is not None:
+        from auvmpc.identification.flight import fly_identified
+
+        flight = fly_identified(then_run, out, vehicle, overwrite)
+        for label, metrics in flight.metrics.items():
+            rms = metrics["rms_position_error_after_transient_m"]
+            after = "n/a" if rms is None else f"{rms:.3g} m"
+            console.print(
+                f"{then_run} with the {label} model: RMS after the transient {after}, "
+                f"verdict {metrics['verdict']} ({flight.folders[label]})",
+                highlight=False,
+            )
+        console.print(f"compared in {flight.comparison}", highlight=False)
 
 
 FigureFormat = Annotated[str, typer.Option("--format", help="png | pdf | svg")]
