@@ -34,6 +34,19 @@ PAPER_INITIAL_STATE = (7.5, -12.0, math.pi / 2, 0.4, 0.1, 0.02 * math.pi)
 
 
 @pytest.fixture
+def installed_interrupts():
+    """auvmpc's SIGINT/SIGTERM handlers installed for the test, as the CLI installs them,
+    with no signal pending before or after."""
+    from auvmpc import interrupts
+
+    interrupts.reset()
+    previous = interrupts.install()
+    yield
+    interrupts.restore(previous)
+    interrupts.reset()
+
+
+@pytest.fixture
 def jmse():
     from auvmpc.models.vehicle import load_vehicle
 

@@ -150,18 +150,14 @@ class _SignalInsideNativeCode:
         return ControlResult(thrust=self.thrust)
 
 
-def test_a_signal_turned_into_another_exception_is_still_an_interrupt(monkeypatch):
+def test_a_signal_turned_into_another_exception_is_still_an_interrupt(
+    monkeypatch, installed_interrupts
+):
     monkeypatch.setattr(
         "auvmpc.experiments.run.make_controller", lambda scenario, model: _SignalInsideNativeCode()
     )
-    interrupts.reset()
-    previous = interrupts.install()
-    try:
-        with pytest.raises(interrupts.Interrupted) as raised:
-            simulate(load_scenario("paper-ideal"))
-    finally:
-        interrupts.restore(previous)
-        interrupts.reset()
+    with pytest.raises(interrupts.Interrupted) as raised:
+        simulate(load_scenario("paper-ideal"))
     assert raised.value.exit_code == 143
 
 

@@ -17,7 +17,6 @@ import copy
 import shutil
 
 import pytest
-import yaml
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -37,6 +36,7 @@ from tests.fuzzing import (
     yaml_document,
     yaml_flow,
 )
+from tests.test_properties import VEHICLE as PROPERTY_VEHICLE
 
 HORIZONTAL = {
     "name": "fuzz",
@@ -96,38 +96,22 @@ SCENARIO_EXTRA = [
     ("obstacle_sensor",), ("sensing", "std"), ("reference", "depth"), ("kind",),
 ]  # fmt: skip
 
-VEHICLE = yaml.safe_load(
-    """
-name: fuzz-vehicle
-mass: 16.5
-size: {length: 1.0, width: 0.2, height: 0.2}
-m11: 18.0
-m22: 30.0
-Iz_rb: 1.3
-Iz_added: 0.7
-Xu: -3.0
-Xuu: -12.0
-Yv: -8.0
-Yvv: -35.0
-Nr: -1.5
-Nrr: -2.5
-thrusters:
-  - {position: [0.4243, 0.0], angle_deg: 45}
-  - {position: [0.4243, 0.0], angle_deg: -45}
-  - {position: [-0.4243, 0.0], angle_deg: -45}
-  - {position: [-0.4243, 0.0], angle_deg: 45}
-thrust_limits: [-15.0, 15.0]
-thrust_rate_limit: 5.0
-heave:
-  m_heave: 33.0
-  Zw: -10.0
-  Zww: -75.0
-  net_buoyancy_N: 1.0
-  thruster_count: 2
-  thrust_limits: [-15.0, 15.0]
-  thrust_rate_limit: 5.0
-"""
-)
+# The property tests' vehicle, with a size and a heave section, so that every field a
+# vehicle file may hold is there to be damaged.
+VEHICLE = {
+    **PROPERTY_VEHICLE,
+    "name": "fuzz-vehicle",
+    "size": {"length": 1.0, "width": 0.2, "height": 0.2},
+    "heave": {
+        "m_heave": 33.0,
+        "Zw": -10.0,
+        "Zww": -75.0,
+        "net_buoyancy_N": 1.0,
+        "thruster_count": 2,
+        "thrust_limits": [-15.0, 15.0],
+        "thrust_rate_limit": 5.0,
+    },
+}
 
 CAMPAIGN = {
     "name": "fuzz-campaign",

@@ -95,19 +95,13 @@ class _SwallowingController:
         return ControlResult(thrust=self.thrust, status=ControlStatus.FALLBACK)
 
 
-def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch):
+def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch, installed_interrupts):
     controller = _SwallowingController(interrupt_at=3)
     monkeypatch.setattr(
         "auvmpc.experiments.run.make_controller", lambda scenario, model: controller
     )
-    interrupts.reset()
-    previous = interrupts.install()
-    try:
-        with pytest.raises(interrupts.Interrupted) as raised:
-            simulate(load_scenario("paper-ideal"))
-    finally:
-        interrupts.restore(previous)
-        interrupts.reset()
+    with pytest.raises(interrupts.Interrupted) as raised:
+        simulate(load_scenario("paper-ideal"))
     assert raised.value.exit_code == 130
     assert controller.steps == 4  # stopped right after the step that was interrupted
 

@@ -155,7 +155,7 @@ def compute_metrics(
     heading = heading_error(log)
     common = actuation_metrics(log, limits.thrust_limits, limits.thrust_rate_limit)
     steady = log.t >= transient_s - 1e-9
-    detour = detour_samples(log, obstacles, vehicle_radius_m + obstacle_margin_m)
+    detour = detour_samples(log, error, obstacles, vehicle_radius_m + obstacle_margin_m)
     tracking = steady & ~detour
     clearance = log.clearance_m
     yaw_rate = np.abs(log.state[:, _YAW_RATE])
@@ -230,7 +230,7 @@ def compute_metrics(
 
 
 def detour_samples(
-    log: SimLog, obstacles: Sequence[ObstacleConfig], keep_out_beyond_m: float
+    log: SimLog, error: np.ndarray, obstacles: Sequence[ObstacleConfig], keep_out_beyond_m: float
 ) -> np.ndarray:
     """(N+1,) True at the samples of a detour round an obstacle: position error that going
     round the obstacle explains, judged by the clearance rather than as tracking error.
@@ -241,9 +241,9 @@ def detour_samples(
     that disc's edge and at most DETOUR_MAX_DIAMETERS x 2 R from the reference, and at one of
     which the reference is inside the disc: the obstacle was on the path and the vehicle went
     round it. A vehicle off a reference that passes beside an obstacle, or off by more than
-    the disc's width, or farther from the obstacle than that, is tracking badly.
+    the disc's width, or farther from the obstacle than that, is tracking badly. ``error``:
+    the log's :func:`position_error`.
     """
-    error = position_error(log)
     vehicle, reference = log.state[:, _POSITION], log.reference[:, _POSITION]
     detour = np.zeros(len(log.t), dtype=bool)
     for obstacle in obstacles:
