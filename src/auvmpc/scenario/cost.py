@@ -37,6 +37,7 @@ __all__ = [
     "check_cost",
     "check_campaign_cost",
     "estimate_cost",
+    "readable_bytes",
 ]
 
 # Beyond these an estimate is refused unless confirmed. 1e7 RK4 sub-steps is 139 h of
@@ -86,16 +87,17 @@ class CostEstimate:
     def summary(self) -> str:
         return (
             f"{self.samples} samples, {self.plant_steps} plant steps, about "
-            f"{_size(self.memory_bytes)} and {_duration(self.seconds)} (an estimate)"
+            f"{readable_bytes(self.memory_bytes)} and {_duration(self.seconds)} (an estimate)"
         )
 
 
-def _size(n_bytes: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
-        if n_bytes < 1024 or unit == "TiB":
+def readable_bytes(n_bytes: float) -> str:
+    """A size in bytes as people read it (``1.5 GiB``)."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n_bytes < 1024 or unit == "PiB":
             return f"{n_bytes:.3g} {unit}"
         n_bytes /= 1024
-    return f"{n_bytes:.3g} TiB"  # pragma: no cover
+    return f"{n_bytes:.3g} PiB"  # pragma: no cover
 
 
 def _duration(seconds: float) -> str:

@@ -59,6 +59,7 @@ from auvmpc.scenario import (
     ResolvedSixDofScenario,
     Scenario,
 )
+from auvmpc.scenario.cost import readable_bytes
 
 __all__ = [
     "available_memory_bytes",
@@ -126,14 +127,6 @@ def _status_bytes(key: str) -> int:
     return 0
 
 
-def _size(n_bytes: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n_bytes < 1024 or unit == "PiB":
-            return f"{n_bytes:.3g} {unit}"
-        n_bytes /= 1024
-    return f"{n_bytes:.3g} PiB"  # pragma: no cover
-
-
 def memory_needs(
     resolved: ResolvedScenario | ResolvedDepthScenario,
 ) -> list[tuple[str, object, float, str]]:
@@ -152,13 +145,19 @@ def memory_needs(
             "duration",
             scenario.duration,
             log_bytes,
-            f"{steps:.3g} samples of {config.sample_time} s need about {_size(log_bytes)} of log",
+            f"{steps:.3g} samples of {config.sample_time} s need about "
+            f"{readable_bytes(log_bytes)} of log",
         )
     ]
     need = class_of(config.type).memory_need(config, n, nx)
     if need is not None:
         needs.append(
-            (need.field, need.value, need.n_bytes, f"{need.what} needs about {_size(need.n_bytes)}")
+            (
+                need.field,
+                need.value,
+                need.n_bytes,
+                f"{need.what} needs about {readable_bytes(need.n_bytes)}",
+            )
         )
     return needs
 
@@ -172,7 +171,7 @@ def check_memory(
     for field, value, n_bytes, what in memory_needs(resolved):
         if n_bytes > budget:
             raise ConfigError(
-                field, value, f"{what}, more than the {_size(budget)} of memory available"
+                field, value, f"{what}, more than the {readable_bytes(budget)} of memory available"
             )
 
 
