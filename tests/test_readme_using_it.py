@@ -10,11 +10,11 @@ other line must be an ``auvmpc`` command.
 Left out, by one rule: the commands that take minutes and that the rest of the suite
 covers on smaller inputs (``reproduce``, ``bench``, ``campaign``, ``campaign-report``,
 ``identify``, ``run --from-campaign``), ``export-c --blasfeo DIR``, whose DIR is a BLASFEO
-build the reader makes first (``make blasfeo``), and the two lines that take 8-11 s each
+build the reader makes first (``make blasfeo``), and the lines that take 5-11 s each
 and that another test runs exactly (``animate``: tests/test_animation.py;
-``run bluerov2-helix``: tests/test_six_dof_loop.py). ``export-c`` and ``verify-c`` are left
-out where there is no C compiler, make or HPIPM (as in tests/test_export_c.py). About 20 s
-on a 2-core Xeon.
+``run bluerov2-helix`` and ``run paper-6dof``: tests/test_six_dof_loop.py). ``export-c``
+and ``verify-c`` are left out where there is no C compiler, make or HPIPM (as in
+tests/test_export_c.py). About 18 s on a 2-core Xeon.
 """
 
 from __future__ import annotations
@@ -35,7 +35,9 @@ pytestmark = pytest.mark.slow
 README = Path(__file__).resolve().parents[1] / "README.md"
 LONG_COMMANDS = {"reproduce", "bench", "campaign", "campaign-report", "identify", "animate"}
 LONG_OPTIONS = {"--from-campaign", "--blasfeo"}
-RUN_ELSEWHERE = {"bluerov2-helix"}  # tests/test_six_dof_loop.py::test_bluerov2_helix
+# Scenarios tests/test_six_dof_loop.py runs exactly (test_bluerov2_helix,
+# test_paper_6dof_within_twice_the_planar_error_with_depth_and_attitude_bounded).
+RUN_ELSEWHERE = {"bluerov2-helix", "paper-6dof"}
 NEEDS_C = {"export-c", "verify-c"}
 FIRST_RUN = ["run", "paper-obstacles", "--out"]
 
@@ -91,7 +93,7 @@ def test_the_using_it_block_runs_top_to_bottom_in_an_empty_folder(tmp_path, monk
         ran.append(args[0])
         if args[:3] == FIRST_RUN and first_run is None:
             first_run = Path(args[3])
-    assert len(ran) >= 16 and {"explain", "compare", "export"} <= set(ran)
+    assert len(ran) >= 15 and {"explain", "compare", "export"} <= set(ran)
     assert first_run is not None, "the block has no `auvmpc run paper-obstacles --out DIR`"
     metrics = json.loads((first_run / "run.json").read_text())["metrics"]
     assert metrics["verdict"] == "ok", metrics["verdict_reason"]
