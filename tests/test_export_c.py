@@ -56,7 +56,16 @@ def test_the_documented_flow_verifies(tmp_path):
     ("scenario", "overrides"),
     [
         ("paper-ideal", ["controller.offset_free=false"]),
-        ("paper-obstacles", ["controller.offset_free=true"]),
+        # spinning at the start, a disc on the way to the reference: the shell's recovery
+        # (the generated feedback, holding station) with the estimator's force
+        (
+            "paper-obstacles",
+            [
+                "controller.offset_free=true",
+                "initial_state=[0.0, -12.0, 1.57, 0.0, 0.0, 3.0]",
+                "obstacles=[{center: [4.0, -12.0], radius: 0.5}]",
+            ],
+        ),
         # a moving disc, one appearing and vanishing within the run, one fixed
         (
             "paper-obstacles",
@@ -71,13 +80,15 @@ def test_the_documented_flow_verifies(tmp_path):
     ],
 )
 def test_exported_controller_reproduces_python_commands(tmp_path, scenario, overrides):
-    """Obstacle slots (moving, appearing) and the offset-free EKF included: every command
-    within the bound."""
+    """Obstacle slots (moving, appearing), the offset-free EKF and the shell's recovery
+    included: every command within the bound, every status the Python run's."""
     resolved, run_dir = _run(tmp_path, scenario, [*_FREE, *overrides])
     export_c(resolved, tmp_path / "export")
     result = verify_c(tmp_path / "export", run_dir)
     assert result.steps == 10
-    assert result.fallbacks == 0
+    assert result.fallbacks == 0 and result.status_differences == 0
+    spinning_start = any(o.startswith("initial_state") for o in overrides)
+    assert result.recoveries == (1 if spinning_start else 0)
     assert result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
     assert 0 < result.static_bytes < result.workspace_bytes
     # HPIPM's workspace lives in the static arena measured at export (plus its alignment room)

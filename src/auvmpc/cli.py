@@ -950,12 +950,17 @@ def verify_c(
     console.print(
         f"steps {result.steps}  max |F_C - F_Python| {result.max_difference_n:.3g} N "
         f"(step {result.worst_step})  fallbacks {result.fallbacks}  "
+        f"recoveries {result.recoveries}  status differences {result.status_differences}  "
         f"step median {result.step_us_median:.0f} us  max {result.step_us_max:.0f} us "
         f"({result.step_us_max_after_first:.0f} us after the cold first step)  "
         f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM"
     )
     if not result.passed:
-        errors.print(f"above the tolerance of {COMMAND_TOLERANCE_N:g} N")
+        errors.print(
+            f"above the tolerance of {COMMAND_TOLERANCE_N:g} N"
+            if result.status_differences == 0
+            else f"{result.status_differences} steps with another status than the Python run's"
+        )
         raise typer.Exit(RUN_FAILED_EXIT)
 
 

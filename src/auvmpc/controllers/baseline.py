@@ -53,9 +53,10 @@ from pydantic import Field, model_validator
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
+from auvmpc.controllers.tracking_law import tracking_law
 from auvmpc.errors import FieldError
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY, PLANAR_MOMENT
-from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
+from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]
 
@@ -63,7 +64,7 @@ __all__ = ["BaselineConfig", "BaselineController"]
 # A command is "saturated" when the limits moved it by more than this (N): float round-off
 # in the allocation is far smaller, any real clipping far larger.
 _SATURATION_TOLERANCE_N = 1e-9
-_POSITION, _HEADING, _YAW_RATE = HORIZONTAL.position, HORIZONTAL.heading, HORIZONTAL.index("r")
+_HEADING = HORIZONTAL.heading
 
 
 class BaselineConfig(StrictModel):
@@ -160,29 +161,22 @@ class BaselineController(ShelledController):
         model: VehicleParams,
         sample_time: float,
         gains: BaselineConfig,
-        check_actuation: bool = True,
-        settling_yaw: bool = False,
     ) -> None:
         if not (math.isfinite(sample_time) and sample_time > 0):
             raise ValueError(f"sample_time must be finite and > 0, got {sample_time!r}")
         if not isinstance(gains, BaselineConfig):
             raise TypeError(f"gains must be a BaselineConfig, got {type(gains).__name__}")
-        if check_actuation:  # the shell's recovery takes the least-squares force instead
-            model.require_full_actuation(
-                "baseline", "it commands surge, sway and yaw forces through the pseudo-inverse"
-            )
+        model.require_full_actuation(
+            "baseline", "it commands surge, sway and yaw forces through the pseudo-inverse"
+        )
         self.model = model
         self.sample_time = float(sample_time)
         self.limits = horizontal_limits(model)
         self.gains = gains
-        self._settling_yaw = settling_yaw  # the shell's recovery: _settled_yaw_accel
+        self._law = tracking_law(model, self.sample_time, gains)
         n = model.n_thrusters
-        self._kp = np.array([gains.along_kp, gains.cross_kp])
-        self._kd = np.array([gains.along_kd, gains.cross_kd])
         self._ki = np.array([gains.along_ki, gains.cross_ki])
         self._mass = np.array([model.m11, model.m22])
-        # Scaling tau towards zero keeps its direction only if zero thrust is allowed.
-        self._zero_thrust_feasible = model.thrust_min <= 0.0 <= model.thrust_max
         self.reset(np.zeros(HORIZONTAL.size), np.zeros(n))
 
     # ----------------------------------------------------------------------------------------
@@ -204,17 +198,15 @@ class BaselineController(ShelledController):
         return cls(model, config.for_vehicle(model).sample_time, config.baseline)
 
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        """Clear the integrators and remember ``initial_thrust`` as F(-1) for the rate limit.
+        """Clear the integrators (``initial_thrust``, F(-1), is the shell's to keep).
 
-        ``initial_state`` is not needed: the law has no state besides the integrators and the
-        previous command.
+        ``initial_state`` is not needed: the law has no state besides the integrators.
         """
         thrust = np.asarray(initial_thrust, dtype=float)
         if thrust.shape != (self.model.n_thrusters,):
             raise ValueError(
                 f"initial_thrust must have shape ({self.model.n_thrusters},), got {thrust.shape}"
             )
-        self._previous_thrust = thrust.copy()
         self._force_integral = np.zeros(2)
         self._moment_integral = 0.0
 
@@ -222,7 +214,6 @@ class BaselineController(ShelledController):
         """Thrust for the coming sample, already inside the limits; ``limited`` when a hard
         limit had to cut the demand."""
         started = time.perf_counter()
-        self._previous_thrust = previous
         state = np.asarray(observation.state, dtype=float)
         reference = np.asarray(observation.reference, dtype=float)
         if state.shape != (HORIZONTAL.size,):
@@ -235,8 +226,13 @@ class BaselineController(ShelledController):
                 f"got {reference.shape}"
             )
 
-        tau_des, errors, integrated = self._desired_generalised_force(state, reference)
-        thrust, saturated = self._saturate(tau_des)
+        ahead = reference[1] if len(reference) > 1 else reference[0]
+        law = self._law(state, reference[0], ahead, self.disturbance_estimate)
+        tau_des, errors, integrated, target, requested = (v.full().ravel() for v in law)
+        # Each thruster clipped into the box one rate step around the previous command; since
+        # both ends are within the force limits, so is the result.
+        thrust, _ = project_to_limits(target, previous, self.model, self.sample_time)
+        saturated = bool(np.any(np.abs(thrust - requested) > _SATURATION_TOLERANCE_N))
         deficit = tau_des - self.model.T @ thrust  # zero unless a limit cut the demand
         self._integrate(state[_HEADING], reference[0, _HEADING], integrated, deficit, saturated)
 
@@ -263,134 +259,6 @@ class BaselineController(ShelledController):
     # Control law
     # ----------------------------------------------------------------------------------------
 
-    def _desired_generalised_force(
-        self, state: np.ndarray, reference: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The generalised force the control law asks for, before any limit.
-
-        Returns
-        -------
-        tau : (3,) array
-            ``[f_u, f_v, M_r]`` (N, N, N m), body frame.
-        errors : (3,) array
-            Along-track, cross-track (m) and wrapped heading error (rad).
-        integrated : (3,) array
-            The errors the integrators are to see (position part shrunk by the speed cap).
-        """
-        g, p, te = self.gains, self.model, self.sample_time
-        _, _, psi, u, v, r = state
-        now = reference[0]
-        ahead = reference[1] if reference.shape[0] > 1 else now
-        psi_r, r_r = now[_HEADING], now[_YAW_RATE]
-
-        # Reference world velocity now and one sample ahead; their difference over Te is the
-        # mean acceleration the held command must produce (centripetal part included).
-        velocity_r = _world_velocity(now)
-        accel_r = (_world_velocity(ahead) - velocity_r) / te
-        yaw_accel_r = (ahead[_YAW_RATE] - r_r) / te
-
-        # Position loop in the path frame (x along the reference heading, y to its starboard).
-        to_path = _rotation(psi_r).T
-        error_path = to_path @ (state[_POSITION] - now[_POSITION])
-        velocity = _rotation(psi) @ np.array([u, v])
-        velocity_error_path = to_path @ (velocity - velocity_r)
-        # Cascade form of PD: the position error asks for a closing speed K_D^-1 K_P e,
-        # capped so that a large error is closed at a bounded speed instead of by a huge
-        # acceleration. (The config guarantees K_D > 0 wherever K_P > 0.)
-        closing = np.divide(self._kp * error_path, self._kd, out=np.zeros(2), where=self._kd > 0)
-        speed = float(np.hypot(*closing))
-        cap = min(1.0, g.max_approach_speed / speed) if speed > 0 else 1.0
-        closing *= cap
-        accel_path = -self._kd * (velocity_error_path + closing)
-        accel_world = accel_r + _rotation(psi_r) @ accel_path
-
-        # Heading loop: wrapped error to the (optionally line-of-sight corrected) reference.
-        psi_d = psi_r
-        if g.los_lookahead_m is not None:
-            psi_d = psi_r - math.atan(error_path[1] / g.los_lookahead_m)
-        heading_error = _wrap(psi - psi_d)
-        yaw_accel = yaw_accel_r - g.heading_kp * heading_error - g.heading_kd * (r - r_r)
-        if self._settling_yaw:
-            yaw_accel = self._settled_yaw_accel(r, r_r, heading_error, yaw_accel)
-
-        # Feedback linearisation: p'' = R(psi) (nu' + r [-v, u]) gives the body accelerations.
-        nu_dot = _rotation(psi).T @ accel_world - r * np.array([-v, u])
-        # Damping is fed forward at the velocity the vehicle should have (the reference's,
-        # in the body frame): with the measured velocity a model that over-estimates damping
-        # turns it into positive feedback, and the plant's own damping then adds to K_D.
-        # Coriolis and Munk terms use the measured velocity: they are not dissipative, and
-        # the Munk moment (m11 - m22) u v is what upsets the heading while the vehicle crabs.
-        u_d, v_d = _rotation(psi).T @ velocity_r
-        damping = np.array(
-            [
-                p.Xu * u_d + p.Xuu * abs(u_d) * u_d,
-                p.Yv * v_d + p.Yvv * abs(v_d) * v_d,
-                yaw_damping_moment(p, r_r),
-            ]
-        )
-        coriolis = np.array([p.m22 * v * r, -p.m11 * u * r, (p.m11 - p.m22) * u * v])
-        tau = (
-            np.array([p.m11 * nu_dot[0], p.m22 * nu_dot[1], p.Iz * yaw_accel]) - damping - coriolis
-        )
-        tau[PLANAR_FORCE_XY] -= _rotation(psi).T @ self._force_integral
-        tau[PLANAR_MOMENT] -= self._moment_integral
-        # The integrators see the position error shrunk by the same cap: outside the range
-        # where the loop is linear a large error must not pile up integral in a few samples.
-        integrated = np.array([cap * error_path[0], cap * error_path[1], heading_error])
-        return tau, np.array([error_path[0], error_path[1], heading_error]), integrated
-
-    def _settled_yaw_accel(
-        self, r: float, r_r: float, heading_error: float, inertial: float
-    ) -> float:
-        """The yaw term for a yaw that settles within the sample: where the yaw damping's
-        time constant at ``r`` is below a third of the sample, the moment that holds the
-        wanted rate ``r_r - (K_P / K_D) e_psi`` against the damping in steady state (as the
-        term the caller turns into a moment), else ``inertial``, the law's own.
-
-        On a light, strongly damped yaw (the hard survey's 0.38 kg m2 vehicle: 0.02 s) the
-        inertial law's moment, held for 0.5 s, overshoots the wanted rate by several rad/s
-        each sample and keeps the vehicle spinning."""
-        p, g = self.model, self.gains
-        slope = abs(p.Nr + 2.0 * p.Nrr * abs(r))  # N m s: the damping's, linearised at r
-        if slope * self.sample_time < 3.0 * p.Iz:
-            return inertial
-        wanted = r_r - g.heading_kp / g.heading_kd * heading_error
-        # the moment that holds ``wanted``, as an acceleration past the reference's damping,
-        # which the caller subtracts
-        return (yaw_damping_moment(p, r_r) - yaw_damping_moment(p, wanted)) / p.Iz
-
-    def _saturate(self, tau_des: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Allocate, fit inside the force limits keeping direction, then clip to the rate box.
-
-        Force limits: the yaw moment is kept whole if it fits and the planar force
-        ``(f_u, f_v)`` is scaled down along its own direction until every thruster is within
-        ``[F_min, F_max]``; if the moment alone does not fit, it is scaled and the planar force
-        dropped. Yaw goes first because a heading error rotates every other error, and
-        because scaling all of tau lets the Munk moment of a crabbing vehicle win.
-        Rate limit: each thruster is clipped into the box one rate step around the previous
-        command (``project_to_limits``); since both ends are within the force limits, so is
-        the result.
-        """
-        p = self.model
-        thrust_yaw = p.T_pinv[:, PLANAR_MOMENT] * tau_des[PLANAR_MOMENT]
-        thrust_planar = p.T_pinv[:, PLANAR_FORCE_XY] @ tau_des[PLANAR_FORCE_XY]
-        if self._zero_thrust_feasible:
-            lower = np.full(p.n_thrusters, p.thrust_min)
-            upper = np.full(p.n_thrusters, p.thrust_max)
-            if np.all((lower <= thrust_yaw) & (thrust_yaw <= upper)):
-                scale = _largest_step(thrust_yaw, thrust_planar, lower, upper)
-                target = thrust_yaw + scale * thrust_planar
-            else:
-                target = (
-                    _largest_step(np.zeros(p.n_thrusters), thrust_yaw, lower, upper) * thrust_yaw
-                )
-        else:  # limits exclude zero thrust (odd but valid): nothing to scale towards
-            target = thrust_yaw + thrust_planar
-        limited, _ = project_to_limits(target, self._previous_thrust, p, self.sample_time)
-        requested = thrust_yaw + thrust_planar
-        saturated = bool(np.any(np.abs(limited - requested) > _SATURATION_TOLERANCE_N))
-        return limited, saturated
-
     def _integrate(
         self, psi: float, psi_r: float, errors: np.ndarray, deficit: np.ndarray, saturated: bool
     ) -> None:
@@ -414,30 +282,10 @@ class BaselineController(ShelledController):
         self._moment_integral = float(np.clip(self._moment_integral + moment_step, -limit, limit))
 
 
-def _world_velocity(reference_row: np.ndarray) -> np.ndarray:
-    """World velocity (x', y') of a reference state row [x, y, psi, u, v, r]."""
-    return _rotation(reference_row[_HEADING]) @ reference_row[HORIZONTAL.body_velocity]
-
-
 def _rotation(angle: float) -> np.ndarray:
     """R(angle), shape (2, 2): body (or path) frame to world frame in the plane."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
-
-
-def _wrap(angle: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
-    return math.pi - (math.pi - angle) % (2.0 * math.pi)
-
-
-def _largest_step(
-    start: np.ndarray, direction: np.ndarray, lower: np.ndarray, upper: np.ndarray
-) -> float:
-    """Largest s in [0, 1] with lower <= start + s * direction <= upper (start inside)."""
-    room = np.where(direction > 0, upper - start, np.where(direction < 0, lower - start, np.inf))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratios = np.where(direction != 0, room / direction, np.inf)
-    return float(np.clip(ratios.min(), 0.0, 1.0))
 
 
 def _clip_norm(vector: np.ndarray, limit: float) -> np.ndarray:

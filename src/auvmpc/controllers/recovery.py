@@ -4,8 +4,9 @@ After a failed solve the shell (controllers/shell.py) follows the last good plan
 most ``PLAN_FALLBACK_STEPS`` samples (it was feasible and rate-limited when it was made, and
 the back end re-initialises meanwhile); after that, and whenever the vehicle spins, it applies
 :class:`StabilisingFeedback`: the classical tracker of controllers/baseline.py (feedback
-linearisation on the nominal model, PD, yaw first in the allocation, inside the hard limits)
-without its integrators, fed the optimiser's own disturbance estimate instead, tracking the
+linearisation on the nominal model, PD, yaw first in the allocation; its one statement,
+controllers/tracking_law.py, is what the exported C controller evaluates too) without its
+integrators, fed the optimiser's own disturbance estimate instead, tracking the
 reference or, where the way there crosses an obstacle, holding station. It damps the yaw
 rate and any drift on any vehicle, since its gains are accelerations and the model supplies
 the inertia. Never blind plan-following for long, never zero thrust.
@@ -25,7 +26,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from auvmpc.controllers.base import Observation
-from auvmpc.controllers.baseline import BaselineConfig, BaselineController
+from auvmpc.controllers.baseline import BaselineConfig
+from auvmpc.controllers.tracking_law import LAW_OUTPUTS, tracking_law
 from auvmpc.models.heave import heave_damping_force
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
@@ -36,6 +38,9 @@ if TYPE_CHECKING:
 __all__ = ["DepthFeedback", "StabilisingFeedback"]
 
 _POSITION, _HEADING = HORIZONTAL.position, HORIZONTAL.heading
+# The baseline's gains without integrators: the optimiser's estimate stands in for them.
+_THRUST = LAW_OUTPUTS.index("thrust")
+RECOVERY_GAINS = BaselineConfig(along_ki=0.0, cross_ki=0.0, heading_ki=0.0)
 
 
 class StabilisingFeedback:
@@ -49,10 +54,7 @@ class StabilisingFeedback:
     watches_yaw = True  # the shell judges spins by the yaw rate of [x y psi u v r]
 
     def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
-        gains = BaselineConfig(along_ki=0.0, cross_ki=0.0, heading_ki=0.0)
-        self._law = BaselineController(
-            model, sample_time, gains, check_actuation=False, settling_yaw=True
-        )
+        self.law = tracking_law(model, sample_time, RECOVERY_GAINS, settling_yaw=True)
         self._keep_out_extra = keep_out_extra  # vehicle radius + margin, m
         self._hold: np.ndarray | None = None  # (2,) world position held, m
 
@@ -63,8 +65,8 @@ class StabilisingFeedback:
     def command(
         self, observation: Observation, previous: np.ndarray, proposal: Proposal
     ) -> np.ndarray:
-        """Thrust for the coming sample, inside the hard limits around ``previous``."""
-        disturbance = proposal.disturbance
+        """Thrust for the coming sample within the force limits (the shell's projection
+        applies the rate limit around ``previous``)."""
         state = np.asarray(observation.state, dtype=float)
         target = observation.reference[:2]
         if self._blocked(state[_POSITION], target[0, _POSITION], observation):
@@ -75,11 +77,12 @@ class StabilisingFeedback:
             target[:, _HEADING] = observation.reference[0, _HEADING]
         else:
             self._hold = None
-        self._law.restart(state, previous)
-        if disturbance is not None and np.size(disturbance) == 3:
-            self._law.assume_disturbance(np.ravel(disturbance))
-        towards = Observation(observation.k, observation.t, state, target)
-        return self._law.propose(towards, previous).plan[0]
+        disturbance = proposal.disturbance
+        if disturbance is None or np.size(disturbance) != 3:
+            disturbance = np.zeros(3)
+        ahead = target[1] if len(target) > 1 else target[0]
+        outputs = self.law(state, target[0], ahead, np.ravel(disturbance))
+        return outputs[_THRUST].full().ravel()
 
     def _blocked(self, start: np.ndarray, end: np.ndarray, observation: Observation) -> bool:
         """Whether the segment start-end passes inside any obstacle's keep-out disc."""

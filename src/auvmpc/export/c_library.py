@@ -32,9 +32,16 @@ import casadi as ca
 import numpy as np
 from pydantic import ValidationError
 
-from auvmpc.controllers.base import horizontal_limits
+from auvmpc.controllers.base import ControlStatus, horizontal_limits
 from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
 from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
+from auvmpc.controllers.recovery import StabilisingFeedback
+from auvmpc.controllers.shell import (
+    PLAN_FALLBACK_STEPS,
+    SPIN_ANGLE_PER_SAMPLE_RAD,
+    SPIN_REFERENCE_FACTOR,
+)
+from auvmpc.controllers.tracking_law import LAW_OUTPUTS
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.estimation.ekf import AugmentedEkf, DisturbanceObserver
@@ -224,6 +231,7 @@ def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfi
         "AUVMPC_HPIPM_SETTINGS": _array(hpipm_settings(config.qp_iteration_limit)),
         "AUVMPC_OFFSET_FREE": int(config.offset_free),
     }
+    macros.update(_recovery_macros(program))
     if config.offset_free:
         macros.update(_observer_macros(model, config))
     lines = [
@@ -237,6 +245,28 @@ def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfi
         "",
     ]
     return "\n".join(lines)
+
+
+def _recovery_law(program: MultipleShootingProgram) -> ca.Function:
+    """The stabilising feedback the registry gives the Python controller: its tracking law,
+    generated to C as ``tracking_law``."""
+    feedback = StabilisingFeedback(program.model, program.sample_time, program.ocp.keep_out_extra)
+    return feedback.law
+
+
+def _recovery_macros(program: MultipleShootingProgram) -> dict:
+    """The shell's recovery rules (controllers/shell.py) and the law's work sizes."""
+    law = _recovery_law(program)
+    return {
+        "AUVMPC_PLAN_FALLBACK_STEPS": PLAN_FALLBACK_STEPS,
+        "AUVMPC_SPIN_ANGLE_PER_SAMPLE": f"{SPIN_ANGLE_PER_SAMPLE_RAD:.17g}",
+        "AUVMPC_SPIN_REFERENCE_FACTOR": f"{SPIN_REFERENCE_FACTOR:.17g}",
+        "AUVMPC_LAW_THRUST": LAW_OUTPUTS.index("thrust"),
+        "AUVMPC_LAW_SZ_ARG": law.sz_arg(),
+        "AUVMPC_LAW_SZ_RES": law.sz_res(),
+        "AUVMPC_LAW_SZ_IW": law.sz_iw(),
+        "AUVMPC_LAW_SZ_W": law.sz_w(),
+    }
 
 
 def _observer(model, config: ControllerConfig) -> AugmentedEkf:
@@ -312,6 +342,7 @@ def export_c(
         generator.add(qp.stage)
         generator.add(qp.terminal)
         generator.add(program.step)  # rk4_step: the cold-start rollout and the shift
+        generator.add(_recovery_law(program))  # the shell's stabilising feedback
         if config.offset_free:  # the EKF's update and propagation (estimation/ekf.py)
             ekf = _observer(model, config)
             generator.add(ekf.update)
@@ -349,6 +380,16 @@ def export_c(
     return Path(out)
 
 
+# auvmpc_status (auvmpc_controller.h) by its number.
+_C_STATUS = (
+    ControlStatus.OK,
+    ControlStatus.RELAXED,
+    ControlStatus.FALLBACK,
+    ControlStatus.SATURATED,
+    ControlStatus.RECOVERY,
+)
+
+
 @dataclass(frozen=True)
 class VerifyResult:
     """What ``verify-c`` measured."""
@@ -362,10 +403,12 @@ class VerifyResult:
     static_bytes: int  # the controller's static structure
     workspace_bytes: int  # HPIPM's workspace and the driver's buffers: the static arena
     fallbacks: int
+    recoveries: int  # steps the shell's stabilising feedback commanded
+    status_differences: int  # steps whose C status is not the Python run's
 
     @property
     def passed(self) -> bool:
-        return self.max_difference_n <= COMMAND_TOLERANCE_N
+        return self.max_difference_n <= COMMAND_TOLERANCE_N and self.status_differences == 0
 
 
 @dataclass(frozen=True)
@@ -489,6 +532,7 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     c_thrust = np.array([[float(r[name]) for name in thrusters] for r in commands])
     py_thrust = np.column_stack([log.column(name) for name in thrusters])[: len(commands)]
     difference = np.abs(c_thrust - py_thrust).max(axis=1)
+    c_status = [_C_STATUS[int(r["status"])] for r in commands]
     return VerifyResult(
         steps=len(commands),
         max_difference_n=float(difference.max()),
@@ -498,7 +542,11 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
         step_us_max_after_first=float(stats["step_us_max_after_first"]),
         static_bytes=int(stats["static_bytes"]),
         workspace_bytes=int(stats["workspace_bytes"]),
-        fallbacks=sum(r["status"] == "2" for r in commands),
+        fallbacks=c_status.count(ControlStatus.FALLBACK),
+        recoveries=c_status.count(ControlStatus.RECOVERY),
+        status_differences=sum(
+            mine != logged for mine, logged in zip(c_status, log.status, strict=False)
+        ),
     )
 
 

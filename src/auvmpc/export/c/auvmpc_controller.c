@@ -3,9 +3,9 @@
  * shell (controllers/shell.py), step for step, so that it reproduces the Python commands.
  *
  * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost,
- * the RK4 step and the estimator's update and propagation, the functions the Python
- * evaluates) and auvmpc_config.h (sizes,
- * weights, limits, settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
+ * the RK4 step, the estimator's update and propagation and the shell's stabilising feedback,
+ * the functions the Python evaluates) and auvmpc_config.h (sizes, weights, limits,
+ * settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
  * Python controller compiles, built here with a static arena for HPIPM's workspace (the
  * Makefile's ARENA). Static memory only (README.md).
  */
@@ -31,6 +31,7 @@
 #define SLACK_ACTIVE 1e-6
 #define SATURATION_N 1e-6
 #define TWO_PI (2.0 * 3.14159265358979323846)
+#define YAW_RATE 5 /* r in [x, y, psi, u, v, r] */
 
 void *auvmpc_rti_create(int horizon, int n, int slots, int nz, int nv, int ng,
                         const double *settings, int count);
@@ -62,6 +63,11 @@ static struct {
     double previous[NT];          /* the last applied command, F(-1) */
     double plan[N][NT];           /* what a fallback follows */
     int has_plan;
+    int unsolved;                 /* samples in a row without an applied proposal */
+    double predicted_yaw_rate;    /* at this sample, by the last applied plan */
+    int has_predicted_yaw_rate;
+    double hold[2];               /* where the recovery holds station, while it does */
+    int holding;
     Iterate guess, next_guess;    /* where the next solve starts (warm start) */
     int has_guess, has_next_guess;
     /* one sample's data */
@@ -84,6 +90,11 @@ static struct {
     casadi_int observer_iw[AUVMPC_OBSERVER_SZ_IW + 1];
     casadi_real observer_w[AUVMPC_OBSERVER_SZ_W + 1];
 #endif
+    /* the stabilising feedback's CasADi work */
+    const casadi_real *law_arg[AUVMPC_LAW_SZ_ARG + 1];
+    casadi_real *law_res[AUVMPC_LAW_SZ_RES + 1];
+    casadi_int law_iw[AUVMPC_LAW_SZ_IW + 1];
+    casadi_real law_w[AUVMPC_LAW_SZ_W + 1];
     /* the RK4 step's CasADi work */
     const casadi_real *step_arg[AUVMPC_STEP_SZ_ARG + 1];
     casadi_real *step_res[AUVMPC_STEP_SZ_RES + 1];
@@ -302,6 +313,9 @@ void auvmpc_reset(const double initial_state[NX], const double initial_thrust[NT
 #endif
     memcpy(c.previous, initial_thrust, sizeof c.previous);
     c.has_plan = 0;
+    c.unsolved = 0;
+    c.has_predicted_yaw_rate = 0;
+    c.holding = 0;
     c.has_guess = 0;
     c.has_next_guess = 0;
     /* HPIPM keeps its last solution as the next warm start, as in Python. */
@@ -464,23 +478,107 @@ static int propose(const double *measured, const double *reference,
     return failed ? -1 : 0;
 }
 
+/* -- the safety shell's recovery (controllers/shell.py, controllers/recovery.py) -- */
+
+/* The yaw rate above which the vehicle spins: more heading per sample than
+ * AUVMPC_SPIN_ANGLE_PER_SAMPLE, and more than AUVMPC_SPIN_REFERENCE_FACTOR times the fastest
+ * reference yaw rate in the preview (shell.spin_limit). */
+static double spin_limit(const double *reference) {
+    double turn = 0.0;
+    for (int k = 0; k <= N; ++k) turn = fmax(turn, fabs(reference[NX * k + YAW_RATE]));
+    return fmax(AUVMPC_SPIN_ANGLE_PER_SAMPLE / AUVMPC_SAMPLE_TIME,
+                AUVMPC_SPIN_REFERENCE_FACTOR * turn);
+}
+
+/* Faster than the limit, and not as the last applied plan predicted (ShelledController._spin). */
+static int spinning(const double *measured, const double *reference) {
+    double yaw_rate = measured[YAW_RATE], limit = spin_limit(reference);
+    if (fabs(yaw_rate) <= limit) return 0;
+    return !c.has_predicted_yaw_rate || fabs(yaw_rate - c.predicted_yaw_rate) > 0.5 * limit;
+}
+
+/* Whether the segment start-end passes inside an obstacle's keep-out disc
+ * (StabilisingFeedback._blocked). */
+static int blocked(const double *start, const double *end, const auvmpc_obstacle *obstacles,
+                   int count) {
+    double way[2] = {end[0] - start[0], end[1] - start[1]};
+    double length2 = way[0] * way[0] + way[1] * way[1];
+    for (int j = 0; j < count; ++j) {
+        const double *center = obstacles[j].center;
+        double along = 0.0;
+        if (length2 != 0.0) {
+            along = ((center[0] - start[0]) * way[0] + (center[1] - start[1]) * way[1]) / length2;
+            along = fmin(fmax(along, 0.0), 1.0);
+        }
+        double gap = hypot(start[0] + along * way[0] - center[0],
+                           start[1] + along * way[1] - center[1]);
+        if (gap < obstacles[j].radius + AUVMPC_KEEP_OUT_EXTRA) return 1;
+    }
+    return 0;
+}
+
+/* The stabilising feedback's thrust within the force limits (StabilisingFeedback.command):
+ * the generated tracking law towards the reference, or towards the station held where the
+ * way to the reference crosses a keep-out disc; the shell's projection follows. */
+static void recover(const double *measured, const double *reference,
+                    const auvmpc_obstacle *obstacles, int count, double *thrust) {
+    double target[2][NX];
+    memcpy(target, reference, sizeof target);
+    if (blocked(measured, reference, obstacles, count)) {
+        if (!c.holding) {
+            c.hold[0] = measured[0];
+            c.hold[1] = measured[1];
+            c.holding = 1;
+        }
+        for (int k = 0; k < 2; ++k) {
+            for (int i = 0; i < NX; ++i) target[k][i] = 0.0;
+            target[k][0] = c.hold[0];
+            target[k][1] = c.hold[1];
+            target[k][2] = reference[2];
+        }
+    } else {
+        c.holding = 0;
+    }
+    c.law_arg[0] = measured;
+    c.law_arg[1] = target[0];
+    c.law_arg[2] = target[1]; /* the reference one sample ahead (N >= 1) */
+    c.law_arg[3] = c.disturbance;
+    for (int i = 0; i < AUVMPC_LAW_SZ_RES; ++i) c.law_res[i] = NULL; /* only the thrust */
+    c.law_res[AUVMPC_LAW_THRUST] = thrust;
+    tracking_law(c.law_arg, c.law_res, c.law_iw, c.law_w, 0);
+}
+
 auvmpc_status auvmpc_step(const double measured_state[NX],
                           const double reference[(N + 1) * NX],
                           const auvmpc_obstacle *obstacles, int obstacle_count,
                           double command[NT]) {
     double wanted[NT];
-    int fell_back = 1;
     c.iterations = 0;
-    if (c.qp && !propose(measured_state, reference, obstacles, obstacle_count)) {
+    int solved = c.qp && !propose(measured_state, reference, obstacles, obstacle_count);
+    int spin = spinning(measured_state, reference);
+    int fell_back = !solved || spin, recovered = 0;
+    if (!fell_back) {
         memcpy(wanted, c.iterate.thrust[0], sizeof wanted);
         memcpy(c.plan, c.iterate.thrust, sizeof c.plan);
         c.has_plan = 1;
-        fell_back = 0;
-    } else if (c.has_plan && N > 1) { /* the previous plan's next move, the plan shifted on */
-        memcpy(wanted, c.plan[1], sizeof wanted);
-        memmove(c.plan[0], c.plan[1], sizeof(double) * (N - 1) * NT);
+        c.unsolved = 0;
+        c.holding = 0; /* the optimiser is back: a later hold starts afresh */
     } else {
-        memcpy(wanted, c.previous, sizeof wanted);
+        ++c.unsolved;
+        /* The plan was feasible when made: followed for at most AUVMPC_PLAN_FALLBACK_STEPS
+         * samples, then (and while the vehicle spins) the stabilising feedback, and the
+         * back end starts again cold. */
+        recovered = c.qp && (spin || !c.has_plan || c.unsolved > AUVMPC_PLAN_FALLBACK_STEPS);
+        if (recovered) {
+            recover(measured_state, reference, obstacles, obstacle_count, wanted);
+            c.has_plan = 0;
+            c.has_next_guess = 0;
+        } else if (c.has_plan && N > 1) { /* the previous plan's next move, shifted on */
+            memcpy(wanted, c.plan[1], sizeof wanted);
+            memmove(c.plan[0], c.plan[1], sizeof(double) * (N - 1) * NT);
+        } else {
+            memcpy(wanted, c.previous, sizeof wanted);
+        }
     }
     /* The safety shell's projection into the thrust and thrust-rate box (ActuatorLimits). */
     int saturated = 0;
@@ -496,12 +594,15 @@ auvmpc_status auvmpc_step(const double measured_state[NX],
         if (fabs(command[i] - wanted[i]) > SATURATION_N) saturated = 1;
     }
     memcpy(c.previous, command, sizeof c.previous);
+    c.has_predicted_yaw_rate = !fell_back;
+    if (!fell_back) c.predicted_yaw_rate = c.iterate.states[1][YAW_RATE];
     /* applied: the warm start moves on (a failure restarts cold) */
     if (c.has_next_guess) c.guess = c.next_guess;
     c.has_guess = c.has_next_guess;
 #if AUVMPC_OFFSET_FREE
     observer_predict(command);
 #endif
+    if (recovered) return AUVMPC_RECOVERY;
     if (fell_back) return AUVMPC_FALLBACK;
     if (c.max_slack > SLACK_ACTIVE) return AUVMPC_RELAXED;
     return saturated ? AUVMPC_SATURATED : AUVMPC_OK;

@@ -29,7 +29,8 @@ typedef enum {
     AUVMPC_OK = 0,
     AUVMPC_RELAXED = 1,   /* an obstacle constraint's slack was active */
     AUVMPC_FALLBACK = 2,  /* the solver failed: the previous plan's next move was applied */
-    AUVMPC_SATURATED = 3  /* the command was projected into the thrust or rate limits */
+    AUVMPC_SATURATED = 3, /* the command was projected into the thrust or rate limits */
+    AUVMPC_RECOVERY = 4   /* the stabilising feedback was applied (plan used up, or a spin) */
 } auvmpc_status;
 
 /* Set HPIPM's workspace up (once) and reset. 0 on success, -1 if its arena is too small or
