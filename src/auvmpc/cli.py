@@ -650,15 +650,31 @@ def excite(
         float, typer.Option("--sample-time", help="how long each thrust row is held (s)")
     ] = 0.1,
     box: Annotated[
-        float, typer.Option("--box", help="the nominal model stays this close to its start (m)")
+        float,
+        typer.Option(
+            "--box", help="the nominal model stays this close to its start (m; heave: depth)"
+        ),
     ] = 15.0,
+    dof: Annotated[
+        str,
+        typer.Option(
+            "--dof",
+            help="horizontal (surge, sway, yaw: the 3-DOF model) or heave (the vertical "
+            "thrusters: the depth model, a depth scenario)",
+        ),
+    ] = "horizontal",
     overwrite: Overwrite = False,
 ) -> None:
     """Write an identification manoeuvre: a scenario that plays a thrust table open loop,
     and the table (CSV, beside it) to play on the real vehicle."""
     from auvmpc.identification import write_excitation
+    from auvmpc.identification.excitation import Dof
 
-    excitation = write_excitation(vehicle, out, duration, seed, sample_time, box, overwrite)
+    if dof not in set(Dof):
+        raise ConfigError("--dof", dof, f"one of {', '.join(Dof)}")
+    excitation = write_excitation(
+        vehicle, out, duration, seed, sample_time, box, overwrite, Dof(dof)
+    )
     console.print(
         f"wrote {out} and {out.with_suffix('.csv').name}: {len(excitation.thrust)} rows of "
         f"{excitation.sample_time:g} s, peak {excitation.amplitude_share:.0%} of the thrust "
