@@ -760,6 +760,14 @@ def identify(
         str | None,
         typer.Option("--reversed", help="DataFlash: channels whose thrust is reversed, e.g. 2,3"),
     ] = None,
+    dof: Annotated[
+        str,
+        typer.Option(
+            "--dof",
+            help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
+            "with Fz1..), or auto: heave if the first log is a depth run's",
+        ),
+    ] = "auto",
     then_run: Annotated[
         str | None,
         typer.Option(
@@ -771,9 +779,19 @@ def identify(
     ] = None,
     overwrite: Overwrite = False,
 ) -> None:
-    """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
-    file, identification.json, identification.md and a fit figure beside it."""
+    """Identify the 3-DOF model (masses, added inertia, damping) or the heave model (heave
+    mass, damping, net buoyancy) from logs; write the vehicle file, identification.json,
+    identification.md and a fit figure beside it."""
     from auvmpc.identification import LogOptions, write_identification
+    from auvmpc.identification.excitation import Dof
+    from auvmpc.identification.heave import is_heave_log
+
+    if dof != "auto" and dof not in set(Dof):
+        raise ConfigError("--dof", dof, f"one of auto, {', '.join(Dof)}")
+    chosen = None if dof == "auto" else Dof(dof)
+    heave = chosen is Dof.HEAVE or (chosen is None and is_heave_log(logs[0]))
+    if then_run is not None and heave:
+        raise ConfigError("--then-run", then_run, "flies horizontal scenarios: not after heave")
 
     options = LogOptions(
         sample_time=sample_time,
@@ -785,7 +803,7 @@ def identify(
         channels=_channel_list(channels, "--channels"),
         reversed_channels=_channel_list(reversed_channels, "--reversed"),
     )
-    found = write_identification(logs, vehicle, out, holdout, overwrite, options)
+    found = write_identification(logs, vehicle, out, holdout, overwrite, options, chosen)
     table = Table(title=f"identified from {len(found.logs)} log(s)")
     for column in ("parameter", "start", "identified", "95 % interval", "excited"):
         table.add_column(column)
@@ -797,7 +815,10 @@ def identify(
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)
     rms_start = ", ".join(f"{x:.3g}" for x in found.validation_rms_start)
-    console.print(f"held-out RMS u, v, r: {rms} (start file: {rms_start})", highlight=False)
+    console.print(
+        f"held-out RMS {', '.join(found.outputs)}: {rms} (start file: {rms_start})",
+        highlight=False,
+    )
     if found.unexcited:
         errors.print(
             f"warning: not excited by the logs, start value kept: {', '.join(found.unexcited)}",
