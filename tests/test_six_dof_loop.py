@@ -198,6 +198,11 @@ def _inline_jmse(**changes) -> dict:
         (("depth_controller.sample_time=0.1",), "depth_controller.sample_time"),
         (("initial_depth_m=-5",), "initial_depth_m"),  # above the surface
         (("water_depth_m=1.8",), "reference.depth"),  # the track dives to 2 m
+        # a table of vertical thrusts plays in a depth scenario, not as the 6-DOF channel
+        (
+            ("depth_controller={type: thrust-playback, playback: {path: t.csv}}",),
+            "depth_controller.type",
+        ),
     ],
 )
 def test_scenarios_the_6dof_plant_cannot_run_are_one_line_errors(

@@ -650,15 +650,31 @@ def excite(
         float, typer.Option("--sample-time", help="how long each thrust row is held (s)")
     ] = 0.1,
     box: Annotated[
-        float, typer.Option("--box", help="the nominal model stays this close to its start (m)")
+        float,
+        typer.Option(
+            "--box", help="the nominal model stays this close to its start (m; heave: depth)"
+        ),
     ] = 15.0,
+    dof: Annotated[
+        str,
+        typer.Option(
+            "--dof",
+            help="horizontal (surge, sway, yaw: the 3-DOF model) or heave (the vertical "
+            "thrusters: the depth model, a depth scenario)",
+        ),
+    ] = "horizontal",
     overwrite: Overwrite = False,
 ) -> None:
     """Write an identification manoeuvre: a scenario that plays a thrust table open loop,
     and the table (CSV, beside it) to play on the real vehicle."""
     from auvmpc.identification import write_excitation
+    from auvmpc.identification.excitation import Dof
 
-    excitation = write_excitation(vehicle, out, duration, seed, sample_time, box, overwrite)
+    if dof not in set(Dof):
+        raise ConfigError("--dof", dof, f"one of {', '.join(Dof)}")
+    excitation = write_excitation(
+        vehicle, out, duration, seed, sample_time, box, overwrite, Dof(dof)
+    )
     console.print(
         f"wrote {out} and {out.with_suffix('.csv').name}: {len(excitation.thrust)} rows of "
         f"{excitation.sample_time:g} s, peak {excitation.amplitude_share:.0%} of the thrust "
@@ -744,6 +760,14 @@ def identify(
         str | None,
         typer.Option("--reversed", help="DataFlash: channels whose thrust is reversed, e.g. 2,3"),
     ] = None,
+    dof: Annotated[
+        str,
+        typer.Option(
+            "--dof",
+            help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
+            "with Fz1..), or auto: heave if the first log is a depth run's",
+        ),
+    ] = "auto",
     then_run: Annotated[
         str | None,
         typer.Option(
@@ -755,9 +779,19 @@ def identify(
     ] = None,
     overwrite: Overwrite = False,
 ) -> None:
-    """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
-    file, identification.json, identification.md and a fit figure beside it."""
+    """Identify the 3-DOF model (masses, added inertia, damping) or the heave model (heave
+    mass, damping, net buoyancy) from logs; write the vehicle file, identification.json,
+    identification.md and a fit figure beside it."""
     from auvmpc.identification import LogOptions, write_identification
+    from auvmpc.identification.excitation import Dof
+    from auvmpc.identification.heave import is_heave_log
+
+    if dof != "auto" and dof not in set(Dof):
+        raise ConfigError("--dof", dof, f"one of auto, {', '.join(Dof)}")
+    chosen = None if dof == "auto" else Dof(dof)
+    heave = chosen is Dof.HEAVE or (chosen is None and is_heave_log(logs[0]))
+    if then_run is not None and heave:
+        raise ConfigError("--then-run", then_run, "flies horizontal scenarios: not after heave")
 
     options = LogOptions(
         sample_time=sample_time,
@@ -769,7 +803,7 @@ def identify(
         channels=_channel_list(channels, "--channels"),
         reversed_channels=_channel_list(reversed_channels, "--reversed"),
     )
-    found = write_identification(logs, vehicle, out, holdout, overwrite, options)
+    found = write_identification(logs, vehicle, out, holdout, overwrite, options, chosen)
     table = Table(title=f"identified from {len(found.logs)} log(s)")
     for column in ("parameter", "start", "identified", "95 % interval", "excited"):
         table.add_column(column)
@@ -781,7 +815,10 @@ def identify(
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)
     rms_start = ", ".join(f"{x:.3g}" for x in found.validation_rms_start)
-    console.print(f"held-out RMS u, v, r: {rms} (start file: {rms_start})", highlight=False)
+    console.print(
+        f"held-out RMS {', '.join(found.outputs)}: {rms} (start file: {rms_start})",
+        highlight=False,
+    )
     if found.unexcited:
         errors.print(
             f"warning: not excited by the logs, start value kept: {', '.join(found.unexcited)}",

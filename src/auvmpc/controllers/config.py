@@ -121,6 +121,16 @@ class PlaybackConfig(StrictModel):
     )
 
 
+def check_playback(controller_type: str, playback: PlaybackConfig | None) -> None:
+    """thrust-playback needs its table, and only it takes one (a horizontal or a depth
+    scenario's ``controller``)."""
+    playing = controller_type == ControllerType.THRUST_PLAYBACK
+    if playing and playback is None:
+        raise FieldError("playback", None, "thrust-playback needs playback.path (a CSV)")
+    if not playing and playback is not None:
+        raise FieldError("playback", playback.model_dump(), "only for thrust-playback")
+
+
 # The validation context of a scenario read back from a run folder's run.json.
 SAVED_RUN = "saved_run"
 
@@ -332,11 +342,7 @@ class ControllerConfig(StrictModel):
 
     @model_validator(mode="after")
     def _playback_table(self) -> ControllerConfig:
-        playing = self.type == ControllerType.THRUST_PLAYBACK
-        if playing and self.playback is None:
-            raise FieldError("playback", None, "thrust-playback needs playback.path (a CSV)")
-        if not playing and self.playback is not None:
-            raise FieldError("playback", self.playback.model_dump(), "only for thrust-playback")
+        check_playback(self.type, self.playback)
         return self
 
     @model_validator(mode="after")
@@ -656,7 +662,11 @@ class DepthControllerConfig(StrictModel):
     """Depth MPC choice and tuning (controllers/depth_mpc.py): a depth scenario's
     ``controller``, a 6-DOF scenario's ``depth_controller``."""
 
-    type: Literal["depth-mpc"] = Field(default=DEPTH_MPC, description="depth controller")
+    type: Literal["depth-mpc", "thrust-playback"] = Field(
+        default=DEPTH_MPC,
+        description="depth controller; thrust-playback plays a table of the vertical thrusts "
+        "open loop (a depth scenario's, as `auvmpc excite --dof heave` writes)",
+    )
     sample_time: Positive = Field(default=0.1, description="Te (s)")
     prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
     control_horizon: Annotated[int, Field(ge=1)] | None = Field(
@@ -684,17 +694,24 @@ class DepthControllerConfig(StrictModel):
     qp_iteration_limit: Annotated[int, Field(ge=1)] | None = None
     solver_time_limit_ms: Positive | None = None
     observer: DepthObserverConfig = Field(default_factory=DepthObserverConfig)
+    playback: PlaybackConfig | None = Field(
+        default=None,
+        description="the vertical thrusts' table thrust-playback plays (header t, Fz1..Fzn)",
+    )
 
     @field_validator("type", mode="before")
     @classmethod
     def _only_the_depth_controller(cls, value: Any) -> Any:
-        if value != DEPTH_MPC and value in ControllerType.__members__.values():
+        if value not in (DEPTH_MPC, ControllerType.THRUST_PLAYBACK) and (
+            value in ControllerType.__members__.values()
+        ):
             raise FieldError("", value, f"a horizontal controller; depth scenarios use {DEPTH_MPC}")
         return value
 
     @model_validator(mode="after")
     def _horizons(self) -> DepthControllerConfig:
         check_control_horizon(self.control_horizon, self.prediction_horizon)
+        check_playback(self.type, self.playback)
         return self
 
     def move_schedule(self) -> tuple[int, ...]:

@@ -2,12 +2,15 @@
 
 The controller of an identification manoeuvre (``auvmpc excite``): it ignores the measured
 state and the reference, and applies row k of its table over [t_k, t_k+1), clipped into the
-thrust and rate limits (a table written by ``excite`` is already inside them). After the
+thrust and rate limits (a table written by ``excite`` is already inside them). In a
+horizontal scenario it plays the horizontal thrusters ``F1..Fn``; as a depth scenario's
+controller the vertical ones ``Fz1..Fzn`` of the vehicle's heave section. After the
 last row the thrust ramps to zero within the rate limit. The vehicle stays in a box of
 water because the table's forces are bounded and zero-mean, not by feedback
 (docs/identification.md).
 
-Thrust table (CSV): header ``t, F1..Fn`` (s, N), row k at t = k Te.
+Thrust table (CSV): header ``t`` and the thrusters' names (``F1..Fn`` or ``Fz1..Fzn``; s, N),
+row k at t = k Te.
 """
 
 from __future__ import annotations
@@ -19,14 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    project_to_limits,
-)
+from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, Observation
+from auvmpc.controllers.config import DepthControllerConfig
 from auvmpc.errors import ConfigError
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import read_text_file
@@ -83,20 +82,34 @@ class ThrustPlayback(Controller):
 
     preview_steps = 0
 
-    def __init__(self, model: VehicleParams, sample_time: float, thrust: np.ndarray) -> None:
+    def __init__(
+        self,
+        model: VehicleParams,
+        sample_time: float,
+        thrust: np.ndarray,
+        actuators: ActuatorSet | None = None,
+    ) -> None:
+        """``actuators``: the thrusters the table drives (default the horizontal ones)."""
+        self.actuators = model.actuators if actuators is None else actuators
+        count = len(self.actuators.layout.names)
         thrust = np.asarray(thrust, dtype=float)
-        if thrust.ndim != 2 or thrust.shape[1] != model.n_thrusters:
-            raise ValueError(f"thrust must have shape (N, {model.n_thrusters}), got {thrust.shape}")
+        if thrust.ndim != 2 or thrust.shape[1] != count:
+            raise ValueError(f"thrust must have shape (N, {count}), got {thrust.shape}")
         self.model = model
         self.sample_time = float(sample_time)
         self.table = thrust
-        self.reset(np.zeros(HORIZONTAL.size), np.zeros(model.n_thrusters))
+        self.reset(np.zeros(HORIZONTAL.size), np.zeros(count))
 
     @classmethod
-    def from_config(cls, model, config, obstacle_count: int = 0) -> ThrustPlayback:
-        inputs = model.actuators.layout.names
-        table = read_thrust_table(config.playback.path, config.sample_time, inputs)
-        return cls(model, config.sample_time, table)
+    def from_config(
+        cls, model, config, obstacle_count: int = 0, **surroundings: float
+    ) -> ThrustPlayback:
+        """A depth scenario's (a :class:`DepthControllerConfig`) plays the heave section's
+        vertical thrusters, a horizontal one's the horizontal thrusters."""
+        depth = isinstance(config, DepthControllerConfig)
+        actuators = model.heave.actuators if depth else model.actuators
+        table = read_thrust_table(config.playback.path, config.sample_time, actuators.layout.names)
+        return cls(model, config.sample_time, table, actuators)
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._previous = np.asarray(initial_thrust, dtype=float).copy()
@@ -104,8 +117,8 @@ class ThrustPlayback(Controller):
     def compute(self, observation: Observation) -> ControlResult:
         started = time.perf_counter()
         k = observation.k
-        wanted = self.table[k] if k < len(self.table) else np.zeros(self.model.n_thrusters)
-        thrust, moved = project_to_limits(wanted, self._previous, self.model, self.sample_time)
+        wanted = self.table[k] if k < len(self.table) else np.zeros(self.table.shape[1])
+        thrust, moved = self.actuators.limits.project(wanted, self._previous, self.sample_time)
         self._previous = thrust
         return ControlResult(
             thrust=thrust,

@@ -1,26 +1,40 @@
-"""Identification of a vehicle's 3-DOF model from logs (docs/identification.md).
+"""Identification of a vehicle's 3-DOF and heave models from logs (docs/identification.md).
 
-- :mod:`~auvmpc.identification.excitation`: the manoeuvre (``auvmpc excite``)
+- :mod:`~auvmpc.identification.excitation`: the manoeuvre (``auvmpc excite``), horizontal
+  or heave
 - :mod:`~auvmpc.identification.logs`: what a log gives (velocities, thrusts or body force),
   run folders, resampling; :mod:`~auvmpc.identification.rosbag` (ROS 2 bags),
   :mod:`~auvmpc.identification.dataflash` (ArduSub DataFlash logs),
   :mod:`~auvmpc.identification.thruster_curve` (PWM to force)
-- :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals
+- :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals, over
+  a grey-box model; :mod:`~auvmpc.identification.heave`: the heave model's, its logs
 - :mod:`~auvmpc.identification.report`: vehicle file, identification.json, report, figure
 """
 
-from auvmpc.identification.estimation import PARAMETERS, Identification, identify
-from auvmpc.identification.excitation import design_excitation, write_excitation
+from auvmpc.identification.estimation import (
+    PARAMETERS,
+    GreyBox,
+    HorizontalGreyBox,
+    Identification,
+    identify,
+)
+from auvmpc.identification.excitation import Dof, design_excitation, write_excitation
+from auvmpc.identification.heave import HeaveGreyBox, read_heave_log
 from auvmpc.identification.logs import LogOptions, VelocityLog, read_log, read_run_folder
 from auvmpc.identification.report import write_identification
 
 __all__ = [
     "PARAMETERS",
+    "Dof",
+    "GreyBox",
+    "HeaveGreyBox",
+    "HorizontalGreyBox",
     "Identification",
     "LogOptions",
     "VelocityLog",
     "design_excitation",
     "identify",
+    "read_heave_log",
     "read_log",
     "read_run_folder",
     "write_excitation",

@@ -38,11 +38,17 @@ with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknown
    file keeps their start values and the report names them.
 5. Validation: the held-out end of each log is simulated from its first measured
    velocity with the identified and with the start parameters; RMS of the differences.
+
+The steps are written once over a :class:`GreyBox`: the model's parameters and bounds, its
+state and what the log measures of it, its equations as a CasADi function of the
+parameters, and the regression they become. :class:`HorizontalGreyBox` is the 3-DOF model
+above (the default); :class:`~auvmpc.identification.heave.HeaveGreyBox` the heave model.
 """
 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -52,7 +58,7 @@ from scipy.linalg import lstsq
 from scipy.signal import savgol_filter
 
 from auvmpc.errors import ConfigError
-from auvmpc.identification.logs import MIN_SAMPLES, VelocityLog
+from auvmpc.identification.logs import MIN_SAMPLES, VELOCITY_NAMES, VelocityLog
 from auvmpc.models.integrators import rk4_step
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
@@ -65,6 +71,8 @@ from auvmpc.sim.plant import substeps_for
 
 __all__ = [
     "PARAMETERS",
+    "GreyBox",
+    "HorizontalGreyBox",
     "Identification",
     "ParameterEstimate",
     "equation_error",
@@ -163,46 +171,150 @@ def noise_levels(logs: list[VelocityLog]) -> np.ndarray:
     return np.maximum(noise, 0.01 * np.maximum(level, 1e-6))
 
 
-def _stacked_regression(logs: list[VelocityLog], vehicle: VehicleParams):
+class GreyBox(ABC):
+    """A model :func:`identify` fits, from a start vehicle (module docstring).
+
+    Its state ``x`` (``state_size``) holds what the log measures (``log.velocity``'s columns,
+    named ``outputs`` in ``units``) at the indices ``measured``; its input is the force the
+    log's commands apply (:meth:`applied`), held over each sample.
+    """
+
+    parameters: tuple[str, ...]  # the unknowns, as the vehicle file names them
+    lower: np.ndarray  # physical bounds of each (a mass > 0, a damping <= 0; +-inf: none)
+    upper: np.ndarray
+    outputs: tuple[str, ...]  # the logged signals (log.velocity's columns)
+    units: tuple[str, ...]
+    measured: tuple[int, ...]  # where each output sits in the state
+    state_size: int
+    title: str  # for the vehicle file's header and the report
+
+    @property
+    @abstractmethod
+    def thrusters(self) -> int:
+        """How many thrusts a log of this model holds per command."""
+
+    @abstractmethod
+    def start(self) -> np.ndarray:
+        """The start vehicle's parameters (p,)."""
+
+    @abstractmethod
+    def rhs(self) -> ca.Function:
+        """The model as a CasADi function of the parameters: (x, input, theta) -> x'."""
+
+    @abstractmethod
+    def applied(self, log: VelocityLog) -> np.ndarray:
+        """The input per command (N, ni): the force the commands apply."""
+
+    @abstractmethod
+    def filtered(self, log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
+        """The smoothed state and its derivative (N+1, state_size) each, from the log."""
+
+    @abstractmethod
+    def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
+        """The model as ``A theta = b`` on samples of the state, its derivative and the
+        input: ``A`` (axes, N, p), ``b`` (axes, N), a block of rows per equation."""
+
+    @abstractmethod
+    def scale_floor(self) -> np.ndarray:
+        """The smallest typical size of each parameter (p,), for IPOPT's scaling."""
+
+    @abstractmethod
+    def damping_rate(self, logs: list[VelocityLog]) -> float:
+        """How fast the start vehicle's damping acts at twice the logged speeds (1/s)."""
+
+
+class HorizontalGreyBox(GreyBox):
+    """The 3-DOF velocity model (module docstring) of ``vehicle``'s thruster layout."""
+
+    parameters = PARAMETERS
+    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6])
+    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6])
+    outputs = VELOCITY_NAMES
+    units = ("m/s", "m/s", "rad/s")
+    measured = (0, 1, 2)
+    state_size = 3
+    title = "grey-box 3-DOF velocity model"
+
+    def __init__(self, vehicle: VehicleParams) -> None:
+        self.vehicle = vehicle
+
+    @property
+    def thrusters(self) -> int:
+        return self.vehicle.n_thrusters
+
+    def start(self) -> np.ndarray:
+        return start_vector(self.vehicle)
+
+    def rhs(self) -> ca.Function:
+        nu, tau, theta = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3), ca.SX.sym("theta", 9)
+        derivative = velocity_rhs(nu, tau, theta, self.vehicle.Iz_rb, ca.fabs)
+        return ca.Function("velocity_rhs", [nu, tau, theta], [derivative])
+
+    def applied(self, log: VelocityLog) -> np.ndarray:
+        return applied_force(log, self.vehicle)
+
+    def filtered(self, log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
+        return smoothed(log)
+
+    def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
+        return regression(x, x_dot, inputs, self.vehicle.Iz_rb)
+
+    def scale_floor(self) -> np.ndarray:
+        vehicle = self.vehicle
+        axis_mass = {"X": vehicle.m11, "Y": vehicle.m22, "N": vehicle.Iz}
+        masses = {"m11": vehicle.m11, "m22": vehicle.m22, "Iz_added": vehicle.Iz}
+        return 0.01 * np.array([masses.get(name) or axis_mass[name[0]] for name in PARAMETERS])
+
+    def damping_rate(self, logs: list[VelocityLog]) -> float:
+        top = 2.0 * np.max(np.vstack([np.abs(log.velocity) for log in logs]), axis=0)
+        return max(damping_rates(self.vehicle, *top))
+
+
+def _stacked_regression(logs: list[VelocityLog], greybox: GreyBox):
     blocks_a, blocks_b = [], []
     for log in logs:
-        nu, nu_dot = smoothed(log)
-        tau = applied_force(log, vehicle)
+        x, x_dot = greybox.filtered(log)
+        tau = greybox.applied(log)
         # The derivative at t_k spans the commands before and after it: their mean.
         tau_k = np.vstack([tau[:1], 0.5 * (tau[:-1] + tau[1:])])
         edge = filter_window(log.sample_time) // 2  # the filter's ends are extrapolations
         rows = slice(edge, log.steps - edge)
-        A, b = regression(nu[:-1][rows], nu_dot[:-1][rows], tau_k[rows], vehicle.Iz_rb)
+        A, b = greybox.regression(x[:-1][rows], x_dot[:-1][rows], tau_k[rows])
         blocks_a.append(A)
         blocks_b.append(b)
     return np.concatenate(blocks_a, axis=1), np.concatenate(blocks_b, axis=1)
 
 
 def equation_error(
-    logs: list[VelocityLog], vehicle: VehicleParams
+    logs: list[VelocityLog], vehicle: VehicleParams, greybox: GreyBox | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares parameters (9,) and the regression ``A`` (3, N, 9), ``b`` (3, N) they
-    solve, each axis' rows scaled by its force RMS so that N and N m weigh alike."""
-    A, b = _stacked_regression(logs, vehicle)
-    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ start_vector(vehicle)) ** 2, 1))
+    """Least-squares parameters (p,) of ``greybox`` (default the 3-DOF model of
+    ``vehicle``) and the regression ``A`` (axes, N, p), ``b`` (axes, N) they solve, each
+    axis' rows scaled by its force RMS so that N and N m weigh alike."""
+    greybox = greybox or HorizontalGreyBox(vehicle)
+    A, b = _stacked_regression(logs, greybox)
+    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ greybox.start()) ** 2, 1))
     scale = np.where(scale > 0, scale, 1.0)
-    theta, *_ = lstsq((A / scale[:, None, None]).reshape(-1, 9), (b / scale[:, None]).ravel())
+    rows = (A / scale[:, None, None]).reshape(-1, A.shape[2])
+    theta, *_ = lstsq(rows, (b / scale[:, None]).ravel())
     return theta, A, b
 
 
 @dataclass
 class _Model:
-    """The simulated velocity model for one sample time: one RK4-integrated sample."""
+    """The simulated model (a :meth:`GreyBox.rhs`) for one sample time: one RK4-integrated
+    sample."""
 
     sample_time: float
     substeps: int
-    iz_rb: float
+    rhs: ca.Function  # (x, input, theta) -> x'
 
     def __post_init__(self) -> None:
-        nu, tau, theta = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3), ca.SX.sym("theta", 9)
+        nu, tau = ca.SX.sym("x", self.rhs.size1_in(0)), ca.SX.sym("input", self.rhs.size1_in(1))
+        theta = ca.SX.sym("theta", self.rhs.size1_in(2))
 
         def f(x, u):
-            return velocity_rhs(x, u, theta, self.iz_rb, ca.fabs)
+            return self.rhs(x, u, theta)
 
         x = nu
         for _ in range(self.substeps):
@@ -211,32 +323,31 @@ class _Model:
         self._rollouts: dict[int, ca.Function] = {}
 
     def rollout(self, steps: int) -> ca.Function:
-        """(nu0 (3,), tau (3, steps), theta (9, steps)) -> velocities at k = 1..steps."""
+        """(x0 (nx,), input (ni, steps), theta (p, steps)) -> states at k = 1..steps."""
         if steps not in self._rollouts:
             self._rollouts[steps] = self.step.mapaccum("rollout", steps)
         return self._rollouts[steps]
 
     def simulate(self, nu0, tau: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Numeric rollout: (N+1, 3) from nu0 under tau (N, 3)."""
+        """Numeric rollout: (N+1, nx) from nu0 under tau (N, ni)."""
         steps = len(tau)
         out = self.rollout(steps)(nu0, tau.T, np.tile(theta[:, None], (1, steps)))
         return np.vstack([np.asarray(nu0, dtype=float)[None, :], np.asarray(out).T])
 
 
-def model_substeps(sample_time: float, vehicle: VehicleParams, logs: list[VelocityLog]) -> int:
+def model_substeps(sample_time: float, greybox: GreyBox, logs: list[VelocityLog]) -> int:
     """RK4 steps per sample: at most the plant's step (DEFAULT_PLANT_STEP_S) each, and
     stable for the start vehicle's damping at twice the logged speeds (the fit moves the
     parameters)."""
-    top = 2.0 * np.max(np.vstack([np.abs(log.velocity) for log in logs]), axis=0)
-    stable = RK4_STABLE_STEP / max(max(damping_rates(vehicle, *top)), 1e-9) / 2.0
+    stable = RK4_STABLE_STEP / max(greybox.damping_rate(logs), 1e-9) / 2.0
     return substeps_for(sample_time, min(stable, DEFAULT_PLANT_STEP_S))
 
 
 @dataclass
 class _Fit:
-    theta: np.ndarray  # (9,)
-    half_width: np.ndarray  # (9,) 95 % half-widths, 0 for a fixed parameter, inf unknown
-    residual_rms: np.ndarray  # (3,) RMS of the velocity residuals (m/s, m/s, rad/s)
+    theta: np.ndarray  # (p,)
+    half_width: np.ndarray  # (p,) 95 % half-widths, 0 for a fixed parameter, inf unknown
+    residual_rms: np.ndarray  # (ny,) RMS of the output residuals (u, v, r: m/s, m/s, rad/s)
     started_from: int  # which candidate
     iterations: int
     status: str
@@ -248,12 +359,9 @@ def _segments(log: VelocityLog, length: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
 
 
-def _scales(start: np.ndarray, first: np.ndarray, vehicle: VehicleParams) -> np.ndarray:
+def _scales(start: np.ndarray, first: np.ndarray, greybox: GreyBox) -> np.ndarray:
     """Typical size per parameter, so that IPOPT's variables are of order one."""
-    axis_mass = {"X": vehicle.m11, "Y": vehicle.m22, "N": vehicle.Iz}
-    masses = {"m11": vehicle.m11, "m22": vehicle.m22, "Iz_added": vehicle.Iz}
-    floor = 0.01 * np.array([masses.get(name) or axis_mass[name[0]] for name in PARAMETERS])
-    return np.maximum.reduce([np.abs(start), np.abs(first), floor])
+    return np.maximum.reduce([np.abs(start), np.abs(first), greybox.scale_floor()])
 
 
 def output_error(
@@ -263,36 +371,39 @@ def output_error(
     fixed: tuple[str, ...] = (),
     weight: np.ndarray | None = None,
     model: _Model | None = None,
+    greybox: GreyBox | None = None,
 ) -> _Fit:
-    """Output-error refinement (module docstring, steps 2 and 3) from whichever of the
-    ``candidates`` (9,) simulates the log best; the ``fixed`` parameters stay at that
-    candidate's values. ``weight`` (3,): per velocity, 1 / its noise level (default: the
-    filter's estimate)."""
+    """Output-error refinement (module docstring, steps 2 and 3) of ``greybox`` (default
+    the 3-DOF model of ``vehicle``) from whichever of the ``candidates`` (p,) simulates the
+    log best; the ``fixed`` parameters stay at that candidate's values. ``weight`` (ny,):
+    per output, 1 / its noise level (default: the filter's estimate)."""
+    greybox = greybox or HorizontalGreyBox(vehicle)
     sample_time = logs[0].sample_time
-    model = model or _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
-    start = start_vector(vehicle)
-    scale = _scales(start, candidates[0], vehicle)
+    model = model or _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
+    start = greybox.start()
+    scale = _scales(start, candidates[0], greybox)
     weight = 1.0 / noise_levels(logs) if weight is None else np.asarray(weight, dtype=float)
-    z = ca.MX.sym("z", 9)
+    n_parameters, nx, seen = len(greybox.parameters), greybox.state_size, list(greybox.measured)
+    z = ca.MX.sym("z", n_parameters)
     theta = z * scale
     length = max(MIN_SAMPLES // 4, round(SEGMENT_S / sample_time))
     initial, guesses, residuals = [], [], []
     for log in logs:
-        tau = applied_force(log, vehicle)
-        nu_smooth = smoothed(log)[0]
+        tau = greybox.applied(log)
+        nu_smooth = greybox.filtered(log)[0]
         for a, b in _segments(log, length):
-            x0 = ca.MX.sym(f"x0_{len(initial)}", 3)
+            x0 = ca.MX.sym(f"x0_{len(initial)}", nx)
             initial.append(x0)
             guesses.append(nu_smooth[a])
             steps = b - a
             predicted = model.rollout(steps)(x0, tau[a:b].T, ca.repmat(theta, 1, steps))
             measured = log.velocity[a + 1 : b + 1].T
-            residuals.append(ca.vec((predicted - measured) * weight))
-            residuals.append((x0 - log.velocity[a]) * weight)
+            residuals.append(ca.vec((predicted[seen, :] - measured) * weight))
+            residuals.append((x0[seen] - log.velocity[a]) * weight)
     x = ca.vertcat(z, *initial)
     residual = ca.vertcat(*residuals)
-    lower, upper = _bounds()
-    is_fixed = np.array([name in fixed for name in PARAMETERS])
+    lower, upper = _bounds(greybox)
+    is_fixed = np.array([name in fixed for name in greybox.parameters])
     guess = np.concatenate(guesses)
     cost = ca.Function("cost", [x], [0.5 * ca.sumsqr(residual)])
     costs = [float(cost(np.concatenate([c / scale, guess]))) for c in candidates]
@@ -300,7 +411,7 @@ def output_error(
     z0 = np.clip(candidates[best] / scale, lower, upper)
     lower = np.where(is_fixed, z0, lower)
     upper = np.where(is_fixed, z0, upper)
-    n_initial = 3 * len(initial)
+    n_initial = nx * len(initial)
     solver = ca.nlpsol(
         "output_error",
         "ipopt",
@@ -326,7 +437,7 @@ def output_error(
     optimum = np.asarray(solution["x"]).ravel()
     # IPOPT may end a hair outside a bound (it relaxes them by ~1e-8 internally): a damping
     # of +2e-9 is not a damping the vehicle file accepts. The optimum is projected back.
-    optimum[:9] = np.clip(optimum[:9], lower, upper)
+    optimum[:n_parameters] = np.clip(optimum[:n_parameters], lower, upper)
     jacobian_of = ca.Function("J", [x], [residual, ca.jacobian(residual, x)])
     r_value, j_value = (np.asarray(value) for value in jacobian_of(optimum))
     r_value = r_value.ravel()
@@ -335,16 +446,16 @@ def output_error(
     dof = max(1, r_value.size - J.shape[1])
     variance = float(r_value @ r_value) / dof
     information = J.T @ J
-    half_width = np.zeros(9)
+    half_width = np.zeros(n_parameters)
     try:
         covariance = variance * np.linalg.inv(information)
         std = np.sqrt(np.clip(np.diag(covariance)[: int((~is_fixed).sum())], 0.0, None))
     except np.linalg.LinAlgError:
         std = np.full(int((~is_fixed).sum()), np.inf)
     half_width[~is_fixed] = Z95 * std * scale[~is_fixed]
-    residual_rms = np.sqrt(np.mean(r_value.reshape(-1, 3) ** 2, axis=0)) / weight
+    residual_rms = np.sqrt(np.mean(r_value.reshape(-1, len(seen)) ** 2, axis=0)) / weight
     return _Fit(
-        theta=optimum[:9] * scale,
+        theta=optimum[:n_parameters] * scale,
         half_width=half_width,
         residual_rms=residual_rms,
         started_from=best,
@@ -353,13 +464,13 @@ def output_error(
     )
 
 
-def _bounds() -> tuple[np.ndarray, np.ndarray]:
-    """Physical bounds on the scaled parameters: masses positive (added yaw inertia >= 0),
-    damping <= 0; every magnitude within a factor MAGNITUDE of its scale."""
-    lower = np.full(9, -MAGNITUDE)
-    upper = np.zeros(9)
-    lower[:2], upper[:2] = 1.0 / MAGNITUDE, MAGNITUDE  # m11, m22
-    lower[2], upper[2] = 0.0, MAGNITUDE  # Iz_added
+def _bounds(greybox: GreyBox) -> tuple[np.ndarray, np.ndarray]:
+    """The physical bounds on the scaled parameters (a mass positive, an added yaw inertia
+    >= 0, a damping <= 0: ``greybox.lower``, ``upper``); every magnitude within a factor
+    MAGNITUDE of its scale."""
+    low, high = greybox.lower, greybox.upper
+    lower = np.where(low > 0, 1.0 / MAGNITUDE, np.where(low == 0, 0.0, -MAGNITUDE))
+    upper = np.where(high < 0, -1.0 / MAGNITUDE, np.where(high == 0, 0.0, MAGNITUDE))
     return lower, upper
 
 
@@ -386,14 +497,17 @@ class Identification:
     sample_time: float
     fit_samples: int
     validation_samples: int
-    noise_std: np.ndarray  # (3,) RMS of the fit's residuals: the noise of u, v, r
+    noise_std: np.ndarray  # (ny,) RMS of the fit's residuals: the noise of each output
     equation_error_used: bool  # the fit started from it (else from the start file)
-    validation_rms: np.ndarray  # (3,) identified model on the held-out parts
-    validation_rms_start: np.ndarray  # (3,) the start model there
+    validation_rms: np.ndarray  # (ny,) identified model on the held-out parts
+    validation_rms_start: np.ndarray  # (ny,) the start model there
     iterations: int
     solver_status: str
     substeps: int
     traces: list[dict[str, np.ndarray]] = field(default_factory=list)  # per log, for figures
+    outputs: tuple[str, ...] = VELOCITY_NAMES  # what the logs measured (the RMS' order)
+    units: tuple[str, ...] = HorizontalGreyBox.units
+    model: str = HorizontalGreyBox.title
 
     @property
     def unexcited(self) -> list[str]:
@@ -406,7 +520,7 @@ class Identification:
 def _excited(theta, half_width, A, b) -> np.ndarray:
     """Module docstring, step 4."""
     relative = half_width <= RELATIVE_HALF_WIDTH * np.abs(theta)
-    force = np.sqrt(np.mean((A * theta) ** 2, axis=(1, 2)) * 9 + np.mean(b**2, axis=1))
+    force = np.sqrt(np.mean((A * theta) ** 2, axis=(1, 2)) * A.shape[2] + np.mean(b**2, axis=1))
     column = np.sqrt(np.mean(A**2, axis=1))  # (3, 9) each regressor's RMS per axis
     moved = half_width[None, :] * column  # force the interval moves, per axis
     share = np.where(column > 0, moved / np.maximum(force[:, None], 1e-12), np.inf).min(axis=0)
@@ -414,10 +528,15 @@ def _excited(theta, half_width, A, b) -> np.ndarray:
 
 
 def identify(
-    logs: list[VelocityLog], vehicle: VehicleParams, holdout: float = 0.2
+    logs: list[VelocityLog],
+    vehicle: VehicleParams,
+    holdout: float = 0.2,
+    greybox: GreyBox | None = None,
 ) -> Identification:
-    """Identify :data:`PARAMETERS` from ``logs`` starting from ``vehicle`` (module
-    docstring); the last ``holdout`` share of each log validates."""
+    """Identify the parameters of ``greybox`` (default the 3-DOF model's, :data:`PARAMETERS`)
+    from ``logs`` starting from ``vehicle`` (module docstring); the last ``holdout`` share of
+    each log validates."""
+    greybox = greybox or HorizontalGreyBox(vehicle)
     if not logs:
         raise ConfigError("LOG", None, "give at least one log")
     sample_time = logs[0].sample_time
@@ -429,11 +548,11 @@ def identify(
                 f"sampled every {log.sample_time:g} s, the first log "
                 f"every {sample_time:g} s: give logs of one sample time",
             )
-        if log.thrust is not None and log.thrust.shape[1] != vehicle.n_thrusters:
+        if log.thrust is not None and log.thrust.shape[1] != greybox.thrusters:
             raise ConfigError(
                 "LOG",
                 log.name,
-                f"has {log.thrust.shape[1]} thrusters, the start vehicle {vehicle.n_thrusters}",
+                f"has {log.thrust.shape[1]} thrusters, the start vehicle {greybox.thrusters}",
             )
     if not 0.0 < holdout < 0.5:
         raise ConfigError("--holdout", holdout, "must be in (0, 0.5)")
@@ -450,24 +569,25 @@ def identify(
         fit_logs.append(log.part(0, cut))
         check_logs.append(log.part(cut, log.steps))
 
-    start = start_vector(vehicle)
-    first, A, b = equation_error(fit_logs, vehicle)
+    start = greybox.start()
+    first, A, b = equation_error(fit_logs, vehicle, greybox)
     # A least-squares value outside the physics (a negative mass, a positive damping) is
     # noise's: the fit starts from the start file's value there.
-    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6])
-    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6])
+    lower, upper = greybox.lower, greybox.upper
     initial = np.where((first >= lower) & (first <= upper), first, start)
-    model = _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
+    model = _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
     # Weighted first by the filter's noise estimate, then again by the residuals' (the
     # filter also removes fast dynamics it cannot follow), all parameters free; those the
     # second fit finds unexcited are then fixed at their start values for a third.
-    first_fit = output_error(fit_logs, vehicle, [initial, start], model=model)
+    first_fit = output_error(fit_logs, vehicle, [initial, start], model=model, greybox=greybox)
     weight = 1.0 / np.maximum(first_fit.residual_rms, 1e-9)
-    fit = output_error(fit_logs, vehicle, [first_fit.theta], weight=weight, model=model)
+    fit = output_error(
+        fit_logs, vehicle, [first_fit.theta], weight=weight, model=model, greybox=greybox
+    )
     excited = _excited(fit.theta, fit.half_width, A, b)
     final = fit
     if not excited.all():
-        fixed = tuple(name for name, ok in zip(PARAMETERS, excited, strict=True) if not ok)
+        fixed = tuple(name for name, ok in zip(greybox.parameters, excited, strict=True) if not ok)
         final = output_error(
             fit_logs,
             vehicle,
@@ -475,6 +595,7 @@ def identify(
             fixed=fixed,
             weight=weight,
             model=model,
+            greybox=greybox,
         )
     # An excited parameter's interval is the final fit's; an unexcited one's the fit that
     # judged it (the final one holds it fixed).
@@ -489,15 +610,22 @@ def identify(
             ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
         )
-        for i, name in enumerate(PARAMETERS)
+        for i, name in enumerate(greybox.parameters)
     ]
     identified = np.array([p.value for p in parameters])
     traces, errors, errors_start = [], [], []
-    for log in check_logs:
-        tau = applied_force(log, vehicle)
-        nu0 = smoothed(log)[0][0] if log.steps > filter_window(sample_time) else log.velocity[0]
-        simulated = model.simulate(nu0, tau, identified)
-        simulated_start = model.simulate(nu0, tau, start)
+    for whole, log in zip(logs, check_logs, strict=True):
+        tau = greybox.applied(log)
+        seen = list(greybox.measured)
+        if whole.steps > filter_window(sample_time):
+            # From the filter over the whole log: at the cut an inner point, not the filter's
+            # extrapolated end (a heave rate from the depth there drifts the simulated depth)
+            nu0 = greybox.filtered(whole)[0][whole.steps - log.steps]
+        else:  # too short to filter: the first measurement, the rest of the state at rest
+            nu0 = np.zeros(greybox.state_size)
+            nu0[seen] = log.velocity[0]
+        simulated = model.simulate(nu0, tau, identified)[:, seen]
+        simulated_start = model.simulate(nu0, tau, start)[:, seen]
         errors.append(simulated - log.velocity)
         errors_start.append(simulated_start - log.velocity)
         traces.append(
@@ -522,4 +650,7 @@ def identify(
         solver_status=final.status,
         substeps=model.substeps,
         traces=traces,
+        outputs=greybox.outputs,
+        units=greybox.units,
+        model=greybox.title,
     )

@@ -1,32 +1,41 @@
-"""An identification manoeuvre: multisine forces in surge, sway and yaw, as thrusts.
+"""An identification manoeuvre: multisine forces on the excited axes, as thrusts.
 
-Each axis gets its own harmonics of one base frequency (surge every third from the first,
-sway from the second, yaw from the third), so the three forces are orthogonal over a
+The axes are those of one model (:class:`Dof`): surge, sway and yaw on the horizontal
+thrusters (the 3-DOF model), or heave on the vertical ones (the heave model). Each axis gets
+its own harmonics of one base frequency (with three axes: surge every third from the
+first, sway from the second, yaw from the third), so the forces are orthogonal over a
 period and every axis is excited over the whole band at once (orthogonal multisines,
 Morelli 2003; Pintelon and Schoukens 2012, ch. 3). Phases are random from the seed; the
 band's top is where the thrust rate limit still lets a full-amplitude sine through, at most
 a quarter of the sampling frequency. The forces are mapped to thrusts by the minimum-norm
-allocation ``F = T_pinv tau``, scaled into the thrust limits, faded in and out, then each
-sample is clipped into the thrust and rate limits (so a table is always feasible).
+allocation (``F = T_pinv tau``; heave: an equal share per vertical thruster), scaled into
+the thrust limits around the trim (the thrust that holds the nominal vehicle still: zero,
+or in heave the nominal net buoyancy's opposite), faded in and out, then each sample is
+clipped into the thrust and rate limits (so a table is always feasible).
 
-The vehicle stays in a box of water by the amplitude alone: the forces are zero-mean and
-the amplitude is reduced until the nominal model, simulated open loop, stays within
-``box_m`` of its start (no feedback: it would correlate the input with the noise).
+The vehicle stays in a box of water by the amplitude alone: the forces are zero-mean about
+the trim and the amplitude is reduced until the nominal model, simulated open loop, stays
+within ``box_m`` of its start (horizontal distance, or depth change; no feedback: it would
+correlate the input with the noise).
 """
 
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.actuators import ActuatorSet
+from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.vehicle import (
     VehicleParams,
     dynamics,
@@ -34,10 +43,12 @@ from auvmpc.models.vehicle import (
     preset_names,
     stable_plant_step,
 )
+from auvmpc.scenario.depth import DepthPlantConfig
 from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
 from auvmpc.sim.plant import substeps_for
 
 __all__ = [
+    "Dof",
     "Excitation",
     "design_excitation",
     "excitation_scenario",
@@ -56,6 +67,15 @@ RATE_REACH = 2.0
 MIN_HARMONICS = 3
 # A manoeuvre lasts at least this many fade times (fade in, excite, fade out).
 MIN_DURATION_FACTOR = 4
+# A heave manoeuvre's scenario starts this far below the surface beyond its box (m).
+DEPTH_MARGIN_M = 1.0
+
+
+class Dof(StrEnum):
+    """The degrees of freedom a manoeuvre excites (``auvmpc excite --dof``)."""
+
+    HORIZONTAL = "horizontal"  # surge, sway, yaw on the horizontal thrusters: the 3-DOF model
+    HEAVE = "heave"  # heave on the heave section's vertical thrusters: the depth model
 
 
 @dataclass(frozen=True)
@@ -64,10 +84,53 @@ class Excitation:
 
     sample_time: float  # s
     thrust: np.ndarray  # (N, n) N, row k applied over [k Te, (k+1) Te)
-    frequencies_hz: tuple[np.ndarray, np.ndarray, np.ndarray]  # per axis (surge, sway, yaw)
+    frequencies_hz: tuple[np.ndarray, ...]  # per axis (surge, sway, yaw; or heave)
     amplitude_share: float  # of the thrust limits the peak takes (before the clip)
-    excursion_m: float  # the nominal model's largest distance from its start
-    peak_speeds: np.ndarray  # (3,) largest |u|, |v| (m/s), |r| (rad/s) of the nominal model
+    excursion_m: float  # the nominal model's largest distance (or depth change) from its start
+    peak_speeds: np.ndarray  # largest |u|, |v| (m/s), |r| (rad/s); or |w| (m/s): nominal model
+    dof: Dof = Dof.HORIZONTAL
+
+
+@dataclass(frozen=True)
+class _Axes:
+    """What the design needs of the degrees of freedom it excites (:func:`_axes`)."""
+
+    actuators: ActuatorSet  # the thrusters the table drives
+    authority: np.ndarray  # (a,) each axis's force scale (N, N m)
+    to_thrust: np.ndarray  # (n, a) the minimum-norm allocation of the axes' forces
+    trim: np.ndarray  # (n,) the thrust that holds the nominal vehicle still
+    # thrust table (N, n), sample time -> the nominal model's largest excursion from its
+    # start (m) and its largest speeds
+    motion: Callable[[np.ndarray, float], tuple[float, np.ndarray]]
+
+
+def _axes(vehicle: VehicleParams, dof: Dof) -> _Axes:
+    if dof is Dof.HORIZONTAL:
+
+        def planar(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
+            states = simulate_open_loop(vehicle, thrust, sample_time)
+            peak = np.max(np.abs(states[:, 3:]), axis=0)
+            return float(np.max(np.hypot(states[:, 0], states[:, 1]))), peak
+
+        n = vehicle.n_thrusters
+        return _Axes(vehicle.actuators, vehicle.thrust_authority, vehicle.T_pinv, np.zeros(n),
+                     planar)  # fmt: skip
+    heave = vehicle.heave
+    if heave is None:
+        raise ConfigError("VEHICLE", vehicle.name, "has no heave section: nothing to excite")
+    n = heave.thruster_count
+
+    def vertical(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
+        states = simulate_heave_open_loop(vehicle, thrust, sample_time)
+        return float(np.max(np.abs(states[:, 0]))), np.max(np.abs(states[:, 1:]), axis=0)
+
+    return _Axes(
+        heave.actuators,
+        np.array([n * heave.thrust_limits[1]]),
+        np.full((n, 1), 1.0 / n),  # the pseudo-inverse of the heave row [1 ... 1]
+        np.full(n, -heave.net_buoyancy_N / n),
+        vertical,
+    )
 
 
 def _multisine(t: np.ndarray, frequencies: np.ndarray, phases: np.ndarray) -> np.ndarray:
@@ -85,8 +148,8 @@ def _fade(t: np.ndarray, duration: float) -> np.ndarray:
     return window
 
 
-def _clip_to_limits(thrust: np.ndarray, vehicle: VehicleParams, sample_time: float):
-    limits = vehicle.actuators.limits
+def _clip_to_limits(thrust: np.ndarray, actuators: ActuatorSet, sample_time: float):
+    limits = actuators.limits
     clipped = np.empty_like(thrust)
     previous = np.zeros(thrust.shape[1])
     for k, wanted in enumerate(thrust):
@@ -109,6 +172,24 @@ def simulate_open_loop(
     return states
 
 
+def simulate_heave_open_loop(
+    vehicle: VehicleParams, thrust: np.ndarray, sample_time: float
+) -> np.ndarray:
+    """The heave model's states ``[z, w]`` (N+1, 2) from rest at z = 0 (its start) under
+    the vertical ``thrust`` (N, n), as the depth plant steps them in calm water."""
+    substeps = substeps_for(sample_time, DepthPlantConfig().max_step)
+    states = np.zeros((len(thrust) + 1, DEPTH.size))
+    for k, row in enumerate(thrust):
+        states[k + 1] = heave_plant_step(
+            vehicle.heave, states[k], row, k * sample_time, sample_time, substeps, _calm
+        )
+    return states
+
+
+def _calm(z: float, t: float) -> float:
+    return 0.0
+
+
 def design_excitation(
     vehicle: VehicleParams,
     duration: float,
@@ -116,6 +197,7 @@ def design_excitation(
     seed: int = 0,
     box_m: float = 15.0,
     period_s: float = 60.0,
+    dof: Dof = Dof.HORIZONTAL,
 ) -> Excitation:
     """The thrust table of an identification manoeuvre (module docstring).
 
@@ -125,38 +207,52 @@ def design_excitation(
     duration : s; the table has round(duration / sample_time) rows
     sample_time : s, how long each row is held
     seed : the phases' random generator seed
-    box_m : the nominal model must stay within this distance of its start (m)
+    box_m : the nominal model must stay within this distance of its start (m; in heave, this
+        change of depth)
     period_s : the multisine's shortest base period (s); longer where the rate limit leaves
         too few harmonics below the top of the band
+    dof : the axes to excite: the horizontal thrusters' (table columns F1..Fn) or the
+        vertical ones' (Fz1..Fzn)
     """
     if not (duration > 0 and sample_time > 0 and box_m > 0 and period_s > 0):
         raise ValueError("duration, sample_time, box_m and period_s must be > 0")
+    axes = _axes(vehicle, Dof(dof))
+    count = len(axes.authority)
     steps = round(duration / sample_time)
     t = sample_time * np.arange(steps)
     rng = np.random.default_rng(seed)
-    low, high = vehicle.thrust_limits
-    reach = PEAK_SHARE * min(-low, high) if low < 0 < high else PEAK_SHARE * (high - low) / 2
+    limits = axes.actuators.limits
+    low, high = float(np.max(limits.lower)), float(np.min(limits.upper))
+    span = min(-low, high) if low < 0 < high else (high - low) / 2
+    # The multisine swings about the trim (zero, or what holds the net buoyancy).
+    reach = PEAK_SHARE * span - float(np.max(np.abs(axes.trim)))
+    if reach <= 0:
+        raise ConfigError(
+            "VEHICLE", vehicle.name, "its trim takes the thrust limits: no thrust left to excite"
+        )
     # The highest frequency a sine of amplitude ``reach`` can follow under the rate limit.
     # A multisine's components share the peak, so the band may reach RATE_REACH times
     # further; the base period grows until each axis has MIN_HARMONICS of its own.
-    top = min(RATE_REACH * vehicle.thrust_rate_limit / (2.0 * math.pi * reach), 0.25 / sample_time)
-    period = max(period_s, 3 * MIN_HARMONICS / top)
+    rate = float(np.min(limits.rate))
+    top = min(RATE_REACH * rate / (2.0 * math.pi * reach), 0.25 / sample_time)
+    period = max(period_s, count * MIN_HARMONICS / top)
     harmonics = np.arange(1, math.floor(top * period + 1e-9) + 1)
     base = 1.0 / period
-    frequencies = tuple(base * harmonics[axis::3] for axis in range(3))
+    frequencies = tuple(base * harmonics[axis::count] for axis in range(count))
     forces = np.column_stack(
         [_multisine(t, f, rng.uniform(0.0, 2.0 * math.pi, f.size)) for f in frequencies]
     )
     # Each axis to unit authority, then all thrusts scaled so that the peak fits the limits.
-    thrust_shape = forces * vehicle.thrust_authority[None, :] @ vehicle.T_pinv.T
+    thrust_shape = forces * axes.authority[None, :] @ axes.to_thrust.T
     peak = np.max(np.abs(thrust_shape))
     # The fade ends on the last row, so the table ends at zero thrust.
-    thrust_shape = thrust_shape / peak * _fade(t, t[-1])[:, None] if peak > 0 else thrust_shape
+    fade = _fade(t, t[-1])[:, None]
+    thrust_shape = thrust_shape / peak * fade if peak > 0 else thrust_shape
     share = 1.0
     for _ in range(MAX_TRIES):
-        thrust = _clip_to_limits(share * reach * thrust_shape, vehicle, sample_time)
-        states = simulate_open_loop(vehicle, thrust, sample_time)
-        excursion = float(np.max(np.hypot(states[:, 0], states[:, 1])))
+        wanted = fade * axes.trim[None, :] + share * reach * thrust_shape
+        thrust = _clip_to_limits(wanted, axes.actuators, sample_time)
+        excursion, peak_speeds = axes.motion(thrust, sample_time)
         if excursion <= box_m:
             break
         share *= SHRINK
@@ -164,9 +260,10 @@ def design_excitation(
         sample_time=sample_time,
         thrust=thrust,
         frequencies_hz=frequencies,
-        amplitude_share=share * PEAK_SHARE,
+        amplitude_share=share * reach / span,
         excursion_m=excursion,
-        peak_speeds=np.max(np.abs(states[:, 3:]), axis=0),
+        peak_speeds=peak_speeds,
+        dof=Dof(dof),
     )
 
 
@@ -176,28 +273,40 @@ def excitation_scenario(
     """The scenario (a mapping to write as YAML) that plays ``excitation`` from the thrust
     table file ``table`` (relative to the scenario's folder) on ``vehicle`` (a preset name
     or a vehicle file path as the scenario should name it). The reference only marks the
-    start, where the position error metrics measure the excursion from."""
+    start, where the position error metrics measure the excursion from.
+
+    A heave manoeuvre is a depth scenario (``kind: depth``): the vehicle starts at rest
+    :data:`DEPTH_MARGIN_M` below the box of depth, in water as deep again below it, the
+    pressure sensor sampling every row; the reference holds the start depth."""
     steps = len(excitation.thrust)
     te = excitation.sample_time
-    return {
+    heave = excitation.dof is Dof.HEAVE
+    scenario = {
+        **({"kind": "depth"} if heave else {}),
         "name": name,
         "description": (
             f"identification manoeuvre (auvmpc excite): orthogonal multisine forces, "
             f"{excitation.amplitude_share:.0%} of the thrust limits at peak, open loop; the "
-            f"nominal model stays within {excitation.excursion_m:.1f} m of the start "
-            f"(box {box_m:g} m)"
+            f"nominal model stays within {excitation.excursion_m:.1f} m "
+            f"{'of depth' if heave else 'of the start'} (box {box_m:g} m)"
         ),
         "duration": round(steps * te, 9),
         "vehicle": vehicle,
-        "reference": {"type": "waypoints", "points": [[0.0, 0.0], [0.1, 0.0]], "speed": 0.1},
-        "initial_state": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        "controller": {
-            "type": "thrust-playback",
-            "sample_time": te,
-            "playback": {"path": table},
-        },
-        "seed": 0,
     }
+    if heave:
+        start = -(box_m + DEPTH_MARGIN_M)
+        scenario |= {
+            "tank": {"depth_m": round(2.0 * (box_m + DEPTH_MARGIN_M), 9)},
+            "sensor": {"rate_hz": round(1.0 / te, 9)},
+            "reference": {"initial_depth_m": start, "final_depth_m": start, "step_time_s": 0.0},
+        }
+    else:
+        scenario |= {
+            "reference": {"type": "waypoints", "points": [[0.0, 0.0], [0.1, 0.0]], "speed": 0.1},
+            "initial_state": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }
+    controller = {"type": "thrust-playback", "sample_time": te, "playback": {"path": table}}
+    return scenario | {"controller": controller, "seed": 0}
 
 
 def write_excitation(
@@ -208,9 +317,10 @@ def write_excitation(
     sample_time: float = 0.1,
     box_m: float = 15.0,
     overwrite: bool = False,
+    dof: Dof = Dof.HORIZONTAL,
 ) -> Excitation:
     """``auvmpc excite``: the scenario ``out`` (YAML) and its thrust table beside it (same
-    stem, ``.csv``) for ``vehicle`` (a preset name or a vehicle file)."""
+    stem, ``.csv``) for ``vehicle`` (a preset name or a vehicle file), exciting ``dof``."""
     from auvmpc.controllers.playback import write_thrust_table
 
     out = Path(out)
@@ -229,15 +339,17 @@ def write_excitation(
             "--duration", duration, f"too short: at least {MIN_DURATION_FACTOR * FADE_S:g} s"
         )
     params = load_vehicle(vehicle, "VEHICLE")
-    excitation = design_excitation(params, duration, sample_time, seed, box_m)
+    excitation = design_excitation(params, duration, sample_time, seed, box_m, dof=dof)
     named = vehicle
     if vehicle not in preset_names():  # a file: named from the scenario's folder
         named = os.path.relpath(Path(vehicle).resolve(), out.resolve().parent)
     scenario = excitation_scenario(named, excitation, table.name, out.stem, box_m)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_thrust_table(table, sample_time, excitation.thrust, params.actuators.layout.names)
+    inputs = _axes(params, excitation.dof).actuators.layout.names
+    write_thrust_table(table, sample_time, excitation.thrust, inputs)
     out.write_text(
-        f"# auvmpc excite {vehicle} --duration {duration:g} --seed {seed}: thrusts in "
-        f"{table.name}\n" + yaml.safe_dump(scenario, sort_keys=False, default_flow_style=None)
+        f"# auvmpc excite {vehicle} --dof {excitation.dof} --duration {duration:g} --seed "
+        f"{seed}: thrusts in {table.name}\n"
+        + yaml.safe_dump(scenario, sort_keys=False, default_flow_style=None)
     )
     return excitation

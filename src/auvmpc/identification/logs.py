@@ -42,14 +42,17 @@ class VelocityLog:
     """Body velocities and the applied force of one log, sampled every ``sample_time``.
 
     Exactly one of ``thrust`` (per thruster, mapped to the body by the vehicle's allocation
-    ``tau = T F``) and ``force`` (the body force itself) is given.
+    ``tau = T F``) and ``force`` (the body force itself) is given. A log of the heave model
+    (identification/heave.py) holds in ``velocity`` what ``outputs`` names instead: the
+    depth z (m, up) and, where logged, the heave rate w (m/s), and the vertical thrusts.
     """
 
     name: str  # where it came from (a path), for the provenance
     sample_time: float  # s
-    velocity: np.ndarray  # (N+1, 3) u, v (m/s), r (rad/s) at t_k
+    velocity: np.ndarray  # (N+1, 3) u, v (m/s), r (rad/s) at t_k (heave: z, w)
     thrust: np.ndarray | None  # (N, n) N, held over [t_k, t_k+1)
     force: np.ndarray | None = None  # (N, 3) X, Y (N), N (N m), held over [t_k, t_k+1)
+    outputs: tuple[str, ...] = VELOCITY_NAMES  # what ``velocity``'s columns are
 
     def __post_init__(self) -> None:
         given = [name for name in ("thrust", "force") if getattr(self, name) is not None]
@@ -74,6 +77,7 @@ class VelocityLog:
             self.velocity[start : stop + 1],
             None if self.thrust is None else self.thrust[start:stop],
             None if self.force is None else self.force[start:stop],
+            self.outputs,
         )
 
 
@@ -227,24 +231,47 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
     read by the log's own table reader (sim/log.py, :class:`~auvmpc.sim.log.LogTable`): a
     file that is not a log, a cut or edited row, a cell that is not a number, a NaN or t
     not increasing is one line naming the file and the line."""
+    table, log_file = run_table(folder)
+    return log_from_table(table, log_file, folder, VELOCITY_NAMES, "F", n_thrusters)
+
+
+# The field a run folder's refusals name (as every command reading one).
+RUN_FIELD = "RUN_DIR"
+
+
+def run_table(folder: str | Path):
+    """A run folder's log.csv as a :class:`~auvmpc.sim.log.LogTable`, and the file."""
     path = Path(folder)
-    field = "RUN_DIR"
     if not path.is_dir():
-        raise ConfigError(field, str(folder), "no such run folder")
+        raise ConfigError(RUN_FIELD, str(folder), "no such run folder")
     log_file = path / "log.csv"
     if not log_file.is_file():
-        raise ConfigError(field, str(folder), "has no log.csv (not an auvmpc run folder)")
-    table = read_log_table(log_file, field)
-    inputs = tuple(f"F{i + 1}" for i in range(n_thrusters))
-    missing = [name for name in ("t", *VELOCITY_NAMES, *inputs) if name not in table.header]
+        raise ConfigError(RUN_FIELD, str(folder), "has no log.csv (not an auvmpc run folder)")
+    return read_log_table(log_file, RUN_FIELD), log_file
+
+
+def log_from_table(
+    table,
+    log_file: Path,
+    folder: str | Path,
+    signals: tuple[str, ...],
+    prefix: str,
+    n_thrusters: int,
+    outputs: tuple[str, ...] = VELOCITY_NAMES,
+) -> VelocityLog:
+    """The columns ``signals`` (the log's ``outputs``) and the thrusts ``prefix``1..n of a
+    run folder's log ``table``, checked (:func:`read_run_folder`)."""
+    field = RUN_FIELD
+    inputs = tuple(f"{prefix}{i + 1}" for i in range(n_thrusters))
+    missing = [name for name in ("t", *signals, *inputs) if name not in table.header]
     if missing:
         raise ConfigError(
             field,
             str(log_file),
-            f"has no column {', '.join(missing)} (need t, u, v, r, "
-            f"{', '.join(inputs)}: the start vehicle has {n_thrusters} thrusters)",
+            f"has no column {', '.join(missing)} (need {', '.join(('t', *signals, *inputs))}: "
+            f"the start vehicle has {n_thrusters} thrusters)",
         )
-    extra = f"F{n_thrusters + 1}"
+    extra = f"{prefix}{n_thrusters + 1}"
     if extra in table.header:
         raise ConfigError(
             field,
@@ -260,7 +287,7 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
         )
     t = table.numbers("t")
     table.increasing("t", t)
-    velocity = np.column_stack([table.numbers(name) for name in VELOCITY_NAMES])
+    velocity = np.column_stack([table.numbers(name) for name in signals])
     commands = slice(0, rows - 1)  # the last row has no command
     thrust = np.column_stack([table.numbers(name, commands) for name in inputs])
     steps = np.diff(t)
@@ -269,4 +296,4 @@ def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
         raise ConfigError(field, str(log_file), "t is not evenly sampled")
     if np.ptp(thrust, axis=0).max() == 0.0:
         raise ConfigError(field, str(log_file), "the thrust never changes: nothing to identify")
-    return VelocityLog(str(folder), sample_time, velocity, thrust)
+    return VelocityLog(str(folder), sample_time, velocity, thrust, outputs=outputs)

@@ -15,7 +15,8 @@ from matplotlib.figure import Figure
 from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import Identification
-from auvmpc.identification.logs import VELOCITY_NAMES, LogOptions
+from auvmpc.identification.excitation import Dof
+from auvmpc.identification.logs import LogOptions
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
 
@@ -27,11 +28,24 @@ __all__ = [
     "write_identification",
 ]
 
-VELOCITIES = ("u (m/s)", "v (m/s)", "r (rad/s)")
-
 
 def _number(value: float) -> float:
     return float(f"{value:.6g}")
+
+
+def _labels(found: Identification) -> list[str]:
+    """Each output with its unit: ``u (m/s)``."""
+    return [f"{name} ({unit})" for name, unit in zip(found.outputs, found.units, strict=True)]
+
+
+def _put(data: dict[str, Any], name: str, value: float) -> None:
+    """Set a vehicle file's field ``name`` (``m11``, or in a section: ``heave.Zw``) in
+    ``data``, copying the sections it changes (the start file's mapping stays as it was)."""
+    *sections, key = name.split(".")
+    for section in sections:
+        data[section] = dict(data[section])
+        data = data[section]
+    data[key] = value
 
 
 def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: str) -> str:
@@ -40,7 +54,7 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     data = dict(start)
     identified = [p for p in found.parameters if p.excited]
     for estimate in identified:
-        data[estimate.name] = _number(estimate.value)
+        _put(data, estimate.name, _number(estimate.value))
     listed = list(data.get("estimated", ()))
     data["estimated"] = listed + [p.name for p in identified if p.name not in listed]
     logs = ", ".join(found.logs)
@@ -52,7 +66,7 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     today = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d")
     header = [
         f"# Identified by auvmpc identify on {today} from: {logs}",
-        f"# start file: {start_name}; grey-box 3-DOF velocity model, output error (IPOPT);",
+        f"# start file: {start_name}; {found.model}, output error (IPOPT);",
         "# 95 % intervals from the Fisher information (identification.json beside this file):",
     ]
     for estimate in found.parameters:
@@ -60,7 +74,9 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
         kept = "" if estimate.excited else "  NOT EXCITED: start value kept"
         header.append(f"#   {estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}")
     rms = ", ".join(f"{value:.3g}" for value in found.validation_rms)
-    header.append(f"# held-out validation RMS u, v, r: {rms} (m/s, m/s, rad/s)")
+    header.append(
+        f"# held-out validation RMS {', '.join(found.outputs)}: {rms} ({', '.join(found.units)})"
+    )
     body = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
     return "\n".join(header) + "\n" + body
 
@@ -83,11 +99,11 @@ def identification_json(found: Identification) -> dict[str, Any]:
         "sample_time_s": found.sample_time,
         "fit_samples": found.fit_samples,
         "validation_samples": found.validation_samples,
-        "validation_rms": dict(zip(VELOCITY_NAMES, found.validation_rms.tolist(), strict=True)),
+        "validation_rms": dict(zip(found.outputs, found.validation_rms.tolist(), strict=True)),
         "validation_rms_start": dict(
-            zip(VELOCITY_NAMES, found.validation_rms_start.tolist(), strict=True)
+            zip(found.outputs, found.validation_rms_start.tolist(), strict=True)
         ),
-        "residual_rms": dict(zip(VELOCITY_NAMES, found.noise_std.tolist(), strict=True)),
+        "residual_rms": dict(zip(found.outputs, found.noise_std.tolist(), strict=True)),
         "solver_status": found.solver_status,
         "iterations": found.iterations,
         "started_from_equation_error": found.equation_error_used,
@@ -115,16 +131,16 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
         )
     lines += [
         "",
-        "Held-out validation (simulated velocities vs the log, RMS):",
+        f"Held-out validation (simulated {', '.join(found.outputs)} vs the log, RMS):",
         "",
-        "| model | u (m/s) | v (m/s) | r (rad/s) |",
-        "|---|---|---|---|",
+        "| model | " + " | ".join(_labels(found)) + " |",
+        "|---|" + "---|" * len(found.outputs),
         "| identified | " + " | ".join(f"{x:.4g}" for x in found.validation_rms) + " |",
         "| start | " + " | ".join(f"{x:.4g}" for x in found.validation_rms_start) + " |",
         "",
         "Fit residual RMS (about the measurement noise when the model fits): "
         + ", ".join(f"{x:.3g}" for x in found.noise_std)
-        + " (u, v, r).",
+        + f" ({', '.join(found.outputs)}).",
     ]
     if found.unexcited:
         lines += [
@@ -137,21 +153,22 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
 
 
 def fit_figure(found: Identification) -> Figure:
-    """The held-out part of the first log: measured, identified and start model velocities."""
+    """The held-out part of the first log: measured, identified and start model outputs."""
     trace = found.traces[0]
-    figure = Figure(figsize=(8, 6.5))
+    labels = _labels(found)
+    figure = Figure(figsize=(8, 1.1 + 1.8 * len(labels)))
     FigureCanvasAgg(figure)
-    axes = figure.subplots(3, 1, sharex=True)
+    axes = figure.subplots(len(labels), 1, sharex=True, squeeze=False)[:, 0]
     for i, ax in enumerate(axes):
         ax.plot(trace["t"], trace["measured"][:, i], color="0.6", lw=0.8, label="log")
         ax.plot(trace["t"], trace["start"][:, i], "--", color="tab:red", lw=1.0, label="start")
         ax.plot(trace["t"], trace["identified"][:, i], color="tab:blue", lw=1.2,
                 label="identified")  # fmt: skip
-        ax.set_ylabel(VELOCITIES[i])
+        ax.set_ylabel(labels[i])
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", ncols=3, fontsize="small")
     axes[-1].set_xlabel("time into the held-out part (s)")
-    figure.suptitle("Held-out validation: simulated from the first measured velocity")
+    figure.suptitle("Held-out validation: simulated from the first measured state")
     return figure
 
 
@@ -162,12 +179,18 @@ def write_identification(
     holdout: float = 0.2,
     overwrite: bool = False,
     options: LogOptions | None = None,
+    dof: Dof | None = None,
 ) -> Identification:
     """``auvmpc identify``: identify from logs (run folders, ROS 2 bags, DataFlash logs:
     :func:`~auvmpc.identification.logs.read_log`, read as ``options`` say) starting from
     ``vehicle`` (preset or file) and write ``out`` with identification.json,
-    identification.md and identification-fit.png beside it."""
+    identification.md and identification-fit.png beside it.
+
+    ``dof``: the model to identify, the 3-DOF one (horizontal) or the heave one; None picks
+    heave when the first log is a run folder with vertical thrusts (a depth run's log.csv,
+    :func:`~auvmpc.identification.heave.is_heave_log`), else horizontal."""
     from auvmpc.identification.estimation import identify
+    from auvmpc.identification.heave import HeaveGreyBox, is_heave_log, read_heave_log
     from auvmpc.identification.logs import read_log
 
     out = Path(out)
@@ -182,8 +205,21 @@ def write_identification(
     start = validated_vehicle(start_data, source, "--vehicle")
     if not log_paths:
         raise ConfigError("LOG", None, "give at least one log")
-    logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
-    found = identify(logs, start, holdout)
+    if dof is None:
+        dof = Dof.HEAVE if is_heave_log(log_paths[0]) else Dof.HORIZONTAL
+    greybox = None
+    if dof is Dof.HEAVE:
+        heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section
+        logs = [read_heave_log(path, heave.thrusters) for path in log_paths]
+        outputs = {log.outputs for log in logs}
+        if len(outputs) > 1:
+            raise ConfigError(
+                "LOG", None, "give logs that all have the heave rate w or all only the depth z"
+            )
+        greybox = HeaveGreyBox(start, logs[0].outputs)
+    else:
+        logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
+    found = identify(logs, start, holdout, greybox)
     text = vehicle_file_text(start_data, found, vehicle)
     load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
     folder.mkdir(parents=True, exist_ok=True)

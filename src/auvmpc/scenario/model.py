@@ -16,7 +16,7 @@ from auvmpc.config import (
     NonNegative,
     StrictModel,
 )
-from auvmpc.controllers.config import ControllerConfig, DepthControllerConfig
+from auvmpc.controllers.config import DEPTH_MPC, ControllerConfig, DepthControllerConfig
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
@@ -191,6 +191,10 @@ class SixDofScenario(Scenario):
     @model_validator(mode="after")
     def _one_sample_time(self) -> SixDofScenario:
         depth = self.depth_controller
+        if depth.type != DEPTH_MPC:  # a table of vertical thrusts is a depth scenario's
+            raise FieldError(
+                "depth_controller.type", depth.type, f"the 6-DOF depth channel is {DEPTH_MPC}"
+            )
         if self.controller.sample_time is not None and "sample_time" in depth.model_fields_set:
             check_one_sample_time(depth.sample_time, self.controller.sample_time, FieldError)
         return self

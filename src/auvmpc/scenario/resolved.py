@@ -77,12 +77,7 @@ class ResolvedScenario:
         plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
         # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
         self.choices = scenario.controller.choices(self.model)
-        controller = scenario.controller.for_vehicle(self.model)
-        if controller.playback is not None:  # the thrust table, as the vehicle file
-            table = relative_to(controller.playback.path, base_dir)
-            controller = controller.model_copy(
-                update={"playback": controller.playback.model_copy(update={"path": table})}
-            )
+        controller = with_table_found(scenario.controller.for_vehicle(self.model), base_dir)
         noise = max(scenario.sensing.std[:2])
         if (
             scenario.obstacles
@@ -228,6 +223,17 @@ def _plant_vehicle(model: VehicleParams, scenario: Scenario, base_dir: Path) -> 
     return plant
 
 
+def with_table_found(controller, base_dir: Path):
+    """A thrust-playback ``controller``'s config with its table's path relative to the
+    scenario's folder, as a vehicle file's (any other config as it is)."""
+    if controller.playback is None:
+        return controller
+    table = relative_to(controller.playback.path, base_dir)
+    return controller.model_copy(
+        update={"playback": controller.playback.model_copy(update={"path": table})}
+    )
+
+
 def relative_to(path: str, base_dir: Path) -> str:
     """A file a scenario names: a relative path is relative to the scenario's folder."""
     return path if Path(path).is_absolute() else str(base_dir / path)
@@ -263,5 +269,8 @@ class ResolvedDepthScenario:
         except FieldError as error:
             raise ConfigError(error.field, error.value, error.reason) from None
         self.given = scenario  # as written: what overrides apply to
+        scenario = scenario.model_copy(
+            update={"controller": with_table_found(scenario.controller, base_dir)}
+        )
         # What was decided for the user that they should hear of (run.json ``warnings``).
         self.scenario, self.notes = rounded_to_samples(scenario)

@@ -443,7 +443,8 @@ def compute_depth_metrics(
     after = log.t >= step.step_time_s - 1e-9
     t_after, z_after = log.t[after] - step.step_time_s, z[after]
     change = step.final_depth_m - step.initial_depth_m
-    progress = (z_after - step.initial_depth_m) / change  # 0 before, 1 at the target
+    # 0 before, 1 at the target; a depth held (no step, e.g. an excite manoeuvre) rises never
+    progress = (z_after - step.initial_depth_m) / change if change else np.zeros_like(z_after)
     error = np.abs(z_after - step.final_depth_m)
     steady = log.t >= log.t[-1] - STEADY_WINDOW_S - 1e-9
     steady_error = np.abs(z[steady] - log.column("z_ref")[steady])
