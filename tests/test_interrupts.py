@@ -19,6 +19,7 @@ from auvmpc.controllers.base import ControlResult, ControlStatus
 from auvmpc.experiments.campaign import count_finished, load_results
 from auvmpc.experiments.run import simulate
 from auvmpc.scenario import load_scenario
+from tests.test_cli import run_cli
 
 # The requirement: the process is gone within 2 s of the signal.
 STOP_WITHIN_S = 2.0
@@ -107,7 +108,8 @@ def test_an_interrupt_a_solver_swallowed_still_stops_the_run(monkeypatch, instal
 
 
 @pytest.mark.slow
-def test_interrupted_campaign_keeps_rows_and_resumes_to_the_same_rows(tmp_path):
+def test_interrupted_campaign_keeps_rows_and_resumes_to_the_same_rows(tmp_path, monkeypatch,
+                                                                    capsys):  # fmt: skip
     runs = 8  # enough to stop mid-campaign (2 workers, stopped after 2 rows) and resume
     base = ("campaign", "paper-robustness", "--runs", str(runs), "--workers", "2", "--no-report")
     process = _cli(*base, "--out", "camp", cwd=tmp_path)
@@ -120,16 +122,11 @@ def test_interrupted_campaign_keeps_rows_and_resumes_to_the_same_rows(tmp_path):
     kept = int(lines[0].split(": ")[1].split()[0])
     assert 2 <= kept < runs
     assert len(load_results(tmp_path / "camp")) == kept
-    resumed = subprocess.run(
-        [sys.executable, "-c", "from auvmpc.cli import main; main()", *base, "--out", "camp"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert resumed.returncode == 0, resumed.stderr
-    whole = subprocess.run(
-        [sys.executable, "-c", "from auvmpc.cli import main; main()", *base, "--out", "whole"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert whole.returncode == 0, whole.stderr
+    # the resume and the uninterrupted campaign in this process (the interrupt needed one
+    # of its own)
+    for out in ("camp", "whole"):
+        code, _, err = run_cli(monkeypatch, capsys, *base, "--out", str(tmp_path / out))
+        assert code == 0, err
     deterministic = [
         c
         for c in load_results(tmp_path / "whole").columns
