@@ -83,7 +83,7 @@ class ResolvedScenario:
             controller = controller.model_copy(
                 update={"playback": controller.playback.model_copy(update={"path": table})}
             )
-        noise = max(scenario.sensing.std[:2])
+        noise = max(scenario.sensing.std[HORIZONTAL.position])
         if (
             scenario.obstacles
             and noise > 0
