@@ -229,6 +229,8 @@ class _Scene:
         self.thruster_xy = np.array([t.position for t in model.thrusters])
         angles = np.radians([t.angle_deg for t in model.thrusters])
         self.thruster_dir = np.column_stack([np.cos(angles), np.sin(angles)])
+        # The world force on the vehicle (N), by its log.csv columns.
+        self.force = np.column_stack([log.column(name) for name in ("dist_X", "dist_Y")])
         self.max_thrust = max(abs(v) for v in model.thrust_limits) or 1.0
         self.radius = controller.vehicle_radius
         half_length = max(float(np.abs(self.thruster_xy[:, 0]).max()) * 1.25, self.radius, 0.3)
@@ -333,8 +335,8 @@ class _Scene:
         )  # fmt: skip
         if main:
             lengths = self.arrow_length
-            for i, color in enumerate(colors):
-                ax.plot([], [], color=color, linewidth=2, label=f"thrust F{i + 1}")
+            for name, color in zip(log.input_names, colors, strict=True):
+                ax.plot([], [], color=color, linewidth=2, label=f"thrust {name}")
             ax.plot(
                 [], [], color="none",
                 label=f"arrow at {self.max_thrust:g} N: {lengths['main']:.2g} m here, "
@@ -397,7 +399,7 @@ class _Scene:
         self.zoom.set_ylim(y - half, y + half)
         error = float(np.hypot(*(log.state[k, _POSITION] - log.reference[k, _POSITION])))
         self.clock.set_text(f"t = {t:6.1f} s\nerror {error:5.2f} m")
-        force = log.environment[k, :2]
+        force = self.force[k]
         magnitude = float(np.hypot(*force))
         if magnitude > 1e-9:
             bearing = math.degrees(math.atan2(force[1], force[0]))

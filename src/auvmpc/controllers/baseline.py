@@ -53,9 +53,9 @@ from pydantic import Field, model_validator
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
-from auvmpc.controllers.tracking_law import tracking_law
+from auvmpc.controllers.tracking_law import PATH_ERRORS, tracking_law
 from auvmpc.errors import FieldError
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY, PLANAR_MOMENT
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_FORCE_XY, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = ["BaselineConfig", "BaselineController"]
@@ -65,6 +65,9 @@ __all__ = ["BaselineConfig", "BaselineController"]
 # in the allocation is far smaller, any real clipping far larger.
 _SATURATION_TOLERANCE_N = 1e-9
 _HEADING = HORIZONTAL.heading
+_FORCE_X, _FORCE_Y = (PLANAR_FORCE.index(name) for name in ("X", "Y"))
+_ALONG, _CROSS, _HEADING_ERROR = (PATH_ERRORS.index(name) for name in PATH_ERRORS.names)
+_POSITION_ERROR = PATH_ERRORS.span("along", "cross")
 
 
 class BaselineConfig(StrictModel):
@@ -186,12 +189,11 @@ class BaselineController(ShelledController):
     @property
     def disturbance_estimate(self) -> np.ndarray:
         """Integral state ``[X, Y, N]``: world-frame force (N) and yaw moment (N m), a copy."""
-        return np.array([*self._force_integral, self._moment_integral])
+        return self._integral.copy()
 
     def assume_disturbance(self, disturbance: np.ndarray) -> None:
         """Start the integral state at a known ``[X, Y, N]`` (world force N, moment N m)."""
-        self._force_integral = np.array(disturbance[PLANAR_FORCE_XY], dtype=float)
-        self._moment_integral = float(disturbance[PLANAR_MOMENT])
+        self._integral = PLANAR_FORCE.vector(disturbance).copy()
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
@@ -207,8 +209,7 @@ class BaselineController(ShelledController):
             raise ValueError(
                 f"initial_thrust must have shape ({self.model.n_thrusters},), got {thrust.shape}"
             )
-        self._force_integral = np.zeros(2)
-        self._moment_integral = 0.0
+        self._integral = np.zeros(PLANAR_FORCE.size)  # [X, Y, N] (PLANAR_FORCE)
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         """Thrust for the coming sample, already inside the limits; ``limited`` when a hard
@@ -237,15 +238,15 @@ class BaselineController(ShelledController):
         self._integrate(state[_HEADING], reference[0, _HEADING], integrated, deficit, saturated)
 
         details = {
-            "tau_u_N": float(tau_des[0]),
-            "tau_v_N": float(tau_des[1]),
+            "tau_u_N": float(tau_des[_FORCE_X]),
+            "tau_v_N": float(tau_des[_FORCE_Y]),
             "tau_r_N_m": float(tau_des[PLANAR_MOMENT]),
-            "along_track_error_m": float(errors[0]),
-            "cross_track_error_m": float(errors[1]),
-            "heading_error_rad": float(errors[2]),
-            "integral_force_x_N": float(self._force_integral[0]),
-            "integral_force_y_N": float(self._force_integral[1]),
-            "integral_moment_N_m": float(self._moment_integral),
+            "along_track_error_m": float(errors[_ALONG]),
+            "cross_track_error_m": float(errors[_CROSS]),
+            "heading_error_rad": float(errors[_HEADING_ERROR]),
+            "integral_force_x_N": float(self._integral[_FORCE_X]),
+            "integral_force_y_N": float(self._integral[_FORCE_Y]),
+            "integral_moment_N_m": float(self._integral[PLANAR_MOMENT]),
         }
         return Proposal(
             plan=thrust[None, :],
@@ -267,19 +268,20 @@ class BaselineController(ShelledController):
         body_to_world = _rotation(psi)
         # The step in acceleration units along the path axes, then times the inertia along the
         # body axes: every axis gets s^3 + k_D s^2 + k_P s + k_I whatever the vehicle's mass.
-        accel_step = _rotation(psi_r) @ (te * self._ki * errors[:2])  # world frame (m/s^2)
+        accel_step = _rotation(psi_r) @ (te * self._ki * errors[_POSITION_ERROR])  # world (m/s^2)
         force_step = body_to_world @ (self._mass * (body_to_world.T @ accel_step))  # world (N)
-        moment_step = te * g.heading_ki * p.Iz * errors[2]  # N m
+        moment_step = te * g.heading_ki * p.Iz * errors[_HEADING_ERROR]  # N m
         if saturated:
             # The integral changes tau by -R^T force_step (and -moment_step); skip a step that
             # would deepen the cut the limits just made (deficit = asked - applied).
             if -(body_to_world.T @ force_step) @ deficit[PLANAR_FORCE_XY] > 0:
-                force_step = np.zeros(2)
+                force_step = np.zeros_like(force_step)
             if -moment_step * deficit[PLANAR_MOMENT] > 0:
                 moment_step = 0.0
-        self._force_integral = _clip_norm(self._force_integral + force_step, g.max_integral_force_N)
+        force = _clip_norm(self._integral[PLANAR_FORCE_XY] + force_step, g.max_integral_force_N)
         limit = g.max_integral_moment_N_m
-        self._moment_integral = float(np.clip(self._moment_integral + moment_step, -limit, limit))
+        moment = float(np.clip(self._integral[PLANAR_MOMENT] + moment_step, -limit, limit))
+        self._integral[PLANAR_FORCE_XY], self._integral[PLANAR_MOMENT] = force, moment
 
 
 def _rotation(angle: float) -> np.ndarray:

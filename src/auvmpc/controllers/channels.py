@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation, timed_command
+from auvmpc.models.actuators import WRENCH
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, SIX_DOF_MEASUREMENT, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
@@ -39,6 +40,7 @@ _DEPTH = SIX_DOF.index("z")  # NED, down (m)
 # Where the navigation solution and the depth sensor's [z, z'] (NED) sit in the measurement.
 _MEASURED_HORIZONTAL = SIX_DOF_MEASUREMENT.span("x", "r")
 _MEASURED_DEPTH = SIX_DOF_MEASUREMENT.span("z", "z_rate")
+_HEAVE = WRENCH.index("Z")  # the heave force's row of an allocation matrix (NED, down)
 
 
 class ThrustMapping:
@@ -59,7 +61,7 @@ class ThrustMapping:
             raise ValueError(f"vehicle {vehicle.name!r} needs six_dof and heave sections")
         self.n_horizontal = n = vehicle.n_thrusters
         self.n_total = six.n_thrusters
-        heave_row = np.asarray(six.T)[2, n:]  # NED Z force per unit thrust of each vertical
+        heave_row = np.asarray(six.T)[_HEAVE, n:]  # NED Z force per unit thrust of each vertical
         # Least-norm F_v with heave_row @ F_v = Z: F_v = pinv(heave_row) Z.
         self.heave_split = heave_row / float(heave_row @ heave_row)
         limits = vehicle.six_dof_actuators.limits

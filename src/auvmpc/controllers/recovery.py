@@ -29,7 +29,7 @@ from auvmpc.controllers.base import Observation
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.tracking_law import LAW_OUTPUTS, tracking_law
 from auvmpc.models.heave import heave_damping_force
-from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 
 if TYPE_CHECKING:
@@ -78,8 +78,8 @@ class StabilisingFeedback:
         else:
             self._hold = None
         disturbance = proposal.disturbance
-        if disturbance is None or np.size(disturbance) != 3:
-            disturbance = np.zeros(3)
+        if disturbance is None or np.size(disturbance) != PLANAR_FORCE.size:
+            disturbance = np.zeros(PLANAR_FORCE.size)
         ahead = target[1] if len(target) > 1 else target[0]
         outputs = self.law(state, target[0], ahead, np.ravel(disturbance))
         return outputs[_THRUST].full().ravel()

@@ -22,18 +22,28 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY, PLANAR_MOMENT
+from auvmpc.models.layout import (
+    HORIZONTAL,
+    PLANAR_FORCE,
+    PLANAR_FORCE_XY,
+    PLANAR_MOMENT,
+    Layout,
+)
 from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 
 if TYPE_CHECKING:
     from auvmpc.controllers.baseline import BaselineConfig
 
-__all__ = ["LAW_INPUTS", "LAW_OUTPUTS", "tracking_law"]
+__all__ = ["LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "tracking_law"]
 
 LAW_INPUTS = ("state", "reference_now", "reference_ahead", "disturbance")
 LAW_OUTPUTS = ("tau", "errors", "integrated", "thrust", "requested")
+# The law's ``errors`` and ``integrated``: the position error along and across the
+# reference's heading (m, path frame) and the heading error (rad, wrapped).
+PATH_ERRORS = Layout(names=("along", "cross", "heading"))
 
 _X, _Y, _PSI, _U, _V, _R = (HORIZONTAL.index(name) for name in HORIZONTAL.names)
+_FORCE_X, _FORCE_Y = (PLANAR_FORCE.index(name) for name in ("X", "Y"))
 
 
 def _rotate(angle, vector) -> list:
@@ -53,6 +63,11 @@ def _wrap(angle):
     divisor's sign as Python's does."""
     remainder = ca.fmod(math.pi - angle, 2.0 * math.pi)
     return math.pi - ca.if_else(remainder < 0, remainder + 2.0 * math.pi, remainder)
+
+
+def _in_order(layout: Layout, by_name: dict):
+    """The column of ``by_name``'s entries in ``layout``'s order."""
+    return ca.vertcat(*(by_name[name] for name in layout.names))
 
 
 def _world_velocity(row) -> list:
@@ -78,7 +93,7 @@ def tracking_law(
     holds the wanted rate against the damping where the yaw settles within the sample."""
     p, te, g = model, float(sample_time), gains
     state, now, ahead = (ca.SX.sym(name, HORIZONTAL.size) for name in LAW_INPUTS[:3])
-    disturbance = ca.SX.sym("disturbance", 3)
+    disturbance = ca.SX.sym("disturbance", PLANAR_FORCE.size)
     psi, u, v, r = state[_PSI], state[_U], state[_V], state[_R]
     psi_r, r_r = now[_PSI], now[_R]
 
@@ -125,23 +140,36 @@ def tracking_law(
     # one a model that over-estimates damping turns it into positive feedback. Coriolis and
     # Munk terms use the measured velocity: they are not dissipative, and the Munk moment
     # (m11 - m22) u v is what upsets the heading while the vehicle crabs.
+    # Each term by its generalised force's name (body frame); the estimated world force is
+    # seen in the body frame, the moment as it is.
     body_accel = _unrotate(psi, accel_world)
     nu_dot = [body_accel[0] + r * v, body_accel[1] - r * u]
     u_d, v_d = _unrotate(psi, velocity_r)
-    damping = [
-        p.Xu * u_d + p.Xuu * ca.fabs(u_d) * u_d,
-        p.Yv * v_d + p.Yvv * ca.fabs(v_d) * v_d,
-        yaw_damping_moment(p, r_r, ca.fabs),
-    ]
-    coriolis = [p.m22 * v * r, -p.m11 * u * r, (p.m11 - p.m22) * u * v]
-    estimate_body = _unrotate(psi, [disturbance[0], disturbance[1]])
-    inertial = [p.m11 * nu_dot[0], p.m22 * nu_dot[1], p.Iz * yaw_accel]
-    tau = [inertial[i] - damping[i] - coriolis[i] for i in range(3)]
-    tau = ca.vertcat(tau[0] - estimate_body[0], tau[1] - estimate_body[1], tau[2] - disturbance[2])
-    errors = ca.vertcat(error_path[0], error_path[1], heading_error)
+    damping = {
+        "X": p.Xu * u_d + p.Xuu * ca.fabs(u_d) * u_d,
+        "Y": p.Yv * v_d + p.Yvv * ca.fabs(v_d) * v_d,
+        "N": yaw_damping_moment(p, r_r, ca.fabs),
+    }
+    coriolis = {"X": p.m22 * v * r, "Y": -p.m11 * u * r, "N": (p.m11 - p.m22) * u * v}
+    estimate_body = _unrotate(psi, [disturbance[_FORCE_X], disturbance[_FORCE_Y]])
+    estimate = {"X": estimate_body[0], "Y": estimate_body[1], "N": disturbance[PLANAR_MOMENT]}
+    inertial = {"X": p.m11 * nu_dot[0], "Y": p.m22 * nu_dot[1], "N": p.Iz * yaw_accel}
+    tau = _in_order(
+        PLANAR_FORCE,
+        {
+            name: inertial[name] - damping[name] - coriolis[name] - estimate[name]
+            for name in PLANAR_FORCE.names
+        },
+    )
+    errors = _in_order(
+        PATH_ERRORS, {"along": error_path[0], "cross": error_path[1], "heading": heading_error}
+    )
     # The integrators see the position error shrunk by the same cap: outside the range where
     # the loop is linear a large error must not pile up integral in a few samples.
-    integrated = ca.vertcat(cap * error_path[0], cap * error_path[1], heading_error)
+    integrated = _in_order(
+        PATH_ERRORS,
+        {"along": cap * error_path[0], "cross": cap * error_path[1], "heading": heading_error},
+    )
 
     # Allocation: the yaw moment kept whole if it fits and the planar force scaled along its
     # own direction into the force limits; if the moment alone does not fit, it is scaled

@@ -358,7 +358,8 @@ class DisturbanceObserver:
     def correct(self, measured_state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fuse a measurement; returns (state estimate (6,), disturbance estimate (3,))."""
         estimate = self._filter.correct(measured_state)
-        force, moment = np.hypot(*estimate[NX : NX + 2]), abs(estimate[NX + 2])
+        disturbance = estimate[NX:]
+        force, moment = np.hypot(*disturbance[PLANAR_FORCE_XY]), abs(disturbance[PLANAR_MOMENT])
         if not (force <= self._plausible_force and moment <= self._plausible_moment):
             self.restarts += 1
             self.reset(measured_state)

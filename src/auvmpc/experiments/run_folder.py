@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -34,8 +33,6 @@ from auvmpc.sim.log import MAX_LOG_BYTES, LogTable, SimLog, read_log_table
 
 __all__ = ["RunFolder", "RunTables", "read_log_frame", "read_run_folder", "read_run_tables"]
 
-_HORIZONTAL_THRUST = re.compile(r"^F\d+$")
-_VERTICAL_THRUST = re.compile(r"^Fz\d+$")
 # What run.json holds (docs/run-folder.md): the keys whose values are objects.
 _OBJECT_KEYS = ("scenario", "plant", "model", "metrics")
 
@@ -158,13 +155,12 @@ class RunTables:
 
     info: dict[str, Any]
     log: pd.DataFrame
+    input_names: tuple[str, ...]  # the run's inputs (SimLog.input_names), in order
 
     @property
     def thrust_columns(self) -> list[str]:
-        """Thrust columns by name: horizontal F1..Fn, then vertical Fz1..Fzm."""
-        names = [c for c in self.log.columns if _HORIZONTAL_THRUST.match(c)]
-        names += [c for c in self.log.columns if _VERTICAL_THRUST.match(c)]
-        return names
+        """The thrust columns: the run's inputs, in order."""
+        return list(self.input_names)
 
 
 def read_run_tables(run_dir: Path) -> RunTables:
@@ -172,9 +168,9 @@ def read_run_tables(run_dir: Path) -> RunTables:
     a DataFrame of every column it has."""
     folder = read_run_folder(run_dir)
     folder.scenario()  # checked: what the bag reads of it (obstacles, horizon) is valid
-    folder.log()
+    names = folder.log().input_names
     table = folder.table()
-    return RunTables(folder.info, _frame(table.header, table.rows))
+    return RunTables(folder.info, _frame(table.header, table.rows), names)
 
 
 def read_log_frame(source: Path | TextIO) -> pd.DataFrame:

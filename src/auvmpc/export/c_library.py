@@ -47,13 +47,14 @@ from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.estimation.ekf import AugmentedEkf, DisturbanceObserver
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.experiments.run_folder import RunFolder, read_run_folder
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, Layout
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
 from auvmpc.ocp.multiple_shooting import (
     _PARKED_OBSTACLE_M,
     MAX_OBSTACLES,
     ND,
+    SLOT,
     SLOT_FIELDS,
     MultipleShootingProgram,
 )
@@ -200,6 +201,11 @@ def _array(values) -> str:
     return "{" + ", ".join(f"{float(v):.17g}" for v in np.ravel(values)) + "}"
 
 
+def _names(layout: Layout) -> str:
+    """A C initialiser of the layout's names as strings."""
+    return "{" + ", ".join(json.dumps(name) for name in layout.names) + "}"
+
+
 def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfig) -> str:
     model, ocp = program.model, program.ocp
     n = program.n_thrusters
@@ -231,6 +237,7 @@ def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfi
         "AUVMPC_HPIPM_SETTINGS": _array(hpipm_settings(config.qp_iteration_limit)),
         "AUVMPC_OFFSET_FREE": int(config.offset_free),
     }
+    macros.update(_layout_macros(program))
     macros.update(_recovery_macros(program))
     if config.offset_free:
         macros.update(_observer_macros(model, config))
@@ -245,6 +252,23 @@ def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfi
         "",
     ]
     return "\n".join(lines)
+
+
+def _layout_macros(program: MultipleShootingProgram) -> dict[str, object]:
+    """Where the C finds each quantity it reads by name (models/layout.py and the program's
+    obstacle slot): the state's and inputs' names (replay's columns), the state entries, the
+    disturbance's size and each slot field."""
+    return {
+        "AUVMPC_STATE_NAMES": _names(HORIZONTAL),
+        "AUVMPC_INPUT_NAMES": _names(program.model.actuators.layout),
+        "AUVMPC_X": HORIZONTAL.index("x"),
+        "AUVMPC_Y": HORIZONTAL.index("y"),
+        "AUVMPC_HEADING": HORIZONTAL.heading,
+        "AUVMPC_YAW_RATE": HORIZONTAL.index("r"),
+        "AUVMPC_ND": ND,
+        "AUVMPC_SLOT_FIELDS": SLOT_FIELDS,
+        **{f"AUVMPC_SLOT_{name.upper()}": SLOT.index(name) for name in SLOT.names},
+    }
 
 
 def _recovery_law(program: MultipleShootingProgram) -> ca.Function:
@@ -528,9 +552,9 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
             raise RunFailed(f"replay failed: {replay.stderr.strip()}")
     commands = list(csv.DictReader(replay.stdout.splitlines()))
     stats = dict(zip(*[iter(replay.stderr.split())] * 2, strict=True))
-    thrusters = [name for name in commands[0] if name.startswith("F")]
-    c_thrust = np.array([[float(r[name]) for name in thrusters] for r in commands])
-    py_thrust = np.column_stack([log.column(name) for name in thrusters])[: len(commands)]
+    inputs = log.input_names  # the replay's columns too: the export's AUVMPC_INPUT_NAMES
+    c_thrust = np.array([[float(r[name]) for name in inputs] for r in commands])
+    py_thrust = np.column_stack([log.column(name) for name in inputs])[: len(commands)]
     difference = np.abs(c_thrust - py_thrust).max(axis=1)
     c_status = [_C_STATUS[int(r["status"])] for r in commands]
     return VerifyResult(

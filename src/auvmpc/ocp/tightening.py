@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
+
 __all__ = [
     "Backoffs",
     "OBSTACLE_BACKOFF_LIMIT_M",
@@ -54,7 +56,9 @@ __all__ = [
 # Bryson's rule for the ancillary feedback (largest acceptable deviation per state entry, on
 # [x, y, psi, u, v, r], and the half thrust range per input): a gain that spends half the
 # thrust range on a 0.25 m position error.
-_TUBE_STATE_SCALE = np.array([0.25, 0.25, 0.2, 0.25, 0.25, 0.2])
+_TUBE_STATE_SCALE = HORIZONTAL.vector(
+    {"x": 0.25, "y": 0.25, "psi": 0.2, "u": 0.25, "v": 0.25, "r": 0.2}
+)
 # Thrust back-offs are capped at this fraction of the half range, so the tightened box never
 # closes and an avoidance manoeuvre keeps most of the thrust in its plan (a bound that would
 # need more is reported by max_thrust_backoff_fraction reaching it). Measured: at 0.5, run 164
@@ -67,6 +71,10 @@ THRUST_BACKOFF_LIMIT = 0.25
 OBSTACLE_BACKOFF_LIMIT_M = 2.0
 # Surge speeds of the gain table (m/s): this step, from the top reverse to the top forward speed.
 GAIN_SPEED_STEP = 0.1
+# Where a gain's position columns and the surge speed sit in the state, and the
+# world force's components in the disturbance.
+_X, _Y, _SURGE = (HORIZONTAL.index(name) for name in ("x", "y", "u"))
+_FORCE_X, _FORCE_Y = (PLANAR_FORCE.index(name) for name in ("X", "Y"))
 
 
 @dataclass(frozen=True)
@@ -92,9 +100,9 @@ def rotated_gains(gains: np.ndarray, headings: np.ndarray) -> np.ndarray:
     """
     cos, sin = np.cos(headings)[:, None], np.sin(headings)[:, None]
     rotated = gains.copy()
-    kx, ky = gains[:, :, 0], gains[:, :, 1]
-    rotated[:, :, 0] = cos * kx - sin * ky
-    rotated[:, :, 1] = sin * kx + cos * ky
+    kx, ky = gains[:, :, _X], gains[:, :, _Y]
+    rotated[:, :, _X] = cos * kx - sin * ky
+    rotated[:, :, _Y] = sin * kx + cos * ky
     return rotated
 
 
@@ -135,15 +143,16 @@ class Tightening:
         self.half_range = np.asarray(half_range, dtype=float)
 
     def feedback(self, nominal: np.ndarray) -> np.ndarray:
-        """K_n (n, nu, nx) along nominal states (n, 6) [x y psi u v r]: the gain of the
+        """K_n (n, nu, nx) along nominal states (n, nx) (HORIZONTAL): the gain of the
         nearest tabled surge speed, rotated to the heading."""
-        nearest = np.abs(nominal[:, 3, None] - self.speeds[None, :]).argmin(axis=1)
-        return rotated_gains(self.gains[nearest], nominal[:, 2])
+        nearest = np.abs(nominal[:, _SURGE, None] - self.speeds[None, :]).argmin(axis=1)
+        return rotated_gains(self.gains[nearest], nominal[:, HORIZONTAL.heading])
 
     def support(self, directions: np.ndarray) -> np.ndarray:
         """h_W of the last axis (X, Y, N) of ``directions``, summed over the axis before it."""
-        force = np.hypot(directions[..., 0], directions[..., 1])
-        return (self.force * force + self.moment * np.abs(directions[..., 2])).sum(axis=-1)
+        force = np.hypot(directions[..., _FORCE_X], directions[..., _FORCE_Y])
+        moment = np.abs(directions[..., PLANAR_MOMENT])
+        return (self.force * force + self.moment * moment).sum(axis=-1)
 
     def backoffs(
         self,

@@ -78,7 +78,7 @@ class ResolvedScenario:
         # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
         self.choices = scenario.controller.choices(self.model)
         controller = with_table_found(scenario.controller.for_vehicle(self.model), base_dir)
-        noise = max(scenario.sensing.std[:2])
+        noise = max(scenario.sensing.std[HORIZONTAL.position])
         if (
             scenario.obstacles
             and noise > 0

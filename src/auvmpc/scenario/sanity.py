@@ -51,7 +51,7 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.registry import class_of
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
@@ -77,6 +77,8 @@ __all__ = [
 _RELATIVE_MARGIN = 1e-6
 # Memory a run may plan to use, as a share of what the machine has available now.
 _MEMORY_SHARE = 0.8
+# The surge force's row of an allocation matrix (PLANAR_FORCE).
+_SURGE = PLANAR_FORCE.index("X")
 
 
 def available_memory_bytes() -> int:
@@ -296,7 +298,7 @@ def _check_start(scenario: Scenario) -> list[str]:
 def steady_top_speed(params: VehicleParams) -> float:
     """Fastest steady straight surge (m/s): the largest pure surge force the thrusters can
     make within their limits (:func:`largest_surge_thrust`) against Xu u + Xuu u|u|."""
-    force = float(params.T[0] @ largest_surge_thrust(params))
+    force = float(params.T[_SURGE] @ largest_surge_thrust(params))
     a, b = -params.Xuu, -params.Xu  # both >= 0: damping force a u^2 + b u
     if a > 0:
         return (-b + math.sqrt(b * b + 4.0 * a * force)) / (2.0 * a)
@@ -309,10 +311,11 @@ def largest_surge_thrust(params: VehicleParams) -> np.ndarray:
     from scipy.optimize import linprog
 
     T = params.T
+    others = [i for i in range(PLANAR_FORCE.size) if i != _SURGE]  # sway force, yaw moment
     result = linprog(
-        -T[0],
-        A_eq=T[1:],
-        b_eq=np.zeros(2),
+        -T[_SURGE],
+        A_eq=T[others],
+        b_eq=np.zeros(len(others)),
         bounds=[params.thrust_limits] * params.n_thrusters,
         method="highs",
     )

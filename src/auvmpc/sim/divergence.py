@@ -47,7 +47,7 @@ def likely_cause(resolved) -> str:
         for linear, quadratic, force in zip(
             (plant.Xu, plant.Yv, plant.Nr),
             (plant.Xuu, plant.Yvv, plant.Nrr),
-            plant.thrust_authority[:3],
+            plant.thrust_authority,
             strict=True,
         )
     ]

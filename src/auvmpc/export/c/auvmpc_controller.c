@@ -18,20 +18,25 @@
 #include "rti_qp_data.h"
 
 #define NX AUVMPC_NX
+#define ND AUVMPC_ND /* the disturbance [X, Y, N] */
 #define N AUVMPC_HORIZON
 #define NT AUVMPC_THRUSTERS
 #define S AUVMPC_OBSTACLE_SLOTS
 #define SA AUVMPC_SLOTS_ALLOC
 #define NZ AUVMPC_NZ
 #define NV AUVMPC_NV
-#define SLOT_FIELDS 5
+#define SLOT_FIELDS AUVMPC_SLOT_FIELDS
 #define SOLVED 0
 /* A slack below this is solver tolerance, not a relaxed constraint (m); the projection moving
  * the command by less than this (N) is round-off, not saturation (controllers/shell.py). */
 #define SLACK_ACTIVE 1e-6
 #define SATURATION_N 1e-6
 #define TWO_PI (2.0 * 3.14159265358979323846)
-#define YAW_RATE 5 /* r in [x, y, psi, u, v, r] */
+/* Where x, y, psi and r sit in a state (auvmpc_config.h, from models/layout.py). */
+#define PX AUVMPC_X
+#define PY AUVMPC_Y
+#define HEADING AUVMPC_HEADING
+#define YAW_RATE AUVMPC_YAW_RATE
 
 void *auvmpc_rti_create(int horizon, int n, int slots, int nz, int nv, int ng,
                         const double *settings, int count);
@@ -48,7 +53,7 @@ static const double thrust_rate[NT] = AUVMPC_THRUST_RATE;
 static const double stage_weight[NX] = AUVMPC_STAGE_WEIGHT;
 static const double hpipm_settings[] = AUVMPC_HPIPM_SETTINGS;
 #if AUVMPC_OFFSET_FREE
-#define NA (NX + 3) /* the estimator's state [x, y, psi, u, v, r, X, Y, N] */
+#define NA (NX + ND) /* the estimator's state [x; d]: the state, then the disturbance */
 static const double prior_covariance[NA] = AUVMPC_PRIOR_COVARIANCE;
 #endif
 
@@ -71,7 +76,7 @@ static struct {
     Iterate guess, next_guess;    /* where the next solve starts (warm start) */
     int has_guess, has_next_guess;
     /* one sample's data */
-    double state[NX], disturbance[3], reference[N + 1][NX];
+    double state[NX], disturbance[ND], reference[N + 1][NX];
     double slots[SA][SLOT_FIELDS], used[SA];
     double weights[N][NX], movable[N];
     /* one solve's work */
@@ -263,7 +268,7 @@ static void observer_correct(const double *measured) {
         c.initialised = 1;
     }
     for (int i = 0; i < NX; ++i) innovation[i] = measured[i] - c.estimate[i];
-    innovation[2] = remainder(innovation[2], TWO_PI);
+    innovation[HEADING] = remainder(innovation[HEADING], TWO_PI);
     observer_call(ekf_update, innovation, corrected, joseph);
     memcpy(c.estimate, corrected, sizeof corrected);
     from_columns(joseph, m);
@@ -278,11 +283,11 @@ static void observer_predict(const double *thrust) {
     if (failed || !all_finite(next, NA) || !all_finite(propagated, NA * NA)) {
         double kept[NX];
         for (int i = 0; i < NX; ++i) kept[i] = 0.0;
-        double disturbance[3];
-        for (int i = 0; i < 3; ++i)
+        double disturbance[ND];
+        for (int i = 0; i < ND; ++i)
             disturbance[i] = isfinite(c.estimate[NX + i]) ? c.estimate[NX + i] : 0.0;
         observer_reset(kept);
-        for (int i = 0; i < 3; ++i) c.estimate[NX + i] = disturbance[i];
+        for (int i = 0; i < ND; ++i) c.estimate[NX + i] = disturbance[i];
         return;
     }
     memcpy(c.estimate, next, sizeof next);
@@ -330,10 +335,10 @@ int auvmpc_last_iterations(void) { return c.iterations; }
 /* The reference with its heading shifted by 2 pi k to the turn the vehicle is on
  * (controllers/base.py, align_heading). nearbyint rounds half to even, as numpy. */
 static void align_reference(const double *reference) {
-    double turns = nearbyint((c.state[2] - reference[2]) / TWO_PI);
+    double turns = nearbyint((c.state[HEADING] - reference[HEADING]) / TWO_PI);
     for (int k = 0; k <= N; ++k) {
         for (int i = 0; i < NX; ++i) c.reference[k][i] = reference[NX * k + i];
-        c.reference[k][2] += TWO_PI * turns;
+        c.reference[k][HEADING] += TWO_PI * turns;
     }
 }
 
@@ -344,17 +349,18 @@ static void fill_slots(const auvmpc_obstacle *obstacles, int count) {
     double last_distance = -1.0;
     int last_index = -1;
     for (int o = 0; o < SA; ++o) {
-        c.slots[o][0] = c.state[0] + AUVMPC_PARKED_M;
-        c.slots[o][1] = c.state[1] + AUVMPC_PARKED_M;
-        c.slots[o][2] = c.slots[o][3] = c.slots[o][4] = 0.0;
+        c.slots[o][AUVMPC_SLOT_X] = c.state[PX] + AUVMPC_PARKED_M;
+        c.slots[o][AUVMPC_SLOT_Y] = c.state[PY] + AUVMPC_PARKED_M;
+        c.slots[o][AUVMPC_SLOT_VX] = c.slots[o][AUVMPC_SLOT_VY] = 0.0;
+        c.slots[o][AUVMPC_SLOT_REACH] = 0.0;
         c.used[o] = 0.0;
     }
     for (int o = 0; o < S; ++o) {
         int best = -1;
         double best_distance = 0.0;
         for (int j = 0; j < count; ++j) {
-            double d = hypot(obstacles[j].center[0] - c.state[0],
-                             obstacles[j].center[1] - c.state[1]);
+            double d = hypot(obstacles[j].center[0] - c.state[PX],
+                             obstacles[j].center[1] - c.state[PY]);
             int after_last = d > last_distance || (d == last_distance && j > last_index);
             if (after_last && (best < 0 || d < best_distance)) {
                 best = j;
@@ -363,11 +369,11 @@ static void fill_slots(const auvmpc_obstacle *obstacles, int count) {
         }
         if (best < 0) break;
         const auvmpc_obstacle *ob = &obstacles[best];
-        c.slots[o][0] = ob->center[0];
-        c.slots[o][1] = ob->center[1];
-        c.slots[o][2] = ob->velocity[0];
-        c.slots[o][3] = ob->velocity[1];
-        c.slots[o][4] = ob->radius + AUVMPC_KEEP_OUT_EXTRA;
+        c.slots[o][AUVMPC_SLOT_X] = ob->center[0];
+        c.slots[o][AUVMPC_SLOT_Y] = ob->center[1];
+        c.slots[o][AUVMPC_SLOT_VX] = ob->velocity[0];
+        c.slots[o][AUVMPC_SLOT_VY] = ob->velocity[1];
+        c.slots[o][AUVMPC_SLOT_REACH] = ob->radius + AUVMPC_KEEP_OUT_EXTRA;
         c.used[o] = 1.0;
         last_distance = best_distance;
         last_index = best;
@@ -442,12 +448,12 @@ static int propose(const double *measured, const double *reference,
     memcpy(c.disturbance, c.estimate + NX, sizeof c.disturbance);
 #else
     memcpy(c.state, measured, sizeof c.state);
-    for (int i = 0; i < 3; ++i) c.disturbance[i] = 0.0;
+    for (int i = 0; i < ND; ++i) c.disturbance[i] = 0.0;
 #endif
     align_reference(reference);
     c.has_next_guess = 0;
     c.max_slack = 0.0;
-    if (!all_finite(c.state, NX) || !all_finite(c.disturbance, 3)
+    if (!all_finite(c.state, NX) || !all_finite(c.disturbance, ND)
         || !all_finite(c.reference[0], (N + 1) * NX))
         return -1;
     fill_slots(obstacles, count);
@@ -458,9 +464,9 @@ static int propose(const double *measured, const double *reference,
         if (AUVMPC_COLD_ITERATIONS > iterations) iterations = AUVMPC_COLD_ITERATIONS;
     } else {
         c.iterate = c.guess;
-        double turns = nearbyint((c.state[2] - c.iterate.states[0][2]) / TWO_PI);
+        double turns = nearbyint((c.state[HEADING] - c.iterate.states[0][HEADING]) / TWO_PI);
         if (turns != 0.0)
-            for (int k = 0; k <= N; ++k) c.iterate.states[k][2] += TWO_PI * turns;
+            for (int k = 0; k <= N; ++k) c.iterate.states[k][HEADING] += TWO_PI * turns;
     }
     int retry = AUVMPC_ITERATIONS > AUVMPC_COLD_ITERATIONS ? AUVMPC_ITERATIONS
                                                           : AUVMPC_COLD_ITERATIONS;
@@ -497,11 +503,12 @@ static int spinning(const double *measured, const double *reference) {
     return !c.has_predicted_yaw_rate || fabs(yaw_rate - c.predicted_yaw_rate) > 0.5 * limit;
 }
 
-/* Whether the segment start-end passes inside an obstacle's keep-out disc
- * (StabilisingFeedback._blocked). */
-static int blocked(const double *start, const double *end, const auvmpc_obstacle *obstacles,
-                   int count) {
-    double way[2] = {end[0] - start[0], end[1] - start[1]};
+/* Whether the segment between the positions of the states start and end passes inside an
+ * obstacle's keep-out disc (StabilisingFeedback._blocked). */
+static int blocked(const double *start_state, const double *end_state,
+                   const auvmpc_obstacle *obstacles, int count) {
+    double start[2] = {start_state[PX], start_state[PY]};
+    double way[2] = {end_state[PX] - start[0], end_state[PY] - start[1]};
     double length2 = way[0] * way[0] + way[1] * way[1];
     for (int j = 0; j < count; ++j) {
         const double *center = obstacles[j].center;
@@ -526,15 +533,15 @@ static void recover(const double *measured, const double *reference,
     memcpy(target, reference, sizeof target);
     if (blocked(measured, reference, obstacles, count)) {
         if (!c.holding) {
-            c.hold[0] = measured[0];
-            c.hold[1] = measured[1];
+            c.hold[0] = measured[PX];
+            c.hold[1] = measured[PY];
             c.holding = 1;
         }
         for (int k = 0; k < 2; ++k) {
             for (int i = 0; i < NX; ++i) target[k][i] = 0.0;
-            target[k][0] = c.hold[0];
-            target[k][1] = c.hold[1];
-            target[k][2] = reference[2];
+            target[k][PX] = c.hold[0];
+            target[k][PY] = c.hold[1];
+            target[k][HEADING] = reference[HEADING];
         }
     } else {
         c.holding = 0;

@@ -44,7 +44,7 @@ void auvmpc_reset(const double initial_state[AUVMPC_NX],
                   const double initial_thrust[AUVMPC_THRUSTERS]);
 
 /* One sample: the measured state, the reference at t_k + i Te for i = 0..AUVMPC_HORIZON
- * (row-major, (AUVMPC_HORIZON + 1) x 6), the obstacles that exist now (the nearest
+ * (row-major, (AUVMPC_HORIZON + 1) x AUVMPC_NX), the obstacles that exist now (the nearest
  * AUVMPC_OBSTACLE_SLOTS count). Writes the command and returns its auvmpc_status; no
  * allocation. Before auvmpc_init it holds the previous command and returns FALLBACK. */
 auvmpc_status auvmpc_step(const double measured_state[AUVMPC_NX],

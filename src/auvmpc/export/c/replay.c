@@ -3,12 +3,12 @@
  *   ./replay RUN_DIR/log.csv replay_data.txt [STEPS] > commands.csv
  *
  * log.csv (written by `auvmpc run`) gives the state the controller saw at every sample
- * (columns x, y, psi, u, v, r: the true state, so the run must be free of sensor noise);
+ * (the columns AUVMPC_STATE_NAMES: the true state, so the run must be free of sensor noise);
  * replay_data.txt (written by `auvmpc export-c`) the initial thrust, the reference preview and
  * the obstacles at every sample, computed as the Python closed loop computes them. stdout:
- * k, the command per thruster (%.17g), the status and HPIPM's iterations per sample; stderr:
- * the step time (median, max, max after the cold-started first step, in microseconds) and the
- * controller's memory (static, and HPIPM's workspace allocated at init).
+ * k, the command per input (AUVMPC_INPUT_NAMES, %.17g), the status and HPIPM's iterations
+ * per sample; stderr: the step time (median, max, max after the cold-started first step, in
+ * microseconds) and the controller's memory (static, and HPIPM's workspace allocated at init).
  */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
@@ -27,9 +27,10 @@ static int compare(const void *a, const void *b) {
     return (x > y) - (x < y);
 }
 
-/* Column indices of x, y, psi, u, v, r in log.csv's header; 0 on success. */
+/* Column indices of the state's entries (AUVMPC_STATE_NAMES) in log.csv's header; 0 on
+ * success. */
 static int state_columns(const char *header, int columns[AUVMPC_NX]) {
-    static const char *names[AUVMPC_NX] = {"x", "y", "psi", "u", "v", "r"};
+    static const char *names[AUVMPC_NX] = AUVMPC_STATE_NAMES;
     char line[MAX_LINE];
     strncpy(line, header, MAX_LINE - 1);
     line[MAX_LINE - 1] = '\0';
@@ -73,7 +74,7 @@ int main(int argc, char **argv) {
     static char line[MAX_LINE];
     int columns[AUVMPC_NX], steps, horizon, thrusters;
     if (!fgets(line, MAX_LINE, log) || state_columns(line, columns)) {
-        fprintf(stderr, "replay: %s has no x, y, psi, u, v, r columns\n", argv[1]);
+        fprintf(stderr, "replay: %s lacks a state column (AUVMPC_STATE_NAMES)\n", argv[1]);
         return 2;
     }
     if (fscanf(data, " auvmpc-replay 1 steps %d horizon %d thrusters %d", &steps, &horizon,
@@ -91,8 +92,9 @@ int main(int argc, char **argv) {
         if (fscanf(data, "%lf", &initial_thrust[i]) != 1) return 2;
     double *times = malloc(sizeof(double) * (size_t) steps);
     if (!times) return 2;
+    static const char *inputs[AUVMPC_THRUSTERS] = AUVMPC_INPUT_NAMES;
     printf("k");
-    for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",F%d", i + 1);
+    for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",%s", inputs[i]);
     printf(",status,iterations\n");
     for (int k = 0; k < steps; ++k) {
         int count;
