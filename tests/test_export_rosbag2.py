@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from auvmpc.experiments.run_folder import read_log_frame
 from auvmpc.models.vehicle import load_vehicle
+from auvmpc.sim.log import read_log_table
 from tests.test_cli import run_cli
 
 rosbags = pytest.importorskip("rosbags")
@@ -29,7 +29,7 @@ def _run_and_export(monkeypatch, capsys, tmp_path, scenario, *overrides):
     assert code == 0, err
     code, _, err = run_cli(monkeypatch, capsys, "export", str(run_dir), "--format", "rosbag2")
     assert code == 0, err
-    return run_dir, read_log_frame(run_dir / "log.csv")
+    return run_dir, read_log_table(run_dir / "log.csv").frame()
 
 
 def _read(bag):

@@ -15,7 +15,6 @@ Everything here is also reachable from the command line; the names are kept stab
 
 from __future__ import annotations
 
-import io
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -153,10 +152,8 @@ def log_dataframe(run: Run | SimLog) -> pd.DataFrame:
     The thrust of the last row is NaN (the command on row k is applied over
     [t_k, t_k+1)); numbers are exactly the simulated ones.
     """
-    from auvmpc.experiments.run_folder import read_log_frame
-
     log = run.log if isinstance(run, RunResult | DepthRunResult) else run
-    return read_log_frame(io.StringIO(log.to_csv_text()))
+    return log.dataframe()
 
 
 def figures(run: RunResult) -> dict[str, Figure]:

@@ -14,13 +14,11 @@ later that way).
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
-import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
@@ -31,7 +29,7 @@ from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import read_text_file
 from auvmpc.sim.log import MAX_LOG_BYTES, LogTable, SimLog, read_log_table
 
-__all__ = ["RunFolder", "RunTables", "read_log_frame", "read_run_folder", "read_run_tables"]
+__all__ = ["RunFolder", "RunTables", "read_run_folder", "read_run_tables"]
 
 # What run.json holds (docs/run-folder.md): the keys whose values are objects.
 _OBJECT_KEYS = ("scenario", "plant", "model", "metrics")
@@ -170,29 +168,4 @@ def read_run_tables(run_dir: Path) -> RunTables:
     folder.scenario()  # checked: what the bag reads of it (obstacles, horizon) is valid
     names = folder.log().input_names
     table = folder.table()
-    return RunTables(folder.info, _frame(table.header, table.rows), names)
-
-
-def read_log_frame(source: Path | TextIO) -> pd.DataFrame:
-    """log.csv (a path or an open text stream) as a DataFrame, every number exactly as
-    written (Python's float parser).
-
-    Columns are kept by name; text columns (``status``) stay text, empty cells are NaN.
-    """
-    if isinstance(source, str | Path):
-        with open(source, newline="") as handle:
-            rows = list(csv.reader(handle))
-    else:
-        rows = list(csv.reader(source))
-    return _frame(rows[0], rows[1:])
-
-
-def _frame(header: list[str], body: list[list[str]]) -> pd.DataFrame:
-    columns = {}
-    for i, name in enumerate(header):
-        cells = [row[i] if i < len(row) else "" for row in body]
-        try:
-            columns[name] = np.array([float(c) if c else np.nan for c in cells], dtype=float)
-        except ValueError:
-            columns[name] = cells
-    return pd.DataFrame(columns)
+    return RunTables(folder.info, table.frame(), names)

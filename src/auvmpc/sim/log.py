@@ -17,12 +17,13 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 
 from auvmpc.controllers.shell import BACKOFF_KEYS, ESTIMATE_KEYS, LOGGED_INFO
 from auvmpc.errors import ConfigError
@@ -309,8 +310,17 @@ class SimLog:
         return [name for column in self.csv_columns() for name in column.names]
 
     def to_csv_text(self) -> str:
+        return _csv_text(self.columns(), self._rows())
+
+    def _rows(self) -> Iterator[list[str]]:
+        """log.csv's rows as text, in order."""
         blocks = self.csv_columns()
-        return _csv_text(self.columns(), (self.row(blocks, k) for k in range(self.steps + 1)))
+        return (self.row(blocks, k) for k in range(self.steps + 1))
+
+    def dataframe(self) -> pd.DataFrame:
+        """The log as a DataFrame with log.csv's columns (:meth:`LogTable.frame` of its
+        rows: a per-command column is NaN on the final row)."""
+        return LogTable(Path("log.csv"), "log", self.columns(), list(self._rows())).frame()
 
     def row(self, blocks: tuple[Column, ...], k: int, final: bool = False) -> list[str]:
         """Row k of log.csv by ``blocks`` (:meth:`csv_columns`, made once per log);
@@ -584,6 +594,19 @@ class LogTable:
 
     def damaged(self, reason: str) -> ConfigError:
         return ConfigError(self.field, str(self.path), f"{self.path.name} {reason}")
+
+    def frame(self) -> pd.DataFrame:
+        """The table as a DataFrame with its columns by name, every number exactly as
+        written (Python's float parser); a text column (``status``) stays text, an empty
+        cell is NaN."""
+        columns: dict[str, Any] = {}
+        for i, name in enumerate(self.header):
+            cells = [row[i] for row in self.rows]
+            try:
+                columns[name] = np.array([float(c) if c else np.nan for c in cells])
+            except ValueError:
+                columns[name] = cells
+        return pd.DataFrame(columns)
 
     def require(self, names: Sequence[str], what: str) -> None:
         """Every one of ``names`` must be a column (``what``: whose log has them)."""
