@@ -164,6 +164,8 @@ class RunKind(ABC):
     name: ClassVar[str]
     result_type: ClassVar[type[Finished]]
     log_format: ClassVar[LogFormat]  # what its log holds (its plant's)
+    #: Whether :meth:`read_log` needs run.json's ``model`` (its inputs are the model's).
+    reads_model: ClassVar[bool] = False
 
     @property
     def has_horizontal(self) -> bool:
@@ -309,6 +311,7 @@ class SixDofKind(HorizontalKind):
     controller (controllers/channels.py) on the 6-DOF plant in the water current."""
 
     name = "six-dof"
+    reads_model = True
     result_type = SixDofRunResult
     log_format = SixDofPlant.log_format
     measure = staticmethod(compute_six_dof_metrics)

@@ -85,8 +85,8 @@ class RunFolder:
         """log.csv as a log of ``kind`` (default: the run's own), checked as
         :meth:`SimLog.read_csv` checks it and against the length of run.json's scenario."""
         own = self.kind
-        if own.name == "six-dof" or (kind or own).name == "six-dof":
-            self.vehicle("model")  # its inputs are the model's (one line if it is damaged)
+        if own.reads_model or (kind or own).reads_model:
+            self.vehicle("model")  # checked: one line if it is damaged
         log = (kind or own).read_log(self.table(), self.info)
         self._check_length(log)
         return log

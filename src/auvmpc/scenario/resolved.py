@@ -51,6 +51,7 @@ class ResolvedScenario:
     #: The state its (horizontal) controller predicts; a horizontal path to check.
     controlled_layout: Layout = HORIZONTAL
     has_horizontal_path = True
+    follows_depth = False  # whether a reference's depth is followed (a 6-DOF run's is)
 
     @property
     def controlled_inputs(self) -> ActuatorSet:
@@ -118,6 +119,7 @@ class ResolvedSixDofScenario(ResolvedScenario):
     vertical thrusters after the horizontal ones) and its 3-D reference."""
 
     scenario: SixDofScenario
+    follows_depth = True
 
     def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
         if scenario.plant.scale:

@@ -56,7 +56,6 @@ from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate
 from auvmpc.scenario import (
     ResolvedDepthScenario,
     ResolvedScenario,
-    ResolvedSixDofScenario,
     Scenario,
 )
 from auvmpc.scenario.cost import readable_bytes
@@ -417,7 +416,7 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     reference = make_reference(scenario.reference, resolved.base_dir)
     states = reference.states(t)
     warnings = _check_mission_end(reference.end_time, scenario.duration, sample_time)
-    if reference.has_depth and not isinstance(resolved, ResolvedSixDofScenario):
+    if reference.has_depth and not resolved.follows_depth:
         depths = reference.depths(t)[:, 0]
         if np.ptp(depths) > 0.0:
             warnings.append(
