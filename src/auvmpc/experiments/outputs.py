@@ -391,19 +391,39 @@ def adding(folder: Path | str, names: Iterable[str], option: str) -> Iterator[Pa
     """Write entries ``names`` into auvmpc's own ``folder`` in the block: claimed first
     (:func:`claim`, so a killed write is recognisably auvmpc's); when the block ends,
     those that exist are listed with whatever the named folders hold, and a name the
-    block did not write is no longer claimed. Operating-system errors become one line."""
+    block did not write is no longer claimed. If the block or that listing fails, the
+    entries the block created are removed. Operating-system errors become one line."""
     folder = Path(folder)
     names = list(names)
     before = _listed(_marker(folder) or {}) or set()
+    new = [n for n in names if not os.path.lexists(folder / n)]
     kind = claim(folder, names, option)
+
+    def list_written() -> None:
+        entries = [folder / n for n in names if (folder / n).exists()]
+        kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
+        _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
+
     try:
         with output_errors(option, str(folder)):
             yield folder
-    finally:
-        entries = [folder / n for n in names if (folder / n).exists()]
-        kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
-        with output_errors(option, str(folder)):
-            _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
+            list_written()
+    except BaseException:
+        # All or nothing, like a staged folder: a new entry the marker could not list
+        # (a full disk) would be a stranger in auvmpc's own folder, and a later
+        # --overwrite there refused.
+        for name in new:
+            _remove(folder / name)
+        with contextlib.suppress(OSError):
+            list_written()
+        raise
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
