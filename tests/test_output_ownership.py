@@ -175,6 +175,36 @@ def test_a_symbolic_link_as_out_is_refused(monkeypatch, capsys, tmp_path, run_fo
     assert _snapshot(run_folder) == before and link.is_symlink()
 
 
+def test_a_link_put_in_place_of_an_own_folder_after_the_check_is_left_alone(monkeypatch, tmp_path):
+    """--overwrite moved a link aside as if it were the folder, and removing a folder does
+    not remove a link: it stayed as a stale .partial link. A link put in place after the
+    last check (the only way past it) is now put back and refused at the move itself."""
+    from auvmpc.errors import ConfigError
+    from auvmpc.experiments import outputs
+
+    out, elsewhere = tmp_path / "run", tmp_path / "elsewhere"
+    for folder in (out, elsewhere):
+        with staged_folder(folder, OutputKind.RUN, overwrite=False) as staging:
+            (staging / "log.csv").write_text("t\n")
+    check, swap = outputs.check_output_folder, []
+
+    def check_then_link(path, *args, **kwargs):
+        checked = check(path, *args, **kwargs)
+        if swap:  # after the last check, before the move: a link takes the folder's place
+            shutil.rmtree(out)
+            out.symlink_to(elsewhere)
+        return checked
+
+    monkeypatch.setattr(outputs, "check_output_folder", check_then_link)
+    before = _snapshot(elsewhere)
+    with pytest.raises(ConfigError, match="is a symbolic link"):
+        with staged_folder(out, OutputKind.RUN, overwrite=True) as staging:
+            (staging / "log.csv").write_text("t\n")
+            swap.append(True)
+    assert out.is_symlink() and _snapshot(elsewhere) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["elsewhere", "run"]  # no .partial
+
+
 # ----------------------------------------------------------------------- a real full disk
 
 

@@ -249,7 +249,7 @@ def check_output_folder(
     with output_errors(option, shown):
         target = _absolute(Path(path), option)
         if target.is_symlink():
-            raise ConfigError(option, shown, "is a symbolic link; name the folder itself")
+            raise ConfigError(option, shown, _SYMBOLIC_LINK)
         if not target.exists():
             return target
         if not target.is_dir():
@@ -280,6 +280,7 @@ def check_output_folder(
     return target
 
 
+_SYMBOLIC_LINK = "is a symbolic link; name the folder itself"
 _OLDER_MARKER = (
     "was written by an earlier auvmpc whose marker does not list its files; "
     "remove it yourself or name another folder"
@@ -512,19 +513,29 @@ def staged_folder(
 
 
 def _replace(staging: Path, target: Path, option: str, shown: str) -> None:
-    if not (target.is_dir() and any(target.iterdir())):
+    if not target.is_symlink() and not (target.is_dir() and any(target.iterdir())):
         os.replace(staging, target)  # rename(2) replaces an empty folder, refuses a full one
         return
-    retired = _staging_name(target)  # an own folder, --overwrite given
+    retired = _retire(target, option, shown)  # an own folder, --overwrite given
+    os.replace(staging, target)
+    shutil.rmtree(retired, ignore_errors=True)
+
+
+def _retire(target: Path, option: str, shown: str) -> Path:
+    """Move auvmpc's own folder ``target`` aside (to be removed), checked again there,
+    where nobody else writes: a file added or a symbolic link put in its place since the
+    check is put back and refused (a link moved aside stayed as a stale ``.partial``
+    link, which removing a folder does not remove)."""
+    retired = _staging_name(target)
     os.replace(target, retired)
-    marker = _marker(retired)
-    try:  # checked again where nobody else writes: a file added since the check stays
-        _refuse_strangers(retired, marker or {}, option, shown)
+    try:
+        if retired.is_symlink():
+            raise ConfigError(option, shown, _SYMBOLIC_LINK)
+        _refuse_strangers(retired, _marker(retired) or {}, option, shown)
     except ConfigError:
         os.replace(retired, target)
         raise
-    os.replace(staging, target)
-    shutil.rmtree(retired, ignore_errors=True)
+    return retired
 
 
 def prepare_campaign_folder(
@@ -539,9 +550,7 @@ def prepare_campaign_folder(
     with output_errors(option, shown, target=target):
         if overwrite and own_kind(target) is OutputKind.CAMPAIGN:
             check_output_folder(path, OutputKind.CAMPAIGN, overwrite=True, option=option)
-            retired = _staging_name(target)
-            os.replace(target, retired)
-            shutil.rmtree(retired, ignore_errors=True)
+            shutil.rmtree(_retire(target, option, shown), ignore_errors=True)
         target.mkdir(parents=True, exist_ok=True)
         if _marker(target) is None:
             _write_marker(target, OutputKind.CAMPAIGN, [])
