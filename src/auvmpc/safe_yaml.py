@@ -26,6 +26,7 @@ __all__ = [
     "MAX_YAML_VALUES",
     "YamlLimit",
     "load_yaml",
+    "plain_number",
     "read_text_file",
     "read_yaml_mapping",
     "yaml_problem",
@@ -158,6 +159,16 @@ def load_yaml(text: str) -> Any:
     if len(text) > MAX_YAML_BYTES:
         raise YamlLimit(None, None, f"{len(text)} characters, more than {MAX_YAML_BYTES}")
     return yaml.load(text, Loader=_SafeLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
+_RESOLVER = yaml.resolver.Resolver()  # the safe loader's: it adds no implicit types
+_NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def plain_number(text: str) -> bool:
+    """Whether YAML reads ``text``, written without quotes, as a number: ``"100"`` in a
+    file is a number quoted. (``1e3`` is not: YAML 1.1 reads it as text, quoted or not.)"""
+    return _RESOLVER.resolve(yaml.ScalarNode, text.strip(), (True, False)) in _NUMBER_TAGS
 
 
 def yaml_problem(error: yaml.YAMLError, line: bool = True) -> str:
