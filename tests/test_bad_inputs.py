@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from auvmpc.experiments.campaign import run_campaign
+from auvmpc.references import MAX_TRACK_BYTES
 from tests.test_cli import run_cli
 from tests.test_safe_yaml import billion_laughs
 
@@ -65,6 +66,12 @@ def files(tmp_path):
     )
     (tmp_path / "many.yaml").write_text(
         "name: m\nbase: paper-ideal\nruns: 100000000\nseed: 1\nparameters: {}\n"
+    )
+    with open(tmp_path / "big.csv", "wb") as track:  # sparse: refused by its size alone
+        track.truncate(MAX_TRACK_BYTES + 1)
+    (tmp_path / "big.yaml").write_text(
+        "name: b\nduration: 10\nreference: {type: csv, path: big.csv}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
     )
     (tmp_path / "quoted.yaml").write_text(
         'name: q\nduration: "100"\nreference: {type: circle}\ninitial_state: [0, 0, 0, 0, 0, 0]\n'
@@ -248,6 +255,11 @@ CASES = [
         ("run", "paper-ideal", "--out", "{d}/binary.yaml"),
         "--out: is a file, not a folder",
         "binary.yaml",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/big.yaml"),  # read whole with no limit: minutes and gigabytes before
+        f"reference.path: is {MAX_TRACK_BYTES + 1} bytes, more than a CSV track may be",
+        "big.csv",
     ),  # fmt: skip
     (
         ("run", "{d}/quoted.yaml"),  # pydantic read it as 100: a number quoted is text
