@@ -50,6 +50,7 @@ from auvmpc.safe_yaml import read_text_file
 __all__ = [
     "REFERENCE_TYPES",
     "CORNER_TURN_DEG",
+    "MAX_TRACK_BYTES",
     "Circle",
     "CircleConfig",
     "CsvConfig",
@@ -77,7 +78,6 @@ __all__ = [
     "Waypoints3D",
     "Waypoints3DConfig",
     "WaypointsConfig",
-    "MAX_TRACK_BYTES",
     "load_track_csv",
     "make_reference",
 ]
