@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from auvmpc.experiments.campaign import run_campaign
+from auvmpc.references import MAX_TRACK_BYTES
 from tests.test_cli import run_cli
 from tests.test_safe_yaml import billion_laughs
 
@@ -65,6 +66,15 @@ def files(tmp_path):
     )
     (tmp_path / "many.yaml").write_text(
         "name: m\nbase: paper-ideal\nruns: 100000000\nseed: 1\nparameters: {}\n"
+    )
+    with open(tmp_path / "big.csv", "wb") as track:  # sparse: refused by its size alone
+        track.truncate(MAX_TRACK_BYTES + 1)
+    (tmp_path / "big.yaml").write_text(
+        "name: b\nduration: 10\nreference: {type: csv, path: big.csv}\n"
+        "initial_state: [0, 0, 0, 0, 0, 0]\n"
+    )
+    (tmp_path / "quoted.yaml").write_text(
+        'name: q\nduration: "100"\nreference: {type: circle}\ninitial_state: [0, 0, 0, 0, 0, 0]\n'
     )
     return tmp_path
 
@@ -246,6 +256,26 @@ CASES = [
         "--out: is a file, not a folder",
         "binary.yaml",
     ),  # fmt: skip
+    (
+        ("run", "{d}/big.yaml"),  # read whole with no limit: minutes and gigabytes before
+        f"reference.path: is {MAX_TRACK_BYTES + 1} bytes, more than a CSV track may be",
+        "big.csv",
+    ),  # fmt: skip
+    (
+        ("run", "{d}/quoted.yaml"),  # pydantic read it as 100: a number quoted is text
+        "duration: a number is needed, not text: write it without quotes",
+        "'100'",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", 'controller.sample_time="0.1"'),
+        "controller.sample_time: a number is needed, not text: write it without quotes",
+        "'0.1'",
+    ),  # fmt: skip
+    (
+        ("run", "paper-ideal", "--set", 'plant.scale.m11="2"'),  # a mapping's value
+        "plant.scale.m11: a number is needed, not text: write it without quotes",
+        "'2'",
+    ),  # fmt: skip
 ]
 
 
@@ -268,6 +298,10 @@ def test_each_bad_input_is_one_line_naming_field_and_value(
     [
         ("name: v\nmas: 16.5\n", "vehicle.mas: unknown key, did you mean mass? (vehicle file "),
         ("name: v\n", "vehicle.mass: field required (vehicle file "),
+        (
+            'name: v\nmass: "16.5"\n',
+            "vehicle.mass: a number is needed, not text: write it without quotes (vehicle file ",
+        ),
     ],
 )
 def test_a_vehicle_error_names_the_vehicle_file(monkeypatch, capsys, tmp_path, vehicle, expected):
@@ -290,6 +324,35 @@ def test_a_campaign_file_goes_through_the_same_loader(monkeypatch, capsys, files
         "error: campaign: not valid YAML at line 3: duplicate key 'runs'"
     )
     assert not (files / "c").exists()
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [
+        ('runs: "3"\nparameters: {}\n', "runs: a number is needed, not text"),
+        (
+            "runs: 3\nparameters:\n  plant.scale.Iz_rb: {type: uniform, low: '0.75', high: 1}\n",
+            "parameters.plant.scale.Iz_rb.low: a number is needed, not text",
+        ),
+    ],
+)
+def test_a_campaign_number_in_quotes_is_refused(monkeypatch, capsys, tmp_path, line, expected):
+    (tmp_path / "c.yaml").write_text(f"name: c\nbase: paper-ideal\nseed: 1\n{line}")
+    code, _, stderr = run_cli(
+        monkeypatch, capsys, "campaign", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "c")
+    )
+    assert code == 2
+    assert _one_error_line(stderr).startswith(f"error: {expected}")
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_number_on_the_command_line_stays_a_number():
+    """--set values are YAML scalars: 100 is a number there (and 1e-3, which YAML 1.1 reads
+    as text, is still read as one)."""
+    from auvmpc.scenario import load_scenario
+
+    scenario = load_scenario("paper-ideal", ["duration=100", "plant.max_step=1e-3"]).scenario
+    assert scenario.duration == 100.0 and scenario.plant.max_step == 1e-3
 
 
 def test_absurdly_many_runs_are_refused(monkeypatch, capsys, files):

@@ -6,8 +6,13 @@ from __future__ import annotations
 
 import errno
 import json
+import os
+import shlex
 import shutil
 import sqlite3
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -168,6 +173,143 @@ def test_a_symbolic_link_as_out_is_refused(monkeypatch, capsys, tmp_path, run_fo
     _refused(monkeypatch, capsys, "run", "paper-ideal", *SHORT, "--out", str(link), "--overwrite",
              fragment="is a symbolic link")  # fmt: skip
     assert _snapshot(run_folder) == before and link.is_symlink()
+
+
+def test_a_link_put_in_place_of_an_own_folder_after_the_check_is_left_alone(monkeypatch, tmp_path):
+    """--overwrite moved a link aside as if it were the folder, and removing a folder does
+    not remove a link: it stayed as a stale .partial link. A link put in place after the
+    last check (the only way past it) is now put back and refused at the move itself."""
+    from auvmpc.errors import ConfigError
+    from auvmpc.experiments import outputs
+
+    out, elsewhere = tmp_path / "run", tmp_path / "elsewhere"
+    for folder in (out, elsewhere):
+        with staged_folder(folder, OutputKind.RUN, overwrite=False) as staging:
+            (staging / "log.csv").write_text("t\n")
+    check, swap = outputs.check_output_folder, []
+
+    def check_then_link(path, *args, **kwargs):
+        checked = check(path, *args, **kwargs)
+        if swap:  # after the last check, before the move: a link takes the folder's place
+            shutil.rmtree(out)
+            out.symlink_to(elsewhere)
+        return checked
+
+    monkeypatch.setattr(outputs, "check_output_folder", check_then_link)
+    before = _snapshot(elsewhere)
+    with pytest.raises(ConfigError, match="is a symbolic link"):
+        with staged_folder(out, OutputKind.RUN, overwrite=True) as staging:
+            (staging / "log.csv").write_text("t\n")
+            swap.append(True)
+    assert out.is_symlink() and _snapshot(elsewhere) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["elsewhere", "run"]  # no .partial
+
+
+# ----------------------------------------------------------------------- a real full disk
+
+
+def _on_small_disk(request, tmp_path, body) -> None:
+    """``body(disk)`` with ``disk`` a real 256 KiB tmpfs: the kernel's own ENOSPC, not a stub.
+
+    Mounted in place where root may mount; elsewhere this test runs again, by pytest, in a
+    user and mount namespace (``unshare -rm``), whose root may; skipped where neither can.
+    """
+    if os.environ.get("AUVMPC_TEST_TMPFS"):  # that run, inside the namespace
+        body(Path(os.environ["AUVMPC_TEST_TMPFS"]))
+        return
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mount = f"mount -t tmpfs -o size=256k tmpfs {shlex.quote(str(disk))}"
+    here = subprocess.run(["sh", "-c", mount], capture_output=True, text=True)
+    if here.returncode == 0:
+        try:
+            body(disk)
+        finally:
+            subprocess.run(["umount", "-l", str(disk)], check=True)
+        return
+    inside = ["unshare", "-rm", "sh", "-c", mount + ' && exec "$@"', "sh"]
+    try:
+        probe = subprocess.run([*inside, "true"], capture_output=True, text=True)
+        why = (probe.stderr.strip() or f"exit {probe.returncode}") if probe.returncode else ""
+    except FileNotFoundError:
+        why = "no unshare command"
+    if why:
+        pytest.skip(f"no tmpfs to fill: mount: {here.stderr.strip()}; unshare -rm: {why}")
+    again = subprocess.run(
+        [*inside, sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+         request.node.nodeid],
+        env={**os.environ, "AUVMPC_TEST_TMPFS": str(disk)}, cwd=request.config.rootpath,
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert again.returncode == 0 and "1 passed" in again.stdout, again.stdout + again.stderr
+
+
+def _free_kib(disk) -> int:
+    space = os.statvfs(disk)
+    return space.f_bavail * space.f_frsize // 1024
+
+
+def _fill(disk, free_kib: int) -> None:
+    """Fill ``disk`` up to ``free_kib`` KiB of free space."""
+    filler = disk / "filler"
+    filler.unlink(missing_ok=True)
+    with open(filler, "wb") as stream:
+        os.posix_fallocate(stream.fileno(), 0, (_free_kib(disk) - free_kib) * 1024)
+
+
+def test_a_full_disk_is_one_line_and_leaves_nothing(request, monkeypatch, capsys, tmp_path,
+                                                    short_run):  # fmt: skip
+    """A run out of space at each of its files (0, 8, 16 KiB free: the marker, log.csv,
+    run.json), and --overwrite of an earlier run: one line naming the file meant and the
+    system's reason, exit 2, no staging folder left, the earlier run as it was."""
+
+    def body(disk):
+        out = disk / "run"
+        for free in (0, 8, 16):
+            _fill(disk, free)
+            err = _refused(monkeypatch, capsys, "run", "paper-ideal", *SHORT, "--out", str(out),
+                           fragment="No space left on device")  # fmt: skip
+            assert f"cannot write {out}/" in err
+            assert [p.name for p in disk.iterdir()] == ["filler"]
+        (disk / "filler").unlink()
+        shutil.copytree(short_run, out)
+        before = _snapshot(out)
+        _fill(disk, 8)
+        _refused(monkeypatch, capsys, "run", "paper-ideal", *SHORT, "--out", str(out),
+                 "--overwrite", fragment="No space left on device")  # fmt: skip
+        assert _snapshot(out) == before
+        assert sorted(p.name for p in disk.iterdir()) == ["filler", "run"]
+
+    _on_small_disk(request, tmp_path, body)
+
+
+def test_a_bag_the_full_disk_cannot_list_is_not_left(request, monkeypatch, capsys, tmp_path,
+                                                     short_run):  # fmt: skip
+    """``export`` into a run folder short of space for its marker (0 KiB free), the bag
+    (half of what it takes) and the marker's listing of the bag (room for the bag only;
+    the new marker is written beside the old): the bag fitted, its listing did not, and
+    the bag stayed, a stranger that made a later ``run --overwrite`` there refuse. Now
+    each is one line, and the folder holds what it held; one page more, and it is written."""
+
+    def body(disk):
+        probe = shutil.copytree(short_run, disk / "probe")
+        free = _free_kib(disk)
+        assert run_cli(monkeypatch, capsys, "export", str(probe))[0] == 0
+        needed = free - _free_kib(disk)  # what the bag takes
+        shutil.rmtree(probe)
+        folder = shutil.copytree(short_run, disk / "run")
+        before = {path: data for path, data in _snapshot(folder).items() if path != MARKER}
+        for free, where in ((0, MARKER), (needed // 2, ""), (needed, MARKER)):
+            _fill(disk, free)
+            err = _refused(monkeypatch, capsys, "export", str(folder),
+                           fragment="No space left on device")  # fmt: skip
+            assert f"cannot write {folder / where}" in err
+            assert {p: d for p, d in _snapshot(folder).items() if p != MARKER} == before
+            check_output_folder(folder, OutputKind.RUN, overwrite=True)  # nothing unlisted
+        _fill(disk, needed + os.statvfs(disk).f_bsize // 1024)
+        assert run_cli(monkeypatch, capsys, "export", str(folder))[0] == 0
+
+    _on_small_disk(request, tmp_path, body)
 
 
 # ------------------------------------------------------------------------------ reproduce

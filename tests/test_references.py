@@ -405,7 +405,7 @@ def test_csv_relative_to_base_dir_and_absolute(tmp_path: Path) -> None:
     absolute = make_reference(CsvConfig(path=str(sub / "a.csv")), base_dir=tmp_path)
     np.testing.assert_allclose(rel.state(1.5), [1.5, 0.0, 0.0, 1.0, 0.0, 0.0], atol=1e-12)
     np.testing.assert_array_equal(rel.states([0.5, 2.5]), absolute.states([0.5, 2.5]))
-    with pytest.raises(ConfigError, match=r"reference\.path.*file not found"):
+    with pytest.raises(ConfigError, match=r"reference\.path: no such CSV track"):
         make_reference(CsvConfig(path="a.csv"), base_dir=tmp_path)
 
 
@@ -442,13 +442,13 @@ def test_csv_bad_files(tmp_path: Path, text: str, match: str) -> None:
 
 
 def test_csv_unreadable_files(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"^reference\.path: file not found.*missing\.csv"):
+    with pytest.raises(ConfigError, match=r"^reference\.path: no such CSV track.*missing\.csv"):
         make_reference(CsvConfig(path="missing.csv"), base_dir=tmp_path)
     (tmp_path / "folder.csv").mkdir()
-    with pytest.raises(ConfigError, match=r"^reference\.path: is a directory"):
+    with pytest.raises(ConfigError, match=r"^reference\.path: is a folder"):
         make_reference(CsvConfig(path="folder.csv"), base_dir=tmp_path)
     (tmp_path / "binary.csv").write_bytes(b"t,x,y\n\xff\xfe,0,0\n")
-    with pytest.raises(ConfigError, match=r"^reference\.path: not a UTF-8"):
+    with pytest.raises(ConfigError, match=r"^reference\.path: is not UTF-8"):
         make_reference(CsvConfig(path="binary.csv"), base_dir=tmp_path)
 
 

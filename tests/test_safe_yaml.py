@@ -31,6 +31,7 @@ def test_an_alias_bomb_is_refused_at_the_alias_that_passes_the_budget():
     # 9 + 1 values a level: level 5 is the first past 100000 (each alias counts its anchor's)
     assert yaml_problem(raised.value) == (
         f"refused at line 6: holds more than {MAX_YAML_VALUES} values with its aliases expanded"
+        " at l5.0"
     )
 
 
@@ -63,6 +64,44 @@ def test_each_refusal_says_what_and_where(text, problem):
     with pytest.raises(yaml.YAMLError) as raised:
         load_yaml(text)
     assert yaml_problem(raised.value).startswith(problem)
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        (
+            "controller:\n  Q: [1]\n  Q: [2]\n",
+            "not valid YAML at line 3: duplicate key 'Q' at controller.Q",
+        ),
+        ("a: 1\na: 2", "not valid YAML at line 2: duplicate key 'a'"),  # the key says where
+        (
+            "a:\n  b: " + "[" * 60,
+            f"refused at line 2: nested more than {MAX_YAML_DEPTH} levels deep at a.b.0.0.0.0...",
+        ),
+        (
+            "a: [1, &x [2, *x]]",
+            "refused at line 1: alias *x inside its own anchor (a cycle) at a.1.1",
+        ),
+        (
+            "obstacles:\n  - {center: [1, 2], radius: 2024-13-45}\n",
+            "not valid YAML at line 2: '2024-13-45' is not a valid timestamp (month must be in "
+            "1..12) at obstacles.0.radius",
+        ),
+    ],
+)
+def test_a_refusal_names_its_key_path(text, problem):
+    """The loader knows where it is while it reads a document; a line number alone left
+    the key to be found by hand."""
+    with pytest.raises(yaml.YAMLError) as raised:
+        load_yaml(text)
+    assert yaml_problem(raised.value) == problem
+
+
+def test_a_value_on_the_command_line_is_refused_without_key_path():
+    """A --set value's keys are relative to its field, which the line names already."""
+    with pytest.raises(yaml.YAMLError) as raised:
+        load_yaml("{Q: {x: 1, x: 2}}")
+    assert yaml_problem(raised.value, line=False) == "not valid YAML: duplicate key 'x'"
 
 
 def test_what_safe_load_reads_is_read_the_same():

@@ -5,9 +5,11 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
-__all__ = ["atomic_write_text"]
+__all__ = ["atomic_file", "atomic_write_text"]
 
 
 def _umask() -> int:
@@ -21,11 +23,15 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write_text(path: Path | str, text: str) -> None:
-    """Write a file so that readers see the old content or the new, never a part.
+@contextlib.contextmanager
+def atomic_file(path: Path | str, mode: str = "w") -> Iterator[IO]:
+    """A stream whose content replaces ``path`` when the block ends, all or nothing.
 
-    The file gets the user's normal permissions (0666 minus the umask), like any file
-    the user creates, not the private mode of a temporary file.
+    Written to a hidden temporary file beside ``path`` and renamed onto it, so readers see
+    the old content or the new, never a part; on any exception the temporary file is
+    removed. An operating-system error (a full disk) names ``path``, not the temporary
+    file. The file gets the user's normal permissions (0666 minus the umask), like any
+    file the user creates, not the private mode of a temporary file.
     """
     path = Path(path)
     try:
@@ -36,8 +42,8 @@ def atomic_write_text(path: Path | str, text: str) -> None:
         raise OSError(error.errno, error.strerror, str(path)) from None
     try:
         os.fchmod(handle, 0o666 & ~_umask())
-        with os.fdopen(handle, "w") as stream:
-            stream.write(text)
+        with os.fdopen(handle, mode) as stream:
+            yield stream
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temporary, path)
@@ -47,3 +53,10 @@ def atomic_write_text(path: Path | str, text: str) -> None:
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_text(path: Path | str, text: str) -> None:
+    """Write a text file so that readers see the old content or the new, never a part
+    (:func:`atomic_file`)."""
+    with atomic_file(path) as stream:
+        stream.write(text)

@@ -11,7 +11,7 @@ from typing import Annotated, Any, Union, get_args, get_origin
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from auvmpc.errors import FieldError, unknown_key
-from auvmpc.safe_yaml import load_yaml
+from auvmpc.safe_yaml import load_yaml, plain_number
 
 __all__ = [
     "NonNegative",
@@ -45,7 +45,7 @@ class StrictModel(BaseModel):
             for key, value in data.items():
                 if key not in cls.model_fields:
                     raise FieldError(str(key), value, unknown_key(key, cls.model_fields))
-                _no_bool_for_number(str(key), value, cls.model_fields[key].annotation)
+                _numbers_as_numbers(str(key), value, cls.model_fields[key].annotation)
         return data
 
     def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False):
@@ -59,22 +59,26 @@ class StrictModel(BaseModel):
         return copied
 
 
-def _no_bool_for_number(field: str, value: Any, annotation: Any) -> None:
-    """pydantic reads ``true`` as 1 for a number (``duration: true`` was a 1 s run): a
-    bool where the field, or the items of a list of numbers, take only numbers is refused."""
-    if isinstance(value, bool):
-        if _numbers_only(annotation):
+def _numbers_as_numbers(field: str, value: Any, annotation: Any) -> None:
+    """pydantic reads ``true`` as 1 and ``"100"`` as 100 for a number (``duration: true``
+    was a 1 s run, ``duration: "100"`` a 100 s one, without a word): a bool, or a number
+    quoted, where the field takes only numbers is refused, also as an item of a list or a
+    value of a mapping of numbers. Text that is no number is left to pydantic's error."""
+    if isinstance(value, bool | str):
+        if not _numbers_only(annotation):
+            return
+        if isinstance(value, bool):
             raise FieldError(field, value, "a number is needed, not true/false")
-        return
-    if isinstance(value, list | tuple):
+        if plain_number(value):
+            raise FieldError(field, value, "a number is needed, not text: write it without quotes")
+    elif isinstance(value, list | tuple):
         items = _item_annotations(annotation)
-        for index, item in enumerate(value):
-            if (
-                isinstance(item, bool)
-                and items
-                and _numbers_only(items[min(index, len(items) - 1)])
-            ):
-                raise FieldError(f"{field}.{index}", item, "a number is needed, not true/false")
+        for index, item in enumerate(value if items else ()):
+            _numbers_as_numbers(f"{field}.{index}", item, items[min(index, len(items) - 1)])
+    elif isinstance(value, Mapping):
+        values = _value_annotation(annotation)
+        for key, item in value.items() if values is not None else ():
+            _numbers_as_numbers(f"{field}.{key}", item, values)
 
 
 def _arms(annotation: Any) -> list[Any]:
@@ -98,6 +102,14 @@ def _item_annotations(annotation: Any) -> list[Any]:
         if get_origin(arm) in (tuple, list):
             return [a for a in get_args(arm) if a is not Ellipsis]
     return []
+
+
+def _value_annotation(annotation: Any) -> Any:
+    """The value type of a mapping annotation (``dict[str, float]``), or None."""
+    for arm in _arms(annotation):
+        if get_origin(arm) is dict:
+            return get_args(arm)[1]
+    return None
 
 
 @functools.cache

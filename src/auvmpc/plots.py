@@ -12,8 +12,6 @@ angles in rad, forces in N (``shared/spec/interfaces.md``).
 from __future__ import annotations
 
 import math
-import os
-import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import ArrayLike
 
+from auvmpc.atomic_write import atomic_file
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.layout import DEPTH, HORIZONTAL
@@ -427,16 +426,8 @@ def save_figures(
     written = []
     for name, figure in figures.items():
         target = folder / f"{name}.{fmt}"
-        temporary = folder / f".{name}.{os.getpid()}.{uuid.uuid4().hex}.{fmt}.tmp"
-        try:
-            with open(temporary, "xb") as stream:
-                figure.savefig(stream, format=fmt, dpi=dpi, bbox_inches="tight")
-                stream.flush()
-                os.fsync(stream.fileno())
-            os.replace(temporary, target)
-        except BaseException:
-            temporary.unlink(missing_ok=True)
-            raise
+        with atomic_file(target, "wb") as stream:  # a full disk names the figure's file
+            figure.savefig(stream, format=fmt, dpi=dpi, bbox_inches="tight")
         written.append(target)
     return written
 

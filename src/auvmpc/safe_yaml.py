@@ -26,6 +26,7 @@ __all__ = [
     "MAX_YAML_VALUES",
     "YamlLimit",
     "load_yaml",
+    "plain_number",
     "read_text_file",
     "read_yaml_mapping",
     "yaml_problem",
@@ -48,49 +49,74 @@ class YamlLimit(yaml.MarkedYAMLError):
     """A document refused for its size, nesting or aliases, not for its syntax."""
 
 
+Part = str | int | None  # a key, a list index, or None for a mapping's key itself
+
+
+def _refusal(kind: type[yaml.MarkedYAMLError], problem: str, mark, path: list[Part]):
+    """An error of ``kind`` at ``mark``, with the key path it is at (``key_path``, which
+    :func:`yaml_problem` names): known to the loader while it reads, lost after."""
+    error = kind(None, None, problem, mark)
+    error.key_path = list(path)
+    return error
+
+
 class _SafeLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` counting, while composing, the nesting depth and the values the
-    document holds with each alias expanded (an alias counts as its anchor's values)."""
+    document holds with each alias expanded (an alias counts as its anchor's values), and
+    keeping where each node is (its parent and key), for the key path of a refusal."""
 
     def __init__(self, stream: str) -> None:
         super().__init__(stream)
         self._depth = 0
         self._values = 0
         self._anchor_values: dict[yaml.Node, int] = {}  # finished anchored nodes only
+        self._path: list[Part] = []  # down to the node being composed
+        self._parents: dict[yaml.Node, tuple[yaml.Node | None, Part]] = {}
 
     def compose_node(self, parent, index):
         event = self.peek_event()
+        if isinstance(parent, yaml.SequenceNode):
+            self._path.append(index)
+        else:  # a mapping's value is under its key; the key itself, or the root, under none
+            self._path.append(index.value if isinstance(index, yaml.ScalarNode) else None)
         if isinstance(event, AliasEvent):
             node = self.anchors.get(event.anchor)
             if node is not None:  # an undefined alias: PyYAML's own error
                 if node not in self._anchor_values:
-                    raise YamlLimit(
-                        None, None, f"alias *{event.anchor} inside its own anchor (a cycle)",
-                        event.start_mark,
-                    )  # fmt: skip
+                    problem = f"alias *{event.anchor} inside its own anchor (a cycle)"
+                    raise _refusal(YamlLimit, problem, event.start_mark, self._path)
                 self._count(self._anchor_values[node], event)
-            return super().compose_node(parent, index)
-        if self._depth >= MAX_YAML_DEPTH:
-            raise YamlLimit(
-                None, None, f"nested more than {MAX_YAML_DEPTH} levels deep", event.start_mark
-            )
-        before = self._values
-        self._count(1, event)
-        self._depth += 1
-        node = super().compose_node(parent, index)
-        self._depth -= 1
-        if event.anchor is not None:
-            self._anchor_values[node] = self._values - before
+            node = super().compose_node(parent, index)
+        else:
+            if self._depth >= MAX_YAML_DEPTH:
+                problem = f"nested more than {MAX_YAML_DEPTH} levels deep"
+                raise _refusal(YamlLimit, problem, event.start_mark, self._path)
+            before = self._values
+            self._count(1, event)
+            self._depth += 1
+            node = super().compose_node(parent, index)
+            self._depth -= 1
+            self._parents[node] = (parent, self._path[-1])
+            if event.anchor is not None:
+                self._anchor_values[node] = self._values - before
+        self._path.pop()
         return node
 
     def _count(self, values: int, event) -> None:
         self._values += values
         if self._values > MAX_YAML_VALUES:
-            raise YamlLimit(
-                None, None,
-                f"holds more than {MAX_YAML_VALUES} values with its aliases expanded",
-                event.start_mark,
-            )  # fmt: skip
+            problem = f"holds more than {MAX_YAML_VALUES} values with its aliases expanded"
+            raise _refusal(YamlLimit, problem, event.start_mark, self._path)
+
+    def path_of(self, node: yaml.Node) -> list[Part]:
+        """The keys and indices from the document's root down to ``node`` (a key: down to
+        its mapping)."""
+        path: list[Part] = []
+        while node in self._parents:
+            node, part = self._parents[node]
+            if part is not None:
+                path.append(part)
+        return path[::-1]
 
     def construct_object(self, node, deep=False):
         # A scalar PyYAML resolves but Python cannot build (a timestamp 2024-13-45).
@@ -98,9 +124,8 @@ class _SafeLoader(yaml.SafeLoader):
             return super().construct_object(node, deep=deep)
         except (ValueError, OverflowError) as error:
             kind = node.tag.rsplit(":", 1)[-1]
-            raise ConstructorError(
-                None, None, f"{node.value!r} is not a valid {kind} ({error})", node.start_mark
-            ) from None
+            problem = f"{node.value!r} is not a valid {kind} ({error})"
+            raise _refusal(ConstructorError, problem, node.start_mark, self.path_of(node)) from None
 
 
 def _unique_mapping(loader: _SafeLoader, node: yaml.MappingNode, deep: bool = False):
@@ -114,7 +139,11 @@ def _unique_mapping(loader: _SafeLoader, node: yaml.MappingNode, deep: bool = Fa
         except TypeError:  # unhashable key: the base constructor reports it
             break
         if duplicate:
-            raise ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
+            where = loader.path_of(node)  # at the top level, the key alone says where
+            raise _refusal(
+                ConstructorError, f"duplicate key {key!r}", key_node.start_mark,
+                [*where, key_node.value] if where else [],
+            )  # fmt: skip
         seen.add(key)
     return SafeConstructor.construct_mapping(loader, node, deep=deep)
 
@@ -122,10 +151,8 @@ def _unique_mapping(loader: _SafeLoader, node: yaml.MappingNode, deep: bool = Fa
 def _bounded_int(loader: _SafeLoader, node: yaml.ScalarNode) -> int:
     digits = sum(character.isdigit() for character in node.value)
     if digits > MAX_INT_DIGITS:
-        raise YamlLimit(
-            None, None, f"an integer of {digits} digits (at most {MAX_INT_DIGITS})",
-            node.start_mark,
-        )  # fmt: skip
+        problem = f"an integer of {digits} digits (at most {MAX_INT_DIGITS})"
+        raise _refusal(YamlLimit, problem, node.start_mark, loader.path_of(node))
     return SafeConstructor.construct_yaml_int(loader, node)
 
 
@@ -138,12 +165,11 @@ def _text(loader: _SafeLoader, node: yaml.ScalarNode) -> str:
     value = SafeConstructor.construct_yaml_str(loader, node)
     found = _SURROGATE.search(value)
     if found:
-        raise ConstructorError(
-            None, None,
+        problem = (
             f"{found.group()!r} is half of a UTF-16 surrogate pair, not a character (write a "
-            "character beyond U+FFFF as \\U0001F600)",
-            node.start_mark,
-        )  # fmt: skip
+            "character beyond U+FFFF as \\U0001F600)"
+        )
+        raise _refusal(ConstructorError, problem, node.start_mark, loader.path_of(node))
     return value
 
 
@@ -160,15 +186,37 @@ def load_yaml(text: str) -> Any:
     return yaml.load(text, Loader=_SafeLoader)  # noqa: S506 (a SafeLoader subclass)
 
 
+_RESOLVER = yaml.resolver.Resolver()  # the safe loader's: it adds no implicit types
+_NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def plain_number(text: str) -> bool:
+    """Whether YAML reads ``text``, written without quotes, as a number: ``"100"`` in a
+    file is a number quoted. (``1e3`` is not: YAML 1.1 reads it as text, quoted or not.)"""
+    return _RESOLVER.resolve(yaml.ScalarNode, text.strip(), (True, False)) in _NUMBER_TAGS
+
+
 def yaml_problem(error: yaml.YAMLError, line: bool = True) -> str:
-    """What is wrong in a few words: ``not valid YAML at line 4: duplicate key 'a'``,
-    ``refused at line 2: nested more than 50 levels deep``."""
+    """What is wrong in a few words, and where in a file (``line``; a value on the command
+    line has no lines, and its keys are relative to its field): ``not valid YAML at line 4:
+    duplicate key 'Q' at controller.Q``, ``refused at line 2: nested more than 50 levels
+    deep at description.0.0.0.0.0...``."""
     mark = getattr(error, "problem_mark", None)
     where = f" at line {mark.line + 1}" if line and mark is not None else ""
     problem = getattr(error, "problem", None)
-    detail = f": {problem}" if problem else ""
+    path = getattr(error, "key_path", None) if line else None
+    detail = f": {problem}{_key_path(path)}" if problem else ""
     lead = "refused" if isinstance(error, YamlLimit) else "not valid YAML"
     return f"{lead}{where}{detail}"
+
+
+def _key_path(path: list[Part] | None) -> str:
+    """`` at controller.Q`` (the first 6 parts), or nothing at the document's root."""
+    parts = [str(part) for part in path or () if part is not None]
+    if not parts:
+        return ""
+    shown = ".".join(p if p.isprintable() and len(p) <= 40 else repr(p[:40]) for p in parts[:6])
+    return f" at {shown}{'...' if len(parts) > 6 else ''}"
 
 
 def read_text_file(path: str | Path, field: str, what: str, limit: int = MAX_YAML_BYTES) -> str:

@@ -171,7 +171,10 @@ class ShelledController(Controller):
 
     def compute(self, observation: Observation) -> ControlResult:
         previous = self._previous
-        proposal = self.propose(observation, previous)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            # An overflow in a back end is judged below by its result (not finite: a
+            # fallback); numpy's warnings were lines of source code before the run's line.
+            proposal = self.propose(observation, previous)
         limit = self.solver_time_limit_ms
         late = limit is not None and 1e3 * proposal.solve_time_s > limit
         usable = proposal.plan is not None and bool(np.all(np.isfinite(proposal.plan)))

@@ -249,7 +249,7 @@ def check_output_folder(
     with output_errors(option, shown):
         target = _absolute(Path(path), option)
         if target.is_symlink():
-            raise ConfigError(option, shown, "is a symbolic link; name the folder itself")
+            raise ConfigError(option, shown, _SYMBOLIC_LINK)
         if not target.exists():
             return target
         if not target.is_dir():
@@ -280,6 +280,7 @@ def check_output_folder(
     return target
 
 
+_SYMBOLIC_LINK = "is a symbolic link; name the folder itself"
 _OLDER_MARKER = (
     "was written by an earlier auvmpc whose marker does not list its files; "
     "remove it yourself or name another folder"
@@ -391,19 +392,39 @@ def adding(folder: Path | str, names: Iterable[str], option: str) -> Iterator[Pa
     """Write entries ``names`` into auvmpc's own ``folder`` in the block: claimed first
     (:func:`claim`, so a killed write is recognisably auvmpc's); when the block ends,
     those that exist are listed with whatever the named folders hold, and a name the
-    block did not write is no longer claimed. Operating-system errors become one line."""
+    block did not write is no longer claimed. If the block or that listing fails, the
+    entries the block created are removed. Operating-system errors become one line."""
     folder = Path(folder)
     names = list(names)
     before = _listed(_marker(folder) or {}) or set()
+    new = [n for n in names if not os.path.lexists(folder / n)]
     kind = claim(folder, names, option)
+
+    def list_written() -> None:
+        entries = [folder / n for n in names if (folder / n).exists()]
+        kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
+        _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
+
     try:
         with output_errors(option, str(folder)):
             yield folder
-    finally:
-        entries = [folder / n for n in names if (folder / n).exists()]
-        kept = (_listed(_marker(folder) or {}) or set()) - (set(names) - before)
-        with output_errors(option, str(folder)):
-            _write_marker(folder, kind, {*kept, *_all_paths(folder, entries)})
+            list_written()
+    except BaseException:
+        # All or nothing, like a staged folder: a new entry the marker could not list
+        # (a full disk) would be a stranger in auvmpc's own folder, and a later
+        # --overwrite there refused.
+        for name in new:
+            _remove(folder / name)
+        with contextlib.suppress(OSError):
+            list_written()
+        raise
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
@@ -492,19 +513,29 @@ def staged_folder(
 
 
 def _replace(staging: Path, target: Path, option: str, shown: str) -> None:
-    if not (target.is_dir() and any(target.iterdir())):
+    if not target.is_symlink() and not (target.is_dir() and any(target.iterdir())):
         os.replace(staging, target)  # rename(2) replaces an empty folder, refuses a full one
         return
-    retired = _staging_name(target)  # an own folder, --overwrite given
+    retired = _retire(target, option, shown)  # an own folder, --overwrite given
+    os.replace(staging, target)
+    shutil.rmtree(retired, ignore_errors=True)
+
+
+def _retire(target: Path, option: str, shown: str) -> Path:
+    """Move auvmpc's own folder ``target`` aside (to be removed), checked again there,
+    where nobody else writes: a file added or a symbolic link put in its place since the
+    check is put back and refused (a link moved aside stayed as a stale ``.partial``
+    link, which removing a folder does not remove)."""
+    retired = _staging_name(target)
     os.replace(target, retired)
-    marker = _marker(retired)
-    try:  # checked again where nobody else writes: a file added since the check stays
-        _refuse_strangers(retired, marker or {}, option, shown)
+    try:
+        if retired.is_symlink():
+            raise ConfigError(option, shown, _SYMBOLIC_LINK)
+        _refuse_strangers(retired, _marker(retired) or {}, option, shown)
     except ConfigError:
         os.replace(retired, target)
         raise
-    os.replace(staging, target)
-    shutil.rmtree(retired, ignore_errors=True)
+    return retired
 
 
 def prepare_campaign_folder(
@@ -519,9 +550,7 @@ def prepare_campaign_folder(
     with output_errors(option, shown, target=target):
         if overwrite and own_kind(target) is OutputKind.CAMPAIGN:
             check_output_folder(path, OutputKind.CAMPAIGN, overwrite=True, option=option)
-            retired = _staging_name(target)
-            os.replace(target, retired)
-            shutil.rmtree(retired, ignore_errors=True)
+            shutil.rmtree(_retire(target, option, shown), ignore_errors=True)
         target.mkdir(parents=True, exist_ok=True)
         if _marker(target) is None:
             _write_marker(target, OutputKind.CAMPAIGN, [])

@@ -136,8 +136,8 @@ def _lost(session: RunSession, resolved, diverged: PlantDiverged) -> Finished:
     scenario = resolved.scenario
     t = diverged.k * scenario.controller.sample_time
     reason = (
-        f"the plant diverged at t = {t:g} s (step {diverged.k}: its state became "
-        f"non-finite); likely cause: {likely_cause(resolved)}"
+        f"the plant diverged at t = {t:g} s (step {diverged.k}: {diverged.what}); "
+        f"likely cause: {likely_cause(resolved)}"
     )
     if session.k < 2:
         raise RunFailed(f"{scenario.name} with {scenario.controller.type} lost: {reason}")

@@ -92,12 +92,14 @@ DIVERGED_MAGNITUDE = 1e9
 
 
 class PlantDiverged(ArithmeticError):
-    """The plant's state after sample ``k - 1`` is not finite or beyond DIVERGED_MAGNITUDE;
-    the session holds samples ``0..k-1``."""
+    """The plant's state after sample ``k - 1`` is not finite or beyond DIVERGED_MAGNITUDE,
+    or the plant's step refused it (``what``: a 6-DOF pitch past its limit); the session
+    holds samples ``0..k-1``."""
 
-    def __init__(self, k: int) -> None:
-        super().__init__(f"the plant state became non-finite at step {k}")
+    def __init__(self, k: int, what: str = "its state became non-finite") -> None:
+        super().__init__(f"the plant diverged at step {k}: {what}")
         self.k = k
+        self.what = what
 
 
 def run_session(
@@ -129,7 +131,11 @@ def run_session(
         # The obstacle sensor looks from where the vehicle truly is.
         detections = None if perception is None else perception.observe(t, state[position])
         result = session.step(t, measured, detections, truth, trusted=True)
-        state = plant.step(state, result.u, t)
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # the state is judged below
+                state = plant.step(state, result.u, t)
+        except ArithmeticError as error:  # the plant's own guard: a 6-DOF pitch past 85 deg
+            raise PlantDiverged(k + 1, str(error)) from error
         if not (np.abs(state) < DIVERGED_MAGNITUDE).all():  # also NaN
             raise PlantDiverged(k + 1)
         if on_step is not None:
