@@ -31,7 +31,7 @@ CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}
 USER_FILE, USER_TEXT = "notes.txt", "the user's own notes"
 CAMPAIGN_RUNS = 6
 # Signals land anywhere from the imports (about 1.5 s on 2 cores) to deep in the work.
-WINDOW_S = {"run": (0.2, 6.0), "campaign": (0.2, 12.0)}
+WINDOW_S = {"run": (0.2, 6.0), "campaign": (0.2, 7.0)}
 COMMANDS = {
     "run": ["run", "paper-obstacles", "--set", "duration=300", "--no-figures", "--out"],
     "campaign": [
