@@ -115,7 +115,7 @@ def assert_clean(
     code: int | None, stderr: str, may_fail_run: bool = False, verdict: str | None = None
 ) -> None:
     """The property: success, or one clean refusal; ``verdict``, a command's documented
-    exit-1 line (verify-c's ``above the tolerance``), is an answer too."""
+    exit-1 line (verify-c's ``not reproduced: ...``), is an answer too."""
     if verdict is not None and code == 1 and stderr.strip().startswith(verdict):
         assert len(stderr.strip().splitlines()) == 1, stderr
         return

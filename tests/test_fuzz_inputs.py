@@ -254,8 +254,8 @@ def test_fuzz_campaign_files(
     GENERATED["campaign"] += 1
     validate = execute.validate_campaign
 
-    def checked_then_stop(campaign, total=None):
-        validate(campaign, total)
+    def checked_then_stop(campaign, *options):
+        validate(campaign, *options)
         raise _Checked
 
     monkeypatch.setattr(execute, "validate_campaign", checked_then_stop)

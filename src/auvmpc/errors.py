@@ -5,7 +5,14 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
-__all__ = ["ConfigError", "FieldError", "RunFailed", "format_validation_error", "unknown_key"]
+__all__ = [
+    "ConfigError",
+    "FieldError",
+    "RunFailed",
+    "format_validation_error",
+    "shortened",
+    "unknown_key",
+]
 
 
 class ConfigError(ValueError):
@@ -15,7 +22,8 @@ class ConfigError(ValueError):
         self.field = field
         self.value = value
         self.reason = reason
-        super().__init__(f"{_printable(field)}: {reason} (got {_short(value)})")
+        # the reason may quote the user's text (a CSV header): one line whatever it holds
+        super().__init__(f"{_printable(field)}: {_printable(reason)} (got {_short(value)})")
 
 
 class RunFailed(RuntimeError):
@@ -35,14 +43,19 @@ class FieldError(ValueError):
         super().__init__(f"{field}: {reason}")
 
 
-def _printable(field: str) -> str:
-    """A field named by the user (a key, a --set path) on one line: a newline, another
-    control character or a lone surrogate escaped as repr() would (``\n``, ``\ud800``)."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(field))
+def _printable(text: str) -> str:
+    """Text from the user (a key, a --set path, a quoted header) on one line: a newline,
+    another control character or a lone surrogate escaped as repr() would (``\n``,
+    ``\ud800``)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
 
 
-def _short(value: object, limit: int = 80) -> str:
-    text = repr(value)
+def _short(value: object) -> str:
+    return shortened(repr(value))
+
+
+def shortened(text: str, limit: int = 80) -> str:
+    """At most ``limit`` characters of ``text`` (a value quoted in a refusal)."""
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 

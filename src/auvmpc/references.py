@@ -43,7 +43,7 @@ from pydantic import Field, field_validator, model_validator
 from scipy.interpolate import CubicSpline
 
 from auvmpc.config import NonNegative, StrictModel
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, shortened
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.safe_yaml import read_text_file
 
@@ -1072,9 +1072,8 @@ def load_track_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     header = [name.strip() for name in rows[0][1]]
     for name in _CSV_COLUMNS:
         if name not in header:
-            raise ConfigError(
-                _CSV_FIELD, where, f"missing column '{name}' (header: {', '.join(header)})"
-            )
+            shown = shortened(", ".join(header))
+            raise ConfigError(_CSV_FIELD, where, f"missing column '{name}' (header: {shown})")
         if header.count(name) > 1:
             raise ConfigError(_CSV_FIELD, where, f"column '{name}' appears more than once")
     columns = [header.index(name) for name in _CSV_COLUMNS]
