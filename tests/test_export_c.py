@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -247,3 +248,14 @@ def test_the_python_step_takes_its_blasfeo_from_the_environment(tmp_path, monkey
     (folder / "blasfeo_target.h").write_text("#define TARGET_X64_INTEL_SKYLAKE_X\n")
     with pytest.raises(ConfigError, match=f"^{BLASFEO_ENV}: .*packs 8 doubles per panel"):
         simulate(scenario)
+
+
+def test_the_status_numbers_are_the_headers():
+    """verify-c reads the replay's statuses by number: its table is auvmpc_status's order."""
+    from auvmpc.export.c_library import _C_STATUS, _TEMPLATES
+
+    header = (_TEMPLATES / "auvmpc_controller.h").read_text()
+    numbers = {
+        name.lower(): int(number) for name, number in re.findall(r"AUVMPC_([A-Z]+) = (\d+)", header)
+    }
+    assert numbers == {str(status): i for i, status in enumerate(_C_STATUS)}

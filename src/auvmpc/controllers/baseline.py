@@ -53,7 +53,7 @@ from pydantic import Field, model_validator
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
 from auvmpc.controllers.shell import Proposal, ShelledController
-from auvmpc.controllers.tracking_law import PATH_ERRORS, tracking_law
+from auvmpc.controllers.tracking_law import PATH_ERRORS, apply_law, tracking_law
 from auvmpc.errors import FieldError
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_FORCE_XY, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams
@@ -191,10 +191,6 @@ class BaselineController(ShelledController):
         """Integral state ``[X, Y, N]``: world-frame force (N) and yaw moment (N m), a copy."""
         return self._integral.copy()
 
-    def assume_disturbance(self, disturbance: np.ndarray) -> None:
-        """Start the integral state at a known ``[X, Y, N]`` (world force N, moment N m)."""
-        self._integral = PLANAR_FORCE.vector(disturbance).copy()
-
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> BaselineController:
         return cls(model, config.for_vehicle(model).sample_time, config.baseline)
@@ -227,9 +223,8 @@ class BaselineController(ShelledController):
                 f"got {reference.shape}"
             )
 
-        ahead = reference[1] if len(reference) > 1 else reference[0]
-        law = self._law(state, reference[0], ahead, self.disturbance_estimate)
-        tau_des, errors, integrated, target, requested = (v.full().ravel() for v in law)
+        law = apply_law(self._law, state, reference, self.disturbance_estimate)
+        tau_des, errors, integrated, target, requested = law
         # Each thruster clipped into the box one rate step around the previous command; since
         # both ends are within the force limits, so is the result.
         thrust, _ = project_to_limits(target, previous, self.model, self.sample_time)

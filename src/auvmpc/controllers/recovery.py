@@ -27,7 +27,7 @@ import numpy as np
 
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.baseline import BaselineConfig
-from auvmpc.controllers.tracking_law import LAW_OUTPUTS, tracking_law
+from auvmpc.controllers.tracking_law import LAW_OUTPUTS, apply_law, tracking_law
 from auvmpc.models.heave import heave_damping_force
 from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
@@ -80,9 +80,7 @@ class StabilisingFeedback:
         disturbance = proposal.disturbance
         if disturbance is None or np.size(disturbance) != PLANAR_FORCE.size:
             disturbance = np.zeros(PLANAR_FORCE.size)
-        ahead = target[1] if len(target) > 1 else target[0]
-        outputs = self.law(state, target[0], ahead, np.ravel(disturbance))
-        return outputs[_THRUST].full().ravel()
+        return apply_law(self.law, state, target, np.ravel(disturbance))[_THRUST]
 
     def _blocked(self, start: np.ndarray, end: np.ndarray, observation: Observation) -> bool:
         """Whether the segment start-end passes inside any obstacle's keep-out disc."""

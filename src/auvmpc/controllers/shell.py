@@ -162,6 +162,8 @@ class ShelledController(Controller):
         self._plan: np.ndarray | None = None  # what a fallback follows
         self._unsolved = 0  # samples in a row without an applied proposal
         self._predicted_yaw_rate: float | None = None  # at this sample, by the applied plan
+        if self.recovery is not None:
+            self.recovery.release()
         self.restart(initial_state, initial_thrust)
 
     @property
@@ -195,6 +197,8 @@ class ShelledController(Controller):
             )
             if recovered:
                 wanted = self.recovery.command(observation, previous, proposal)
+                if not np.all(np.isfinite(wanted)):  # a non-finite state or estimate in it
+                    wanted = previous
                 self._plan = None
                 self.forget_plan()
             else:

@@ -10,8 +10,8 @@ its C), so the feedback a vehicle falls back on is the same in Python and on boa
 The function :func:`tracking_law` builds takes the state ``[x y psi u v r]``, the reference
 now and one sample ahead, and the disturbance estimate (world force X, Y and yaw moment N)
 and returns the generalised force asked for, the errors, what the integrators are to see,
-the thrust within the force limits (before the rate limit, which the caller's projection
-applies) and the unlimited allocation.
+the thrust (within the force limits where they allow zero thrust; before the rate limit,
+which the caller's projection applies) and the unlimited allocation.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 if TYPE_CHECKING:
     from auvmpc.controllers.baseline import BaselineConfig
 
-__all__ = ["LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "tracking_law"]
+__all__ = ["LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "apply_law", "tracking_law"]
 
 LAW_INPUTS = ("state", "reference_now", "reference_ahead", "disturbance")
 LAW_OUTPUTS = ("tau", "errors", "integrated", "thrust", "requested")
@@ -44,6 +44,16 @@ PATH_ERRORS = Layout(names=("along", "cross", "heading"))
 
 _X, _Y, _PSI, _U, _V, _R = (HORIZONTAL.index(name) for name in HORIZONTAL.names)
 _FORCE_X, _FORCE_Y = (PLANAR_FORCE.index(name) for name in ("X", "Y"))
+
+
+def apply_law(
+    law: ca.Function, state: np.ndarray, reference: np.ndarray, disturbance: np.ndarray
+) -> list[np.ndarray]:
+    """``law``'s outputs (LAW_OUTPUTS, as NumPy vectors) for ``state``, the reference rows
+    from now on (the second is one sample ahead; a single row is held) and the disturbance
+    estimate."""
+    ahead = reference[1] if len(reference) > 1 else reference[0]
+    return [value.full().ravel() for value in law(state, reference[0], ahead, disturbance)]
 
 
 def _rotate(angle, vector) -> list:

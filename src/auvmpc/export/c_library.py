@@ -114,7 +114,7 @@ def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
     N, n, S = horizon, thrusters, max(slots, 1)
     nz, nv = _NX + n, n + (1 if slots else 0)
     iterates = 3 * ((N + 1) * _NX + N * n)  # guess, next guess, iterate
-    shell = n * (1 + N)  # previous command, fallback plan
+    shell = n * (1 + N) + 3  # previous command, fallback plan, predicted yaw rate, hold
     # state, disturbance, reference, obstacle slots with their used flags, weights, movable
     sample = _NX + ND + (N + 1) * _NX + (SLOT_FIELDS + 1) * S + N * _NX + N
     step = (N + 1) * n + (N + 1) * nz + N * nv + N  # P, dz, dv, slack
@@ -404,7 +404,7 @@ def export_c(
     return Path(out)
 
 
-# auvmpc_status (auvmpc_controller.h) by its number.
+# auvmpc_status (auvmpc_controller.h) by its number (tests/test_export_c.py reads the header).
 _C_STATUS = (
     ControlStatus.OK,
     ControlStatus.RELAXED,
@@ -431,8 +431,21 @@ class VerifyResult:
     status_differences: int  # steps whose C status is not the Python run's
 
     @property
+    def failures(self) -> list[str]:
+        """What the replay did not reproduce (none: it passed)."""
+        found = []
+        if self.max_difference_n > COMMAND_TOLERANCE_N:
+            found.append(f"commands above the tolerance of {COMMAND_TOLERANCE_N:g} N")
+        if self.status_differences:
+            found.append(
+                f"{self.status_differences} steps with another status than the run's (the C "
+                "has neither the IPOPT rescue nor the estimator's restart: docs/onboard.md)"
+            )
+        return found
+
+    @property
     def passed(self) -> bool:
-        return self.max_difference_n <= COMMAND_TOLERANCE_N and self.status_differences == 0
+        return not self.failures
 
 
 @dataclass(frozen=True)
@@ -556,7 +569,16 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
     c_thrust = np.array([[float(r[name]) for name in inputs] for r in commands])
     py_thrust = np.column_stack([log.column(name) for name in inputs])[: len(commands)]
     difference = np.abs(c_thrust - py_thrust).max(axis=1)
-    c_status = [_C_STATUS[int(r["status"])] for r in commands]
+    if len(commands) != log.steps:  # the export's replay data ends before the run
+        raise ConfigError(
+            "RUN_DIR", str(run_dir),
+            f"has {log.steps} steps, the export replays {len(commands)}: export the scenario "
+            "with the run's duration",
+        )  # fmt: skip
+    codes = [int(r["status"]) for r in commands]
+    if not all(0 <= code < len(_C_STATUS) for code in codes):
+        raise RunFailed(f"replay wrote a status auvmpc does not know: {sorted(set(codes))}")
+    c_status = [_C_STATUS[code] for code in codes]
     return VerifyResult(
         steps=len(commands),
         max_difference_n=float(difference.max()),
@@ -569,7 +591,7 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
         fallbacks=c_status.count(ControlStatus.FALLBACK),
         recoveries=c_status.count(ControlStatus.RECOVERY),
         status_differences=sum(
-            mine != logged for mine, logged in zip(c_status, log.status, strict=False)
+            mine != logged for mine, logged in zip(c_status, log.status, strict=True)
         ),
     )
 

@@ -17,6 +17,7 @@ from auvmpc.controllers.base import Controller
 from auvmpc.environment.disturbances import WorldDisturbance
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.models.six_dof import PitchSingularity
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.plant import HorizontalPlant, Plant, plant_step
@@ -134,7 +135,7 @@ def run_session(
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # the state is judged below
                 state = plant.step(state, result.u, t)
-        except ArithmeticError as error:  # the plant's own guard: a 6-DOF pitch past 85 deg
+        except PitchSingularity as error:  # the plant's own guard: a 6-DOF pitch past 85 deg
             raise PlantDiverged(k + 1, str(error)) from error
         if not (np.abs(state) < DIVERGED_MAGNITUDE).all():  # also NaN
             raise PlantDiverged(k + 1)

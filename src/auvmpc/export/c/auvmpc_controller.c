@@ -578,6 +578,8 @@ auvmpc_status auvmpc_step(const double measured_state[NX],
         recovered = c.qp && (spin || !c.has_plan || c.unsolved > AUVMPC_PLAN_FALLBACK_STEPS);
         if (recovered) {
             recover(measured_state, reference, obstacles, obstacle_count, wanted);
+            if (!all_finite(wanted, NT)) /* a non-finite state or estimate in it */
+                memcpy(wanted, c.previous, sizeof wanted);
             c.has_plan = 0;
             c.has_next_guess = 0;
         } else if (c.has_plan && N > 1) { /* the previous plan's next move, shifted on */
