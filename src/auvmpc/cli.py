@@ -744,6 +744,29 @@ def identify(
         str | None,
         typer.Option("--reversed", help="DataFlash: channels whose thrust is reversed, e.g. 2,3"),
     ] = None,
+    current: Annotated[
+        bool,
+        typer.Option(
+            "--current",
+            help="also estimate a constant current (world frame, from the logged heading); "
+            "reported, not written into the vehicle",
+        ),
+    ] = False,
+    thrust_gain: Annotated[
+        bool,
+        typer.Option(
+            "--thrust-gain",
+            help="also estimate one gain on every thrust (needs --fix: the gain is measured "
+            "in a held parameter's scale); the vehicle file's thrust limits are scaled by it",
+        ),
+    ] = False,
+    fix: Annotated[
+        str | None,
+        typer.Option(
+            "--fix",
+            help="parameters held at the start file's values, e.g. m11 or m11,Iz_added",
+        ),
+    ] = None,
     then_run: Annotated[
         str | None,
         typer.Option(
@@ -755,9 +778,10 @@ def identify(
     ] = None,
     overwrite: Overwrite = False,
 ) -> None:
-    """Identify the 3-DOF model (masses, added inertia, damping) from logs; write the vehicle
-    file, identification.json, identification.md and a fit figure beside it."""
-    from auvmpc.identification import LogOptions, write_identification
+    """Identify the 3-DOF model (masses, added inertia, damping; optionally a current and a
+    thrust gain) from logs; write the vehicle file, identification.json, identification.md
+    and a fit figure beside it."""
+    from auvmpc.identification import LogOptions, Unknowns, write_identification
 
     options = LogOptions(
         sample_time=sample_time,
@@ -769,14 +793,16 @@ def identify(
         channels=_channel_list(channels, "--channels"),
         reversed_channels=_channel_list(reversed_channels, "--reversed"),
     )
-    found = write_identification(logs, vehicle, out, holdout, overwrite, options)
+    fixed = tuple(name.strip() for name in fix.split(",") if name.strip()) if fix else ()
+    unknowns = Unknowns(current=current, thrust_gain=thrust_gain, fixed=fixed)
+    found = write_identification(logs, vehicle, out, holdout, overwrite, options, unknowns)
     table = Table(title=f"identified from {len(found.logs)} log(s)")
     for column in ("parameter", "start", "identified", "95 % interval", "excited"):
         table.add_column(column)
-    for p in found.parameters:
+    for p in found.parameters + found.extras:
         table.add_row(
             p.name, f"{p.start:.4g}", f"{p.value:.4g}", f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]",
-            "yes" if p.excited else "NO",
+            "fixed" if p.fixed else ("yes" if p.excited else "NO"),
         )  # fmt: skip
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)

@@ -5,11 +5,12 @@
   run folders, resampling; :mod:`~auvmpc.identification.rosbag` (ROS 2 bags),
   :mod:`~auvmpc.identification.dataflash` (ArduSub DataFlash logs),
   :mod:`~auvmpc.identification.thruster_curve` (PWM to force)
-- :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals
+- :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals (a
+  current and a thrust gain as optional unknowns)
 - :mod:`~auvmpc.identification.report`: vehicle file, identification.json, report, figure
 """
 
-from auvmpc.identification.estimation import PARAMETERS, Identification, identify
+from auvmpc.identification.estimation import PARAMETERS, Identification, Unknowns, identify
 from auvmpc.identification.excitation import design_excitation, write_excitation
 from auvmpc.identification.logs import LogOptions, VelocityLog, read_log, read_run_folder
 from auvmpc.identification.report import write_identification
@@ -18,6 +19,7 @@ __all__ = [
     "PARAMETERS",
     "Identification",
     "LogOptions",
+    "Unknowns",
     "VelocityLog",
     "design_excitation",
     "identify",

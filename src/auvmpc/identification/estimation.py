@@ -8,12 +8,29 @@ The model is the velocity part of :mod:`auvmpc.models.vehicle` (Fossen 2021, ch.
 
 with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknowns are
 :data:`PARAMETERS`; ``Iz_rb`` is kept from the start file (only the sum Iz is observable).
+Optionally (:class:`Unknowns`, :data:`EXTRAS`) also:
+
+- a **constant current** ``(V_x, V_y)`` in the world frame of the log's heading. The model
+  then holds for the velocity through the water ``nu_r = nu - nu_c`` with
+  ``(u_c, v_c) = body_from_world(V, psi)`` (Fossen 2021, sec. 6.5; ``models.vehicle.dynamics``):
+  since ``u_c' = r v_c`` and ``v_c' = -r u_c``, the relative velocity obeys the equations
+  above exactly, current-free, and what is measured is ``nu_r + nu_c(psi)``, psi being the
+  logged heading;
+- a **thrust gain** ``g``, one factor on every thrust (``tau = g T F``). A gain and the
+  masses and dampings scale together (``g tau = M nu' - D nu ...`` is unchanged when all of
+  them are multiplied by one factor; ``Iz_rb`` does not help, ``Iz_added`` takes it up), so
+  the gain is only identifiable against a parameter held at its start value
+  (``Unknowns.fixed``): the estimates are then in that parameter's scale.
 
 1. Equation error (:func:`equation_error`). The equations are linear in the parameters
-   once the accelerations are known: ``A theta = b`` with rows per sample and axis. The
-   velocities and their derivatives come from a Savitzky-Golay filter (Savitzky and Golay
-   1964), each axis' rows are scaled by its force level, and ``scipy.linalg.lstsq`` solves
-   it. Noise in the regressors biases this estimate; it is a start, not the answer.
+   (and the gain) once the accelerations are known: ``A theta = b`` with rows per sample
+   and axis. The velocities and their derivatives come from a Savitzky-Golay filter
+   (Savitzky and Golay 1964), each axis' rows are scaled by its force level, and
+   ``scipy.linalg.lstsq`` solves it. A current enters nonlinearly (through |u_r|); the
+   least squares are solved for each trial current inside a trust-region Gauss-Newton
+   search (``scipy.optimize.least_squares``) over the current's two components (variable
+   projection, Golub and Pereyra 1973). Noise in the regressors biases this estimate; it
+   is a start, not the answer.
 2. Output error (:func:`output_error`). The velocity model is simulated (RK4, thrust held
    over each sample) over segments of the log, each segment from its own free initial
    velocity (multiple shooting without continuity: the segments are independent, so a
@@ -33,11 +50,13 @@ with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknown
 4. Excitation. A parameter is *excited* if its interval is narrower than its value
    (half-width <= 0.5 |value|) or if its interval moves its equation's force by less than
    :data:`SENSITIVITY_SHARE` of that force's RMS (a parameter that is small but well
-   determined, e.g. a zero linear damping), judged on the second fit. Parameters that are
-   not are fixed at their start value and the fit is repeated without them; the vehicle
-   file keeps their start values and the report names them.
+   determined, e.g. a zero linear damping; for the current, the force through the
+   equations' derivative with respect to it), judged on the second fit. Parameters that are
+   not are fixed at their start value (no current, gain 1) and the fit is repeated without
+   them; the vehicle file keeps their start values and the report names them.
 5. Validation: the held-out end of each log is simulated from its first measured
-   velocity with the identified and with the start parameters; RMS of the differences.
+   velocity with the identified and with the start parameters (the start without a current
+   and with gain 1); RMS of the differences.
 """
 
 from __future__ import annotations
@@ -49,6 +68,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 from scipy.linalg import lstsq
+from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
 from auvmpc.errors import ConfigError
@@ -57,6 +77,7 @@ from auvmpc.models.integrators import rk4_step
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
+    body_from_world,
     damping_rates,
     velocity_derivative,
 )
@@ -64,9 +85,11 @@ from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
 from auvmpc.sim.plant import substeps_for
 
 __all__ = [
+    "EXTRAS",
     "PARAMETERS",
     "Identification",
     "ParameterEstimate",
+    "Unknowns",
     "equation_error",
     "identify",
     "output_error",
@@ -76,6 +99,14 @@ __all__ = [
 
 PARAMETERS = ("m11", "m22", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr")
 MASSES = ("m11", "m22", "Iz_added")
+# Unknowns beside the vehicle's (module docstring): one factor on every thrust, and the
+# world-frame current (m/s). Each has a neutral value, held where it is not estimated.
+EXTRAS = ("thrust_gain", "current_x", "current_y")
+NEUTRAL = np.array([1.0, 0.0, 0.0])
+UNKNOWNS = PARAMETERS + EXTRAS
+_P, _U = len(PARAMETERS), len(UNKNOWNS)
+_GAIN = UNKNOWNS.index("thrust_gain")
+_CURRENT = slice(UNKNOWNS.index("current_x"), UNKNOWNS.index("current_y") + 1)
 # 95 % two-sided normal quantile.
 Z95 = 1.959963984540054
 # A parameter whose interval moves its equation's force by less than this share of the
@@ -104,6 +135,64 @@ def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
 
 def start_vector(vehicle: VehicleParams) -> np.ndarray:
     return np.array([float(getattr(vehicle, name)) for name in PARAMETERS])
+
+
+def start_unknowns(vehicle: VehicleParams) -> np.ndarray:
+    """:data:`UNKNOWNS` at their start: the vehicle's parameters, gain 1, no current."""
+    return np.concatenate([start_vector(vehicle), NEUTRAL])
+
+
+@dataclass(frozen=True)
+class Unknowns:
+    """What :func:`identify` estimates besides the vehicle's parameters and what it holds at
+    the start file's values (``auvmpc identify --current --thrust-gain --fix``)."""
+
+    current: bool = False  # the constant world-frame current (V_x, V_y)
+    thrust_gain: bool = False  # one factor on every thrust: needs a held parameter
+    fixed: tuple[str, ...] = ()  # of PARAMETERS, held at the start file's values
+
+    def held(self) -> tuple[str, ...]:
+        """The names in :data:`UNKNOWNS` not estimated: the fixed ones and the extras not
+        asked for (held at gain 1, no current)."""
+        extras = () if self.thrust_gain else ("thrust_gain",)
+        return (*self.fixed, *extras, *(() if self.current else ("current_x", "current_y")))
+
+    def check(self, vehicle: VehicleParams, logs: list[VelocityLog]) -> None:
+        """One ConfigError line for an unknown name, a gain without a scale to be measured
+        in (module docstring), or a current asked of a log without a heading."""
+        unknown = [name for name in self.fixed if name not in PARAMETERS]
+        if unknown:
+            raise ConfigError(
+                "--fix", ",".join(unknown), f"not a parameter identify estimates: one of "
+                f"{', '.join(PARAMETERS)}",
+            )  # fmt: skip
+        if self.thrust_gain and not any(getattr(vehicle, name) != 0 for name in self.fixed):
+            raise ConfigError(
+                "--thrust-gain", ",".join(self.fixed) or None,
+                "a gain on every thrust and the masses and dampings scale together (the log "
+                "cannot tell g tau = M nu' - D nu from tau = M/g nu' - D/g nu): hold one "
+                "nonzero parameter at the start file's value, e.g. --fix m11",
+            )  # fmt: skip
+        for log in logs if self.current else ():
+            if log.heading is None:
+                raise ConfigError(
+                    "LOG", log.name, "has no heading, which --current needs (a current fixed "
+                    "in the world turns in the body as the vehicle turns)",
+                )  # fmt: skip
+
+
+def current_rows(current, heading: np.ndarray):
+    """The current's body components (u_c, v_c, 0) at each heading (n,), as rows (3, n):
+    ``current`` (2,) NumPy or a CasADi column (then a CasADi matrix)."""
+    u_c, v_c = body_from_world(current, np.asarray(heading, dtype=float)[None, :])
+    if isinstance(u_c, ca.MX | ca.SX):
+        return ca.vertcat(u_c, v_c, ca.DM.zeros(1, len(heading)))
+    return np.vstack([u_c, v_c, np.zeros_like(u_c)])
+
+
+def _heading(log: VelocityLog) -> np.ndarray:
+    """The log's heading, or zeros where it has none (then the current is held at zero)."""
+    return np.zeros(log.steps + 1) if log.heading is None else log.heading
 
 
 def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float):
@@ -163,31 +252,72 @@ def noise_levels(logs: list[VelocityLog]) -> np.ndarray:
     return np.maximum(noise, 0.01 * np.maximum(level, 1e-6))
 
 
-def _stacked_regression(logs: list[VelocityLog], vehicle: VehicleParams):
+def _stacked_regression(logs: list[VelocityLog], vehicle: VehicleParams, current=NEUTRAL[1:]):
+    """The rows of every log at a trial ``current`` (2,): ``A`` (3, N, 10) over the
+    parameters and the gain (whose column is the applied force), ``b`` (3, N)."""
     blocks_a, blocks_b = [], []
     for log in logs:
         nu, nu_dot = smoothed(log)
+        # The model holds for the velocity through the water (module docstring).
+        psi = savgol_filter(_heading(log), filter_window(log.sample_time), FILTER_ORDER)
+        u_c, v_c, _ = current_rows(np.asarray(current, dtype=float), psi)
+        r = nu[:, 2]
+        nu = nu - np.column_stack([u_c, v_c, np.zeros_like(r)])
+        nu_dot = nu_dot - np.column_stack([r * v_c, -r * u_c, np.zeros_like(r)])
         tau = applied_force(log, vehicle)
         # The derivative at t_k spans the commands before and after it: their mean.
         tau_k = np.vstack([tau[:1], 0.5 * (tau[:-1] + tau[1:])])
         edge = filter_window(log.sample_time) // 2  # the filter's ends are extrapolations
         rows = slice(edge, log.steps - edge)
         A, b = regression(nu[:-1][rows], nu_dot[:-1][rows], tau_k[rows], vehicle.Iz_rb)
-        blocks_a.append(A)
-        blocks_b.append(b)
+        force = tau_k[rows].T  # b holds -tau: with a gain it is the gain's column
+        blocks_a.append(np.concatenate([A, force[:, :, None]], axis=2))
+        blocks_b.append(b + force)
     return np.concatenate(blocks_a, axis=1), np.concatenate(blocks_b, axis=1)
 
 
+# Central differences of the rows in the current (m/s): for the excitation test only.
+CURRENT_STEP = 1e-4
+
+
 def equation_error(
-    logs: list[VelocityLog], vehicle: VehicleParams
+    logs: list[VelocityLog], vehicle: VehicleParams, held: tuple[str, ...] = EXTRAS
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares parameters (9,) and the regression ``A`` (3, N, 9), ``b`` (3, N) they
-    solve, each axis' rows scaled by its force RMS so that N and N m weigh alike."""
+    """Least-squares :data:`UNKNOWNS` (12,), the ``held`` ones at their start, and the
+    regression ``A`` (3, N, 12), ``b`` (3, N) at that estimate, each axis' rows scaled by
+    its force RMS so that N and N m weigh alike. ``A``'s current columns are the rows'
+    derivatives with respect to the current (their equations are not linear in it)."""
+    start = start_unknowns(vehicle)
+    linear = np.array([name not in held for name in UNKNOWNS[: _GAIN + 1]])
+    fixed_part = np.where(linear, 0.0, start[: _GAIN + 1])
     A, b = _stacked_regression(logs, vehicle)
-    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ start_vector(vehicle)) ** 2, 1))
-    scale = np.where(scale > 0, scale, 1.0)
-    theta, *_ = lstsq((A / scale[:, None, None]).reshape(-1, 9), (b / scale[:, None]).ravel())
-    return theta, A, b
+    applied = b - A[..., _GAIN]  # b without the gain: -tau (+ Iz_rb r' for yaw)
+    scale = np.sqrt(np.mean(applied**2, axis=1)) + np.sqrt(
+        np.mean((A[..., :_P] @ start[:_P]) ** 2, 1)
+    )
+    scale = np.where(scale > 0, scale, 1.0)[:, None]
+
+    def solve(current) -> tuple[np.ndarray, np.ndarray]:
+        rows, rhs = _stacked_regression(logs, vehicle, current)
+        rhs = (rhs - rows @ fixed_part) / scale
+        rows = rows[..., linear] / scale[:, :, None]
+        solution, *_ = lstsq(rows.reshape(-1, int(linear.sum())), rhs.ravel())
+        return solution, (rows @ solution - rhs).ravel()
+
+    current = NEUTRAL[1:]
+    if "current_x" not in held:  # variable projection over the current (module docstring)
+        current = least_squares(lambda c: solve(c)[1], np.zeros(2), x_scale=0.1).x
+    theta = start.copy()
+    theta[_CURRENT] = current
+    theta[: _GAIN + 1][linear] = solve(current)[0]
+    A, b = _stacked_regression(logs, vehicle, current)
+    columns = [np.zeros_like(b)] * 2
+    for axis in range(2 if "current_x" not in held else 0):
+        step = CURRENT_STEP * np.eye(2)[axis]
+        moved = [_stacked_regression(logs, vehicle, current + sign * step) for sign in (1, -1)]
+        residuals = [rows @ theta[: _GAIN + 1] - rhs for rows, rhs in moved]
+        columns[axis] = (residuals[0] - residuals[1]) / (2 * CURRENT_STEP)
+    return theta, np.concatenate([A, np.stack(columns, axis=2)], axis=2), b
 
 
 @dataclass
@@ -234,8 +364,8 @@ def model_substeps(sample_time: float, vehicle: VehicleParams, logs: list[Veloci
 
 @dataclass
 class _Fit:
-    theta: np.ndarray  # (9,)
-    half_width: np.ndarray  # (9,) 95 % half-widths, 0 for a fixed parameter, inf unknown
+    theta: np.ndarray  # (12,) UNKNOWNS
+    half_width: np.ndarray  # (12,) 95 % half-widths, 0 for a fixed parameter, inf unknown
     residual_rms: np.ndarray  # (3,) RMS of the velocity residuals (m/s, m/s, rad/s)
     started_from: int  # which candidate
     iterations: int
@@ -248,11 +378,16 @@ def _segments(log: VelocityLog, length: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
 
 
+# The current's typical size (m/s) where neither the start nor the first estimate has one.
+CURRENT_SCALE = 0.1
+
+
 def _scales(start: np.ndarray, first: np.ndarray, vehicle: VehicleParams) -> np.ndarray:
-    """Typical size per parameter, so that IPOPT's variables are of order one."""
+    """Typical size per unknown (12,), so that IPOPT's variables are of order one."""
     axis_mass = {"X": vehicle.m11, "Y": vehicle.m22, "N": vehicle.Iz}
     masses = {"m11": vehicle.m11, "m22": vehicle.m22, "Iz_added": vehicle.Iz}
     floor = 0.01 * np.array([masses.get(name) or axis_mass[name[0]] for name in PARAMETERS])
+    floor = np.concatenate([floor, [1.0, CURRENT_SCALE, CURRENT_SCALE]])
     return np.maximum.reduce([np.abs(start), np.abs(first), floor])
 
 
@@ -265,37 +400,49 @@ def output_error(
     model: _Model | None = None,
 ) -> _Fit:
     """Output-error refinement (module docstring, steps 2 and 3) from whichever of the
-    ``candidates`` (9,) simulates the log best; the ``fixed`` parameters stay at that
-    candidate's values. ``weight`` (3,): per velocity, 1 / its noise level (default: the
-    filter's estimate)."""
+    ``candidates`` (12,: :data:`UNKNOWNS`) simulates the log best; the ``fixed`` ones stay at
+    that candidate's values. ``weight`` (3,): per velocity, 1 / its noise level (default:
+    the filter's estimate). Each segment's free initial state is its velocity through the
+    water; the current's body components at the logged headings are added to what it
+    predicts (module docstring)."""
     sample_time = logs[0].sample_time
     model = model or _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
-    start = start_vector(vehicle)
+    start = start_unknowns(vehicle)
     scale = _scales(start, candidates[0], vehicle)
     weight = 1.0 / noise_levels(logs) if weight is None else np.asarray(weight, dtype=float)
-    z = ca.MX.sym("z", 9)
+    z = ca.MX.sym("z", _U)
     theta = z * scale
+    parameters, gain, current = theta[:_P], theta[_GAIN], theta[_CURRENT]
     length = max(MIN_SAMPLES // 4, round(SEGMENT_S / sample_time))
-    initial, guesses, residuals = [], [], []
+    initial, starts, residuals = [], [], []
     for log in logs:
         tau = applied_force(log, vehicle)
         nu_smooth = smoothed(log)[0]
+        psi = _heading(log)
         for a, b in _segments(log, length):
             x0 = ca.MX.sym(f"x0_{len(initial)}", 3)
             initial.append(x0)
-            guesses.append(nu_smooth[a])
+            starts.append((nu_smooth[a], psi[a : a + 1]))
             steps = b - a
-            predicted = model.rollout(steps)(x0, tau[a:b].T, ca.repmat(theta, 1, steps))
+            relative = model.rollout(steps)(x0, gain * tau[a:b].T, ca.repmat(parameters, 1, steps))
+            predicted = relative + current_rows(current, psi[a + 1 : b + 1])
             measured = log.velocity[a + 1 : b + 1].T
             residuals.append(ca.vec((predicted - measured) * weight))
-            residuals.append((x0 - log.velocity[a]) * weight)
+            first = x0 + current_rows(current, psi[a : a + 1])
+            residuals.append((first - log.velocity[a]) * weight)
     x = ca.vertcat(z, *initial)
     residual = ca.vertcat(*residuals)
     lower, upper = _bounds()
-    is_fixed = np.array([name in fixed for name in PARAMETERS])
-    guess = np.concatenate(guesses)
+    is_fixed = np.array([name in fixed for name in UNKNOWNS])
+
+    def guess(candidate: np.ndarray) -> np.ndarray:
+        """The segments' initial velocities through the water under ``candidate``'s current."""
+        return np.concatenate(
+            [nu - current_rows(candidate[_CURRENT], psi)[:, 0] for nu, psi in starts]
+        )
+
     cost = ca.Function("cost", [x], [0.5 * ca.sumsqr(residual)])
-    costs = [float(cost(np.concatenate([c / scale, guess]))) for c in candidates]
+    costs = [float(cost(np.concatenate([c / scale, guess(c)]))) for c in candidates]
     best = min(range(len(costs)), key=lambda i: costs[i] if math.isfinite(costs[i]) else math.inf)
     z0 = np.clip(candidates[best] / scale, lower, upper)
     lower = np.where(is_fixed, z0, lower)
@@ -318,7 +465,7 @@ def output_error(
         },
     )
     solution = solver(
-        x0=np.concatenate([z0, guess]),
+        x0=np.concatenate([z0, guess(candidates[best])]),
         lbx=np.concatenate([lower, np.full(n_initial, -np.inf)]),
         ubx=np.concatenate([upper, np.full(n_initial, np.inf)]),
     )
@@ -326,7 +473,7 @@ def output_error(
     optimum = np.asarray(solution["x"]).ravel()
     # IPOPT may end a hair outside a bound (it relaxes them by ~1e-8 internally): a damping
     # of +2e-9 is not a damping the vehicle file accepts. The optimum is projected back.
-    optimum[:9] = np.clip(optimum[:9], lower, upper)
+    optimum[:_U] = np.clip(optimum[:_U], lower, upper)
     jacobian_of = ca.Function("J", [x], [residual, ca.jacobian(residual, x)])
     r_value, j_value = (np.asarray(value) for value in jacobian_of(optimum))
     r_value = r_value.ravel()
@@ -335,7 +482,7 @@ def output_error(
     dof = max(1, r_value.size - J.shape[1])
     variance = float(r_value @ r_value) / dof
     information = J.T @ J
-    half_width = np.zeros(9)
+    half_width = np.zeros(_U)
     try:
         covariance = variance * np.linalg.inv(information)
         std = np.sqrt(np.clip(np.diag(covariance)[: int((~is_fixed).sum())], 0.0, None))
@@ -344,7 +491,7 @@ def output_error(
     half_width[~is_fixed] = Z95 * std * scale[~is_fixed]
     residual_rms = np.sqrt(np.mean(r_value.reshape(-1, 3) ** 2, axis=0)) / weight
     return _Fit(
-        theta=optimum[:9] * scale,
+        theta=optimum[:_U] * scale,
         half_width=half_width,
         residual_rms=residual_rms,
         started_from=best,
@@ -354,12 +501,15 @@ def output_error(
 
 
 def _bounds() -> tuple[np.ndarray, np.ndarray]:
-    """Physical bounds on the scaled parameters: masses positive (added yaw inertia >= 0),
-    damping <= 0; every magnitude within a factor MAGNITUDE of its scale."""
-    lower = np.full(9, -MAGNITUDE)
-    upper = np.zeros(9)
+    """Physical bounds on the scaled unknowns: masses and the gain positive (added yaw
+    inertia >= 0), damping <= 0, the current either way; every magnitude within a factor
+    MAGNITUDE of its scale."""
+    lower = np.full(_U, -MAGNITUDE)
+    upper = np.zeros(_U)
     lower[:2], upper[:2] = 1.0 / MAGNITUDE, MAGNITUDE  # m11, m22
     lower[2], upper[2] = 0.0, MAGNITUDE  # Iz_added
+    lower[_GAIN], upper[_GAIN] = 1.0 / MAGNITUDE, MAGNITUDE
+    upper[_CURRENT] = MAGNITUDE
     return lower, upper
 
 
@@ -375,6 +525,7 @@ class ParameterEstimate:
     value: float  # what the vehicle file gets (the start value where not excited)
     ci95: tuple[float, float]
     excited: bool
+    fixed: bool = False  # held at the start value as asked (``--fix``): not estimated
 
 
 @dataclass
@@ -394,30 +545,47 @@ class Identification:
     solver_status: str
     substeps: int
     traces: list[dict[str, np.ndarray]] = field(default_factory=list)  # per log, for figures
+    # The EXTRAS asked for (thrust gain, current): estimated like the parameters, not
+    # vehicle parameters themselves.
+    extras: list[ParameterEstimate] = field(default_factory=list)
 
     @property
     def unexcited(self) -> list[str]:
-        return [p.name for p in self.parameters if not p.excited]
+        return [p.name for p in self.parameters + self.extras if not (p.excited or p.fixed)]
+
+    @property
+    def fixed(self) -> list[str]:
+        return [p.name for p in self.parameters if p.fixed]
 
     def vehicle_values(self) -> dict[str, float]:
         return {p.name: p.value for p in self.parameters}
+
+    def extra(self, name: str) -> ParameterEstimate | None:
+        """The estimate of ``name`` in :data:`EXTRAS`, or None where it was not asked for."""
+        return next((p for p in self.extras if p.name == name), None)
 
 
 def _excited(theta, half_width, A, b) -> np.ndarray:
     """Module docstring, step 4."""
     relative = half_width <= RELATIVE_HALF_WIDTH * np.abs(theta)
-    force = np.sqrt(np.mean((A * theta) ** 2, axis=(1, 2)) * 9 + np.mean(b**2, axis=1))
-    column = np.sqrt(np.mean(A**2, axis=1))  # (3, 9) each regressor's RMS per axis
+    # Each equation's force: its terms' and its right-hand side's RMS together.
+    force = np.sqrt(np.sum(np.mean((A * theta) ** 2, axis=1), axis=1) + np.mean(b**2, axis=1))
+    column = np.sqrt(np.mean(A**2, axis=1))  # (3, 12) each regressor's RMS per axis
     moved = half_width[None, :] * column  # force the interval moves, per axis
     share = np.where(column > 0, moved / np.maximum(force[:, None], 1e-12), np.inf).min(axis=0)
     return relative | (share <= SENSITIVITY_SHARE)
 
 
 def identify(
-    logs: list[VelocityLog], vehicle: VehicleParams, holdout: float = 0.2
+    logs: list[VelocityLog],
+    vehicle: VehicleParams,
+    holdout: float = 0.2,
+    unknowns: Unknowns | None = None,
 ) -> Identification:
-    """Identify :data:`PARAMETERS` from ``logs`` starting from ``vehicle`` (module
-    docstring); the last ``holdout`` share of each log validates."""
+    """Identify :data:`PARAMETERS` (and the :data:`EXTRAS` ``unknowns`` asks for, holding
+    the parameters it fixes) from ``logs`` starting from ``vehicle`` (module docstring); the
+    last ``holdout`` share of each log validates."""
+    unknowns = unknowns or Unknowns()
     if not logs:
         raise ConfigError("LOG", None, "give at least one log")
     sample_time = logs[0].sample_time
@@ -435,6 +603,7 @@ def identify(
                 log.name,
                 f"has {log.thrust.shape[1]} thrusters, the start vehicle {vehicle.n_thrusters}",
             )
+    unknowns.check(vehicle, logs)
     if not 0.0 < holdout < 0.5:
         raise ConfigError("--holdout", holdout, "must be in (0, 0.5)")
     fit_logs, check_logs = [], []
@@ -450,24 +619,26 @@ def identify(
         fit_logs.append(log.part(0, cut))
         check_logs.append(log.part(cut, log.steps))
 
-    start = start_vector(vehicle)
-    first, A, b = equation_error(fit_logs, vehicle)
+    start = start_unknowns(vehicle)
+    held = unknowns.held()
+    estimated = np.array([name not in held for name in UNKNOWNS])
+    first, A, b = equation_error(fit_logs, vehicle, held)
     # A least-squares value outside the physics (a negative mass, a positive damping) is
     # noise's: the fit starts from the start file's value there.
-    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6])
-    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6])
+    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6, 1e-9, -np.inf, -np.inf])
+    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6, np.inf, np.inf, np.inf])
     initial = np.where((first >= lower) & (first <= upper), first, start)
     model = _Model(sample_time, model_substeps(sample_time, vehicle, logs), vehicle.Iz_rb)
     # Weighted first by the filter's noise estimate, then again by the residuals' (the
-    # filter also removes fast dynamics it cannot follow), all parameters free; those the
+    # filter also removes fast dynamics it cannot follow), all unknowns free; those the
     # second fit finds unexcited are then fixed at their start values for a third.
-    first_fit = output_error(fit_logs, vehicle, [initial, start], model=model)
+    first_fit = output_error(fit_logs, vehicle, [initial, start], fixed=held, model=model)
     weight = 1.0 / np.maximum(first_fit.residual_rms, 1e-9)
-    fit = output_error(fit_logs, vehicle, [first_fit.theta], weight=weight, model=model)
-    excited = _excited(fit.theta, fit.half_width, A, b)
+    fit = output_error(fit_logs, vehicle, [first_fit.theta], fixed=held, weight=weight, model=model)
+    excited = _excited(fit.theta, fit.half_width, A, b) & estimated
     final = fit
-    if not excited.all():
-        fixed = tuple(name for name, ok in zip(PARAMETERS, excited, strict=True) if not ok)
+    if not excited[estimated].all():
+        fixed = tuple(name for name, ok in zip(UNKNOWNS, excited, strict=True) if not ok)
         final = output_error(
             fit_logs,
             vehicle,
@@ -477,10 +648,10 @@ def identify(
             model=model,
         )
     # An excited parameter's interval is the final fit's; an unexcited one's the fit that
-    # judged it (the final one holds it fixed).
+    # judged it (the final one holds it fixed); a held one's is its value.
     center = np.where(excited, final.theta, fit.theta)
     half_width = np.where(excited, final.half_width, fit.half_width)
-    parameters = [
+    estimates = [
         ParameterEstimate(
             name=name,
             start=float(start[i]),
@@ -488,16 +659,19 @@ def identify(
             value=float(final.theta[i]) if excited[i] else float(start[i]),
             ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
+            fixed=name in unknowns.fixed,
         )
-        for i, name in enumerate(PARAMETERS)
+        for i, name in enumerate(UNKNOWNS)
     ]
-    identified = np.array([p.value for p in parameters])
+    identified = np.array([p.value for p in estimates])
     traces, errors, errors_start = [], [], []
     for log in check_logs:
         tau = applied_force(log, vehicle)
+        psi = _heading(log)
         nu0 = smoothed(log)[0][0] if log.steps > filter_window(sample_time) else log.velocity[0]
-        simulated = model.simulate(nu0, tau, identified)
-        simulated_start = model.simulate(nu0, tau, start)
+        simulated, simulated_start = (
+            _simulated(model, nu0, tau, psi, theta) for theta in (identified, start)
+        )
         errors.append(simulated - log.velocity)
         errors_start.append(simulated_start - log.velocity)
         traces.append(
@@ -509,7 +683,7 @@ def identify(
             }
         )
     return Identification(
-        parameters=parameters,
+        parameters=estimates[:_P],
         logs=[log.name for log in logs],
         sample_time=sample_time,
         fit_samples=sum(log.steps for log in fit_logs),
@@ -522,4 +696,13 @@ def identify(
         solver_status=final.status,
         substeps=model.substeps,
         traces=traces,
+        extras=[p for p in estimates[_P:] if p.name not in held],
     )
+
+
+def _simulated(model: _Model, nu0: np.ndarray, tau: np.ndarray, heading, theta) -> np.ndarray:
+    """The velocities (N+1, 3) ``theta`` (12,) predicts from the measured ``nu0`` under
+    ``tau`` (N, 3): the velocity through the water simulated, the current added back."""
+    current = current_rows(theta[_CURRENT], heading).T
+    relative = model.simulate(nu0 - current[0], theta[_GAIN] * tau, theta[:_P])
+    return relative + current
