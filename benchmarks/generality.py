@@ -77,10 +77,13 @@ def track(name: str, s: float) -> dict:
     raise ValueError(name)
 
 
-def scenario(vehicle: str, track_name: str, condition: str, overrides: list[str]) -> dict:
+def scenario(
+    vehicle: str | dict, track_name: str, condition: str, overrides: list[str], name: str = ""
+) -> dict:
+    """The run of ``vehicle`` (a preset, or a vehicle's fields named ``name``) on a track."""
     params = load_vehicle(vehicle)
     data = {
-        "name": f"{vehicle}-{track_name}-{condition}",
+        "name": f"{name or vehicle}-{track_name}-{condition}",
         "duration": DURATION_S,
         "vehicle": vehicle,
         "reference": track(track_name, length_scale(params.mass)),

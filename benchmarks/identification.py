@@ -25,7 +25,7 @@ from auvmpc.experiments.run import simulate
 from auvmpc.identification.estimation import PARAMETERS, identify
 from auvmpc.identification.excitation import design_excitation, excitation_scenario
 from auvmpc.identification.logs import VelocityLog
-from auvmpc.models.vehicle import load_vehicle
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
 from auvmpc.scenario import load_scenario
 
 # Sensor noise of [x, y, psi, u, v, r] (m, m, rad, m/s, m/s, rad/s): a DVL-grade velocity
@@ -43,19 +43,42 @@ def perturbed(truth, rng):
     return load_vehicle(data)
 
 
-def run(vehicle_name: str, duration: float, seed: int) -> list[dict]:
-    truth = load_vehicle(vehicle_name)
+def measured_excite_log(
+    truth: VehicleParams,
+    name: str,
+    duration: float,
+    seed: int,
+    current=None,
+    plant_step: float | None = None,
+) -> VelocityLog:
+    """The ``auvmpc excite`` manoeuvre of ``truth`` simulated as its scenario with sensor
+    noise (SENSING_STD), in a constant water ``current`` (north, east: m/s) if given, the
+    plant's RK4 step ``plant_step`` (s) if given: the noisy velocities and heading the
+    controller was given, and the thrusts."""
     excitation = design_excitation(truth, duration, seed=seed)
     with tempfile.TemporaryDirectory() as folder:
         table = Path(folder) / "excite.csv"
-        write_thrust_table(table, excitation.sample_time, excitation.thrust)
-        scenario = excitation_scenario(vehicle_name, excitation, "excite.csv", "bench", 15.0)
+        write_thrust_table(
+            table, excitation.sample_time, excitation.thrust, truth.actuators.layout.names
+        )
+        scenario = excitation_scenario(name, excitation, "excite.csv", "bench", 15.0)
+        scenario["vehicle"] = truth.model_dump(mode="json")
+        if current is not None:
+            velocity = [float(current[0]), float(current[1]), 0.0]
+            scenario["disturbance"] = {"water_current": {"velocity_m_per_s": velocity}}
+        if plant_step is not None:
+            scenario["plant"] = {"max_step": plant_step}
         path = Path(folder) / "excite.yaml"
         path.write_text(yaml.safe_dump(scenario, sort_keys=False))
         resolved = load_scenario(path, [f"sensing.std={SENSING_STD}", f"seed={seed}"])
-        result = simulate(resolved)
-    log = result.log
-    measured = VelocityLog(vehicle_name, log.sample_time, log.measured[:, 3:6], log.thrust)
+        log = simulate(resolved).log
+    return VelocityLog(name, log.sample_time, log.measured[:, 3:6], log.thrust,
+                       heading=log.measured[:, 2])  # fmt: skip
+
+
+def run(vehicle_name: str, duration: float, seed: int) -> list[dict]:
+    truth = load_vehicle(vehicle_name)
+    measured = measured_excite_log(truth, vehicle_name, duration, seed)
     start = perturbed(truth, np.random.default_rng(seed))
     began = time.perf_counter()
     found = identify([measured], start)

@@ -126,12 +126,17 @@ def test_excite_run_identify_round_trip(tmp_path, monkeypatch, capsys):
         "disturbance: {current_force_world: [2.0, 0.0]}\n"
     )
     code, text, err = run_cli(monkeypatch, capsys, "identify", str(run), "--vehicle",
-                              str(start_file), "--out", str(out),
+                              str(start_file), "--out", str(out), "--current",
                               "--then-run", str(scenario))  # fmt: skip
     assert code == 0, err
     identified = load_vehicle(str(out))  # loads as-is
     assert set(yaml.safe_load(out.read_text())) >= set(start)
-    report = json.loads((out.parent / "identification.json").read_text())["parameters"]
+    found = json.loads((out.parent / "identification.json").read_text())
+    # The run had no current: the one identified is nothing (its interval, or 1 mm/s).
+    for axis in ("x", "y"):
+        entry = found["current"][axis]
+        assert entry["ci95"][0] - 1e-3 <= 0.0 <= entry["ci95"][1] + 1e-3, entry
+    report = found["parameters"]
     assert set(report) == set(PARAMETERS)
     for name in PARAMETERS:
         entry, true_value = report[name], getattr(truth, name)
@@ -160,6 +165,74 @@ def test_excite_run_identify_round_trip(tmp_path, monkeypatch, capsys):
                            "videoray-pro3", "--out", str(tmp_path / "v.yaml"))  # fmt: skip
     assert code == 2
     assert err.count("\n") == 1 and "has a column F3: more thrusters than the start" in err
+
+
+# identify with a current and a thrust gain: the log's truth. A 0.27 m/s current (half the
+# vehicle's speed in the manoeuvre) and thrusters giving 85 % of the logged commands.
+TRUE_CURRENT = np.array([0.25, -0.1])
+TRUE_GAIN = 0.85
+# Sensor noise on u, v, r (m/s, m/s, rad/s) and psi (rad), as benchmarks/identification.py's.
+VELOCITY_NOISE, HEADING_NOISE = 0.005, 0.01
+# The pass rule of the issue: within 10 % of the truth, or the 95 % interval covers it.
+WITHIN = 0.1
+
+
+def _close_or_covered(estimate, truth: float) -> bool:
+    low, high = estimate.ci95
+    return abs(estimate.value - truth) <= WITHIN * abs(truth) or low <= truth <= high
+
+
+def test_a_current_and_a_thrust_gain_are_identified_and_the_damping_is_not_biased():
+    """A 40 s manoeuvre in a current, with every thrust 85 % of what the log says and the
+    velocities and heading measured with noise; the start file 30 % off in everything but
+    m11, which is held (--fix m11: the gain's scale). Each damping, mass, the gain and the
+    current within 10 % of the truth or covered by its interval; without the current as an
+    unknown the same log biases the dampings (equation error, the cheap stage)."""
+    from auvmpc.identification.estimation import CURRENT, EXTRAS, HorizontalGreyBox, identify
+
+    truth = load_vehicle("jmse2210")
+    excitation = design_excitation(truth, 40.0)
+    states = simulate_open_loop(
+        truth, TRUE_GAIN * excitation.thrust, excitation.sample_time, current_world=TRUE_CURRENT
+    )
+    rng = np.random.default_rng(7)
+    velocity = states[:, 3:] + VELOCITY_NOISE * rng.standard_normal(states[:, 3:].shape)
+    heading = states[:, 2] + HEADING_NOISE * rng.standard_normal(len(states))
+    log = VelocityLog("in a current", excitation.sample_time, velocity, excitation.thrust,
+                      heading=heading)  # fmt: skip
+    start = truth.model_dump(mode="json")
+    for i, name in enumerate(PARAMETERS[1:]):
+        start[name] = start[name] * (1.3 if i % 2 else 0.7)
+    start_vehicle = load_vehicle(start)
+    greybox = HorizontalGreyBox(start_vehicle, current=True, thrust_gain=True)
+    found = identify([log], start_vehicle, greybox=greybox, fixed=("m11",))
+    assert not found.unexcited
+    assert found.fixed == ["m11"] and found.parameters[0].value == truth.m11
+    true_extras = dict(zip(EXTRAS, [TRUE_GAIN, *TRUE_CURRENT], strict=True))
+    for estimate in found.extras:
+        assert _close_or_covered(estimate, true_extras[estimate.name]), estimate
+    # The current: within 10 % of its speed (a zero component has no 10 % of its own).
+    current = np.array([found.extra(name).value for name in CURRENT])
+    assert np.linalg.norm(current - TRUE_CURRENT) <= WITHIN * np.linalg.norm(TRUE_CURRENT)
+    for estimate in found.parameters[1:]:
+        assert _close_or_covered(estimate, getattr(truth, estimate.name)), estimate
+    # The dampings without the current as an unknown (gain still free): biased.
+    dampings = [PARAMETERS.index(name) for name in ("Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr")]
+    truth_vector = start_vector(truth)[dampings]
+    gain_only = HorizontalGreyBox(start_vehicle, thrust_gain=True)
+    without, _, _ = equation_error([log], start_vehicle, gain_only, fixed=("m11",))
+    bias = np.abs(without[dampings] / truth_vector - 1.0)
+    assert bias.max() > 3 * WITHIN, bias
+    # The vehicle file says what the thrusters give in the water; the current is reported.
+    from auvmpc.identification.report import vehicle_file_text
+
+    text = vehicle_file_text(start, found, "start.yaml")
+    written = load_vehicle(yaml.safe_load(text))
+    gain = found.extra("thrust_gain").value
+    assert written.thrust_limits == pytest.approx([gain * x for x in truth.thrust_limits], 1e-5)
+    assert written.thrust_rate_limit == pytest.approx(gain * truth.thrust_rate_limit, 1e-5)
+    assert {"thrust_limits", "thrust_rate_limit"} <= set(written.estimated)
+    assert "current_x" in text and "current_x" not in yaml.safe_load(text)
 
 
 def _write_log(folder, rows, columns="t,u,v,r,F1,F2,F3,F4"):
@@ -194,6 +267,27 @@ def test_identify_refuses_a_bad_log_in_one_line(tmp_path, monkeypatch, capsys, m
     folder = make(tmp_path)
     code, _, err = run_cli(monkeypatch, capsys, "identify", str(folder), "--vehicle",
                            "jmse2210", "--out", str(tmp_path / "out.yaml"))  # fmt: skip
+    assert code == 2
+    assert err.count("\n") == 1 and message in err
+
+
+@pytest.mark.parametrize(
+    ("vehicle", "flags", "message"),
+    [
+        ("jmse2210", ["--thrust-gain"], "--thrust-gain: a gain on every thrust and the masses"),
+        # bluerov2-heavy's Yv is 0: holding it sets no scale.
+        ("bluerov2-heavy", ["--thrust-gain", "--fix", "Yv"], "hold one nonzero parameter"),
+        ("jmse2210", ["--fix", "m11,Iz"], "--fix: not a parameter identify estimates"),
+        ("jmse2210", ["--current"], "has no heading, which --current needs"),
+    ],
+)
+def test_identify_refuses_unknowns_it_cannot_estimate_in_one_line(
+    tmp_path, monkeypatch, capsys, vehicle, flags, message
+):
+    rows = [[0.1 * k, 0, 0, 0, np.sin(0.1 * k), 1, 1, 1] for k in range(200)]
+    folder = _write_log(tmp_path / "log", rows)  # no psi column: no heading
+    code, _, err = run_cli(monkeypatch, capsys, "identify", str(folder), "--vehicle",
+                           vehicle, "--out", str(tmp_path / "out.yaml"), *flags)  # fmt: skip
     assert code == 2
     assert err.count("\n") == 1 and message in err
 

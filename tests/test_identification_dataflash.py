@@ -38,6 +38,8 @@ ROLL_DEG, PITCH_DEG = 2.0, -3.0  # a constant small attitude, so the rotation is
 VELOCITY_TOL = 2e-4
 # IMU's GyrZ is float32: 1e-7 relative.
 RATE_TOL = 1e-6
+# ATT's yaw in centidegrees: half of one, 8.7e-5 rad, at most off.
+HEADING_TOL = 1e-4
 
 
 def _struct(fmt: str) -> struct.Struct:
@@ -137,6 +139,9 @@ def test_the_dataflash_log_reads_back_as_the_flight(flight):
     np.testing.assert_allclose(log.velocity[:, :2], states[:, 3:5], rtol=0, atol=VELOCITY_TOL)
     np.testing.assert_allclose(log.velocity[:, 2], states[:, 5], rtol=0, atol=RATE_TOL)
     np.testing.assert_array_equal(log.thrust, thrust)
+    # The heading (ATT's yaw, logged in [0, 360) deg) up to whole turns.
+    turned = np.angle(np.exp(1j * (log.heading - states[:, 2])))
+    np.testing.assert_allclose(turned, 0.0, rtol=0, atol=HEADING_TOL)
     # Channels named and reversed: thruster 1 read from C2, reversed.
     options = LogOptions(channels=(2, 1, 3, 4), reversed_channels=(2,))
     swapped = read_log(path, vehicle.n_thrusters, options)

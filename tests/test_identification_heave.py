@@ -132,6 +132,9 @@ def test_excite_run_identify_heave_from_the_depth_sensor(tmp_path, monkeypatch, 
         (["--vehicle", "videoray-pro3"], "has no heave section"),
         (["--vehicle", "bluerov2-heavy", "--then-run", "paper-ideal"], "--then-run"),
         (["--vehicle", "bluerov2-heavy", "--dof", "sideways"], "--dof: one of auto"),
+        (["--vehicle", "bluerov2-heavy", "--current"], "--current: the heave model has no"),
+        (["--vehicle", "bluerov2-heavy", "--thrust-gain", "--fix", "heave.Zw"], "no current or"),
+        (["--vehicle", "bluerov2-heavy", "--fix", "m11"], "--fix: not a parameter identify"),
     ):
         code, _, err = run_cli(monkeypatch, capsys, "identify", str(run), *args, "--out",
                                str(tmp_path / "refused.yaml"))  # fmt: skip

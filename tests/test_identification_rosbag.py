@@ -74,6 +74,7 @@ def _rewrite_as_sqlite3_rep103(run: Path, out: Path) -> None:
         for stamp, message in odometry:
             twist = message.twist.twist
             _, twist.linear.y, twist.angular.z = flip * [0.0, twist.linear.y, twist.angular.z]
+            message.pose.pose.orientation.z *= flip[2]  # level: the mirror negates the yaw
             writer.write(odom, stamp, store.serialize_cdr(message, "nav_msgs/msg/Odometry"))
         for stamp, parts in sorted(wrenches.items()):
             total = parts[0]
@@ -95,6 +96,7 @@ def test_the_exported_bag_reads_back_as_the_run_folder(run, tmp_path):
         assert bag.steps == folder.steps
         np.testing.assert_allclose(bag.velocity, folder.velocity, rtol=0, atol=BAG_VELOCITY_TOL)
         np.testing.assert_array_equal(bag.thrust, folder.thrust)
+        np.testing.assert_allclose(bag.heading, folder.heading, rtol=0, atol=BAG_VELOCITY_TOL)
     # SQLite3 storage, a body wrench instead of thrusts, REP 103 axes.
     sqlite = tmp_path / "rep103"
     _rewrite_as_sqlite3_rep103(run, sqlite)
@@ -103,6 +105,7 @@ def test_the_exported_bag_reads_back_as_the_run_folder(run, tmp_path):
     bag = read_log(sqlite, vehicle.n_thrusters, options)
     assert bag.thrust is None
     np.testing.assert_allclose(bag.velocity, folder.velocity, rtol=0, atol=BAG_VELOCITY_TOL)
+    np.testing.assert_allclose(bag.heading, folder.heading, rtol=0, atol=BAG_VELOCITY_TOL)
     np.testing.assert_allclose(bag.force, folder.thrust @ vehicle.T.T, rtol=0, atol=1e-9)
     # Read in the wrong axes, v and r come back mirrored.
     mirrored = read_log(sqlite, vehicle.n_thrusters, LogOptions(wrench_topic="/wrench"))

@@ -768,6 +768,31 @@ def identify(
             "with Fz1..), or auto: heave if the first log is a depth run's",
         ),
     ] = "auto",
+    current: Annotated[
+        bool,
+        typer.Option(
+            "--current",
+            help="also estimate a constant current (world frame, from the logged heading); "
+            "reported, not written into the vehicle (horizontal only)",
+        ),
+    ] = False,
+    thrust_gain: Annotated[
+        bool,
+        typer.Option(
+            "--thrust-gain",
+            help="also estimate one gain on every thrust (needs --fix: the gain is measured "
+            "in a held parameter's scale); the vehicle file's thrust limits are scaled by it "
+            "(horizontal only)",
+        ),
+    ] = False,
+    fix: Annotated[
+        str | None,
+        typer.Option(
+            "--fix",
+            help="parameters held at the start file's values, e.g. m11 or m11,Iz_added "
+            "(heave: heave.m_heave)",
+        ),
+    ] = None,
     then_run: Annotated[
         str | None,
         typer.Option(
@@ -779,9 +804,9 @@ def identify(
     ] = None,
     overwrite: Overwrite = False,
 ) -> None:
-    """Identify the 3-DOF model (masses, added inertia, damping) or the heave model (heave
-    mass, damping, net buoyancy) from logs; write the vehicle file, identification.json,
-    identification.md and a fit figure beside it."""
+    """Identify the 3-DOF model (masses, added inertia, damping; optionally a current and a
+    thrust gain) or the heave model (heave mass, damping, net buoyancy) from logs; write the
+    vehicle file, identification.json, identification.md and a fit figure beside it."""
     from auvmpc.identification import LogOptions, write_identification
     from auvmpc.identification.excitation import Dof
     from auvmpc.identification.heave import is_heave_log
@@ -803,14 +828,18 @@ def identify(
         channels=_channel_list(channels, "--channels"),
         reversed_channels=_channel_list(reversed_channels, "--reversed"),
     )
-    found = write_identification(logs, vehicle, out, holdout, overwrite, options, chosen)
+    fixed = tuple(name.strip() for name in fix.split(",") if name.strip()) if fix else ()
+    found = write_identification(
+        logs, vehicle, out, holdout, overwrite, options, chosen,
+        current=current, thrust_gain=thrust_gain, fixed=fixed,
+    )  # fmt: skip
     table = Table(title=f"identified from {len(found.logs)} log(s)")
     for column in ("parameter", "start", "identified", "95 % interval", "excited"):
         table.add_column(column)
-    for p in found.parameters:
+    for p in found.parameters + found.extras:
         table.add_row(
             p.name, f"{p.start:.4g}", f"{p.value:.4g}", f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]",
-            "yes" if p.excited else "NO",
+            "fixed" if p.fixed else ("yes" if p.excited else "NO"),
         )  # fmt: skip
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)

@@ -7,11 +7,13 @@
   :mod:`~auvmpc.identification.dataflash` (ArduSub DataFlash logs),
   :mod:`~auvmpc.identification.thruster_curve` (PWM to force)
 - :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals, over
-  a grey-box model; :mod:`~auvmpc.identification.heave`: the heave model's, its logs
+  a grey-box model (the 3-DOF one with a current and a thrust gain as optional unknowns);
+  :mod:`~auvmpc.identification.heave`: the heave model's, its logs
 - :mod:`~auvmpc.identification.report`: vehicle file, identification.json, report, figure
 """
 
 from auvmpc.identification.estimation import (
+    EXTRAS,
     PARAMETERS,
     GreyBox,
     HorizontalGreyBox,
@@ -24,6 +26,7 @@ from auvmpc.identification.logs import LogOptions, VelocityLog, read_log, read_r
 from auvmpc.identification.report import write_identification
 
 __all__ = [
+    "EXTRAS",
     "PARAMETERS",
     "Dof",
     "GreyBox",

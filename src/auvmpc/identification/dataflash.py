@@ -6,7 +6,8 @@ messages give each message type's name, binary layout and column names, the othe
 
 What is read (ArduPilot's log message reference; frames NED world, FRD body, as auvmpc's):
 
-- ``ATT``: ``Roll``, ``Pitch``, ``Yaw`` (degrees): the attitude, to rotate the velocity.
+- ``ATT``: ``Roll``, ``Pitch``, ``Yaw`` (degrees): the attitude, to rotate the velocity;
+  the yaw is also the heading a constant current is estimated in (``identify --current``).
 - ``XKF1`` (EKF3; ``NKF1``, EKF2, when there is no XKF1): ``VN``, ``VE``, ``VD`` (m/s), the
   EKF's velocity in the NED world, of its first core (``C`` = 0). The body velocity is
   ``R(phi, theta, psi)' [VN, VE, VD]`` (Fossen 2021, eq. 2.18, :func:`auvmpc.models.six_dof.Rzyx`)
@@ -149,4 +150,5 @@ def read_dataflash(path: str | Path, n_thrusters: int, options: LogOptions) -> V
         rc_t,
         thrust,
         (f"{ekf} velocity", "RCOU"),
+        heading=at_ekf[:, 2],
     )

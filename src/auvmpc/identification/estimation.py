@@ -8,12 +8,31 @@ The model is the velocity part of :mod:`auvmpc.models.vehicle` (Fossen 2021, ch.
 
 with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknowns are
 :data:`PARAMETERS`; ``Iz_rb`` is kept from the start file (only the sum Iz is observable).
+Optionally (:class:`HorizontalGreyBox`'s ``current`` and ``thrust_gain``, :data:`EXTRAS`)
+also:
+
+- a **constant current** ``(V_x, V_y)`` in the world frame of the log's heading. The model
+  then holds for the velocity through the water ``nu_r = nu - nu_c`` with
+  ``(u_c, v_c) = body_from_world(V, psi)`` (Fossen 2021, sec. 6.5; ``models.vehicle.dynamics``):
+  since ``u_c' = r v_c`` and ``v_c' = -r u_c``, the relative velocity obeys the equations
+  above exactly, current-free, and what is measured is ``nu_r + nu_c(psi)``, psi being the
+  logged heading: the current is added to the model's output;
+- a **thrust gain** ``g``, one factor on every thrust (``tau = g T F``): it multiplies the
+  model's input. A gain and the masses and dampings scale together (``g tau = M nu' - D nu
+  ...`` is unchanged when all of them are multiplied by one factor; ``Iz_rb`` does not help,
+  ``Iz_added`` takes it up), so the gain is only identifiable against a parameter held at its
+  start value (``identify(fixed=...)``, ``--fix``): the estimates are then in that
+  parameter's scale.
 
 1. Equation error (:func:`equation_error`). The equations are linear in the parameters
    once the accelerations are known: ``A theta = b`` with rows per sample and axis. The
    velocities and their derivatives come from a Savitzky-Golay filter (Savitzky and Golay
    1964), each axis' rows are scaled by its force level, and ``scipy.linalg.lstsq`` solves
-   it. Noise in the regressors biases this estimate; it is a start, not the answer.
+   it. The current and the gain enter through the data, not as columns (the current
+   through |u_r|, nonlinearly): the least squares are solved for each trial value of them
+   inside a trust-region Gauss-Newton search (``scipy.optimize.least_squares``) over them
+   (variable projection, Golub and Pereyra 1973). Noise in the regressors biases this
+   estimate; it is a start, not the answer.
 2. Output error (:func:`output_error`). The velocity model is simulated (RK4, thrust held
    over each sample) over segments of the log, each segment from its own free initial
    velocity (multiple shooting without continuity: the segments are independent, so a
@@ -33,16 +52,21 @@ with ``tau = T F`` from the start vehicle's (known) thruster layout. The unknown
 4. Excitation. A parameter is *excited* if its interval is narrower than its value
    (half-width <= 0.5 |value|) or if its interval moves its equation's force by less than
    :data:`SENSITIVITY_SHARE` of that force's RMS (a parameter that is small but well
-   determined, e.g. a zero linear damping), judged on the second fit. Parameters that are
-   not are fixed at their start value and the fit is repeated without them; the vehicle
-   file keeps their start values and the report names them.
+   determined, e.g. a zero linear damping; for the current and the gain, the force
+   through the equations' derivative with respect to them), judged on the second fit.
+   Parameters that are not are fixed at their start value (no current, gain 1) and the fit
+   is repeated without them; the vehicle file keeps their start values and the report
+   names them. A parameter held as asked (``fixed``) is not judged.
 5. Validation: the held-out end of each log is simulated from its first measured
-   velocity with the identified and with the start parameters; RMS of the differences.
+   velocity with the identified and with the start parameters (the start without a current
+   and with gain 1); RMS of the differences.
 
 The steps are written once over a :class:`GreyBox`: the model's parameters and bounds, its
 state and what the log measures of it, its equations as a CasADi function of the
-parameters, and the regression they become. :class:`HorizontalGreyBox` is the 3-DOF model
-above (the default); :class:`~auvmpc.identification.heave.HeaveGreyBox` the heave model.
+parameters, the regression they become, and the maps from the logged commands to its input
+and from its state to the logged outputs, which may hold parameters of their own (the
+gain, the current). :class:`HorizontalGreyBox` is the 3-DOF model above (the default);
+:class:`~auvmpc.identification.heave.HeaveGreyBox` the heave model (no current or gain).
 """
 
 from __future__ import annotations
@@ -55,6 +79,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 from scipy.linalg import lstsq
+from scipy.optimize import least_squares
 from scipy.signal import savgol_filter
 
 from auvmpc.errors import ConfigError
@@ -63,6 +88,7 @@ from auvmpc.models.integrators import rk4_step
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
+    body_from_world,
     damping_rates,
     velocity_derivative,
 )
@@ -70,6 +96,7 @@ from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
 from auvmpc.sim.plant import substeps_for
 
 __all__ = [
+    "EXTRAS",
     "PARAMETERS",
     "GreyBox",
     "HorizontalGreyBox",
@@ -84,6 +111,17 @@ __all__ = [
 
 PARAMETERS = ("m11", "m22", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr")
 MASSES = ("m11", "m22", "Iz_added")
+# The 3-DOF model's optional unknowns beside the vehicle's (module docstring): one factor
+# on every thrust, and the world-frame current (m/s).
+GAIN = "thrust_gain"
+CURRENT = ("current_x", "current_y")
+EXTRAS = (GAIN, *CURRENT)
+# Each one's neutral value (where it starts, and what the start model holds), its bounds
+# and its typical size (the current's where neither the start nor the first estimate has
+# one).
+EXTRA_START = {GAIN: 1.0, CURRENT[0]: 0.0, CURRENT[1]: 0.0}
+EXTRA_BOUNDS = {GAIN: (1e-9, np.inf), CURRENT[0]: (-np.inf, np.inf), CURRENT[1]: (-np.inf, np.inf)}
+EXTRA_SIZE = {GAIN: 1.0, CURRENT[0]: 0.1, CURRENT[1]: 0.1}
 # 95 % two-sided normal quantile.
 Z95 = 1.959963984540054
 # A parameter whose interval moves its equation's force by less than this share of the
@@ -96,12 +134,15 @@ FILTER_WINDOW_S = 0.7
 FILTER_ORDER = 3
 # Output-error segments: this long (s), each from its own initial velocity.
 SEGMENT_S = 10.0
+# Central differences of the regression in a searched extra (its units: m/s for the
+# current, 1 for the gain), for the excitation test only.
+EXTRA_STEP = 1e-4
 
 
 def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
     """[u', v', r'] of the model above (models.vehicle.velocity_derivative) with the
-    parameters ``theta`` in :data:`PARAMETERS` order. NumPy arrays (``nu``, ``tau`` of shape
-    (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
+    parameters ``theta`` in :data:`PARAMETERS` order (any further entries are not read).
+    NumPy arrays (``nu``, ``tau`` of shape (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
     values = dict(zip(PARAMETERS, (theta[i] for i in range(len(PARAMETERS))), strict=True))
     coefficients = SimpleNamespace(**values, Iz=iz_rb + values["Iz_added"])
     derivative = velocity_derivative(coefficients, nu[0], nu[1], nu[2], tau, absolute)
@@ -112,6 +153,15 @@ def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
 
 def start_vector(vehicle: VehicleParams) -> np.ndarray:
     return np.array([float(getattr(vehicle, name)) for name in PARAMETERS])
+
+
+def current_rows(current, heading: np.ndarray):
+    """The current's body components (u_c, v_c, 0) at each heading (n,), as rows (3, n):
+    ``current`` (2,) NumPy or a CasADi column (then a CasADi matrix)."""
+    u_c, v_c = body_from_world(current, np.asarray(heading, dtype=float)[None, :])
+    if isinstance(u_c, ca.MX | ca.SX):
+        return ca.vertcat(u_c, v_c, ca.DM.zeros(1, len(heading)))
+    return np.vstack([u_c, v_c, np.zeros_like(u_c)])
 
 
 def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float):
@@ -175,11 +225,13 @@ class GreyBox(ABC):
     """A model :func:`identify` fits, from a start vehicle (module docstring).
 
     Its state ``x`` (``state_size``) holds what the log measures (``log.velocity``'s columns,
-    named ``outputs`` in ``units``) at the indices ``measured``; its input is the force the
-    log's commands apply (:meth:`applied`), held over each sample.
+    named ``outputs`` in ``units``) at the indices ``measured``, plus :meth:`offset`; its
+    input is :meth:`input` of the force the log's commands apply (:meth:`applied`), held over
+    each sample. ``extras`` are the parameters of those two maps (the rest are the vehicle
+    file's fields, which :meth:`regression` is linear in).
     """
 
-    parameters: tuple[str, ...]  # the unknowns, as the vehicle file names them
+    parameters: tuple[str, ...]  # the unknowns, as the vehicle file names them, and extras
     lower: np.ndarray  # physical bounds of each (a mass > 0, a damping <= 0; +-inf: none)
     upper: np.ndarray
     outputs: tuple[str, ...]  # the logged signals (log.velocity's columns)
@@ -187,6 +239,7 @@ class GreyBox(ABC):
     measured: tuple[int, ...]  # where each output sits in the state
     state_size: int
     title: str  # for the vehicle file's header and the report
+    extras: tuple[str, ...] = ()  # of ``parameters``: not the vehicle's, in the maps only
 
     @property
     @abstractmethod
@@ -195,7 +248,7 @@ class GreyBox(ABC):
 
     @abstractmethod
     def start(self) -> np.ndarray:
-        """The start vehicle's parameters (p,)."""
+        """The start vehicle's parameters (p,), the extras at their neutral values."""
 
     @abstractmethod
     def rhs(self) -> ca.Function:
@@ -203,16 +256,20 @@ class GreyBox(ABC):
 
     @abstractmethod
     def applied(self, log: VelocityLog) -> np.ndarray:
-        """The input per command (N, ni): the force the commands apply."""
+        """The force the log's commands apply (N, ni)."""
 
     @abstractmethod
-    def filtered(self, log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
-        """The smoothed state and its derivative (N+1, state_size) each, from the log."""
+    def filtered(
+        self, log: VelocityLog, theta: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The smoothed state and its derivative (N+1, state_size) each, from the log, as
+        the output map of ``theta`` (p,; default the start) gives them."""
 
     @abstractmethod
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         """The model as ``A theta = b`` on samples of the state, its derivative and the
-        input: ``A`` (axes, N, p), ``b`` (axes, N), a block of rows per equation."""
+        input: ``A`` (axes, N, p - extras) over the parameters but the extras, ``b`` (axes,
+        N), a block of rows per equation."""
 
     @abstractmethod
     def scale_floor(self) -> np.ndarray:
@@ -222,39 +279,102 @@ class GreyBox(ABC):
     def damping_rate(self, logs: list[VelocityLog]) -> float:
         """How fast the start vehicle's damping acts at twice the logged speeds (1/s)."""
 
+    def input(self, force, theta):
+        """The model's input from the commands' ``force`` (any shape) under ``theta`` (p,),
+        NumPy or CasADi: the force itself unless a parameter acts on it."""
+        return force
+
+    def offset(self, theta, log: VelocityLog, first: int, stop: int):
+        """What the outputs hold beyond the state's measured components at samples
+        ``first``..``stop`` - 1 of ``log`` under ``theta`` (p,), as rows (outputs, n), NumPy or
+        CasADi; None: nothing."""
+        return None
+
+    def check(self, logs: list[VelocityLog], fixed: tuple[str, ...]) -> None:
+        """One ConfigError line for a ``fixed`` name that is not a parameter (a model adds
+        what its extras need of the logs)."""
+        unknown = [name for name in fixed if name not in self.parameters]
+        if unknown:
+            raise ConfigError(
+                "--fix", ",".join(unknown), f"not a parameter identify estimates: one of "
+                f"{', '.join(self.parameters)}",
+            )  # fmt: skip
+
 
 class HorizontalGreyBox(GreyBox):
-    """The 3-DOF velocity model (module docstring) of ``vehicle``'s thruster layout."""
+    """The 3-DOF velocity model (module docstring) of ``vehicle``'s thruster layout, with a
+    constant world-frame ``current`` and a ``thrust_gain`` as further unknowns if asked."""
 
-    parameters = PARAMETERS
-    lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6])
-    upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6])
     outputs = VELOCITY_NAMES
     units = ("m/s", "m/s", "rad/s")
     measured = (0, 1, 2)
     state_size = 3
     title = "grey-box 3-DOF velocity model"
 
-    def __init__(self, vehicle: VehicleParams) -> None:
+    def __init__(
+        self, vehicle: VehicleParams, current: bool = False, thrust_gain: bool = False
+    ) -> None:
         self.vehicle = vehicle
+        self.extras = ((GAIN,) if thrust_gain else ()) + (CURRENT if current else ())
+        self.parameters = PARAMETERS + self.extras
+        lower, upper = ([EXTRA_BOUNDS[name][i] for name in self.extras] for i in (0, 1))
+        self.lower = np.array([1e-9, 1e-9, 0.0, *[-np.inf] * 6, *lower])
+        self.upper = np.array([np.inf, np.inf, np.inf, *[0.0] * 6, *upper])
 
     @property
     def thrusters(self) -> int:
         return self.vehicle.n_thrusters
 
     def start(self) -> np.ndarray:
-        return start_vector(self.vehicle)
+        return np.array([*start_vector(self.vehicle), *(EXTRA_START[n] for n in self.extras)])
 
     def rhs(self) -> ca.Function:
-        nu, tau, theta = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3), ca.SX.sym("theta", 9)
+        nu, tau = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3)
+        theta = ca.SX.sym("theta", len(self.parameters))
         derivative = velocity_rhs(nu, tau, theta, self.vehicle.Iz_rb, ca.fabs)
         return ca.Function("velocity_rhs", [nu, tau, theta], [derivative])
 
     def applied(self, log: VelocityLog) -> np.ndarray:
         return applied_force(log, self.vehicle)
 
-    def filtered(self, log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
-        return smoothed(log)
+    def input(self, force, theta):
+        """``tau = g T F`` with the thrust gain g, if it is an unknown."""
+        if GAIN not in self.extras:
+            return force
+        return theta[self.parameters.index(GAIN)] * force
+
+    def _current(self, theta):
+        """theta's current (2,), or None where the model has none."""
+        if CURRENT[0] not in self.extras:
+            return None
+        at = self.parameters.index(CURRENT[0])
+        return theta[at : at + 2]
+
+    def offset(self, theta, log: VelocityLog, first: int, stop: int):
+        """The current's body components at the logged headings: the log measures the
+        velocity over the ground, the model's state is the velocity through the water."""
+        current = self._current(theta)
+        if current is None:
+            return None
+        return current_rows(current, log.heading[first:stop])
+
+    def filtered(
+        self, log: VelocityLog, theta: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The smoothed velocities through the water and their derivatives: the current's
+        body components at the (smoothed) heading and their rates ``u_c' = r v_c``,
+        ``v_c' = -r u_c`` taken off."""
+        nu, nu_dot = smoothed(log)
+        current = None if theta is None else self._current(theta)
+        if current is None:
+            return nu, nu_dot
+        psi = savgol_filter(log.heading, filter_window(log.sample_time), FILTER_ORDER)
+        u_c, v_c, zero = current_rows(np.asarray(current, dtype=float), psi)
+        r = nu[:, 2]
+        return (
+            nu - np.column_stack([u_c, v_c, zero]),
+            nu_dot - np.column_stack([r * v_c, -r * u_c, zero]),
+        )
 
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         return regression(x, x_dot, inputs, self.vehicle.Iz_rb)
@@ -263,18 +383,47 @@ class HorizontalGreyBox(GreyBox):
         vehicle = self.vehicle
         axis_mass = {"X": vehicle.m11, "Y": vehicle.m22, "N": vehicle.Iz}
         masses = {"m11": vehicle.m11, "m22": vehicle.m22, "Iz_added": vehicle.Iz}
-        return 0.01 * np.array([masses.get(name) or axis_mass[name[0]] for name in PARAMETERS])
+        floor = [0.01 * (masses.get(name) or axis_mass[name[0]]) for name in PARAMETERS]
+        return np.array(floor + [EXTRA_SIZE[name] for name in self.extras])
 
     def damping_rate(self, logs: list[VelocityLog]) -> float:
         top = 2.0 * np.max(np.vstack([np.abs(log.velocity) for log in logs]), axis=0)
         return max(damping_rates(self.vehicle, *top))
 
+    def check(self, logs: list[VelocityLog], fixed: tuple[str, ...]) -> None:
+        """Also a gain without a scale to be measured in (module docstring), and a current
+        asked of a log without a heading."""
+        super().check(logs, fixed)
+        start = dict(zip(self.parameters, self.start(), strict=True))
+        if GAIN in self.extras and not any(start[name] != 0 for name in fixed):
+            raise ConfigError(
+                "--thrust-gain", ",".join(fixed) or None,
+                "a gain on every thrust and the masses and dampings scale together (the log "
+                "cannot tell g tau = M nu' - D nu from tau = M/g nu' - D/g nu): hold one "
+                "nonzero parameter at the start file's value, e.g. --fix m11",
+            )  # fmt: skip
+        for log in logs if CURRENT[0] in self.extras else ():
+            if log.heading is None:
+                raise ConfigError(
+                    "LOG", log.name, "has no heading, which --current needs (a current fixed "
+                    "in the world turns in the body as the vehicle turns)",
+                )  # fmt: skip
 
-def _stacked_regression(logs: list[VelocityLog], greybox: GreyBox):
+
+def _observed(greybox: GreyBox, states, theta, log: VelocityLog, first: int):
+    """The outputs (outputs, n) the model's ``states`` (state_size, n) at samples ``first``..
+    give: their measured components plus the output map's offset."""
+    seen = states[list(greybox.measured), :]
+    offset = greybox.offset(theta, log, first, first + states.shape[1])
+    return seen if offset is None else seen + offset
+
+
+def _stacked_regression(logs: list[VelocityLog], greybox: GreyBox, theta: np.ndarray):
+    """The regression rows of every log (``GreyBox.regression``) with its maps at ``theta``."""
     blocks_a, blocks_b = [], []
     for log in logs:
-        x, x_dot = greybox.filtered(log)
-        tau = greybox.applied(log)
+        x, x_dot = greybox.filtered(log, theta)
+        tau = greybox.input(greybox.applied(log), theta)
         # The derivative at t_k spans the commands before and after it: their mean.
         tau_k = np.vstack([tau[:1], 0.5 * (tau[:-1] + tau[1:])])
         edge = filter_window(log.sample_time) // 2  # the filter's ends are extrapolations
@@ -286,18 +435,58 @@ def _stacked_regression(logs: list[VelocityLog], greybox: GreyBox):
 
 
 def equation_error(
-    logs: list[VelocityLog], vehicle: VehicleParams, greybox: GreyBox | None = None
+    logs: list[VelocityLog],
+    vehicle: VehicleParams,
+    greybox: GreyBox | None = None,
+    fixed: tuple[str, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least-squares parameters (p,) of ``greybox`` (default the 3-DOF model of
-    ``vehicle``) and the regression ``A`` (axes, N, p), ``b`` (axes, N) they solve, each
-    axis' rows scaled by its force RMS so that N and N m weigh alike."""
+    ``vehicle``), the ``fixed`` ones at their start, and the regression ``A`` (axes, N, p),
+    ``b`` (axes, N) at that estimate, each axis' rows scaled by its force RMS so that N and
+    N m weigh alike. The extras are searched by variable projection (module docstring);
+    ``A``'s columns of them are the rows' derivatives with respect to them."""
     greybox = greybox or HorizontalGreyBox(vehicle)
-    A, b = _stacked_regression(logs, greybox)
-    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ greybox.start()) ** 2, 1))
+    start = greybox.start()
+    names = greybox.parameters
+    terms = np.array([name not in greybox.extras for name in names])
+    searched = np.array([name in greybox.extras and name not in fixed for name in names])
+    free = np.array([name not in fixed for name in names])[terms]
+    held = np.where(free, 0.0, start[terms])
+    A, b = _stacked_regression(logs, greybox, start)
+    scale = np.sqrt(np.mean(b**2, axis=1)) + np.sqrt(np.mean((A @ start[terms]) ** 2, 1))
     scale = np.where(scale > 0, scale, 1.0)
-    rows = (A / scale[:, None, None]).reshape(-1, A.shape[2])
-    theta, *_ = lstsq(rows, (b / scale[:, None]).ravel())
-    return theta, A, b
+
+    def with_extras(values) -> np.ndarray:
+        theta = start.copy()
+        theta[searched] = values
+        return theta
+
+    def solve(values) -> tuple[np.ndarray, np.ndarray]:
+        """The free terms' least squares at the extras ``values``, and its residual."""
+        rows, rhs = _stacked_regression(logs, greybox, with_extras(values))
+        rhs = (rhs - rows @ held) / scale[:, None]
+        rows = (rows[..., free] / scale[:, None, None]).reshape(-1, int(free.sum()))
+        solution, *_ = lstsq(rows, rhs.ravel())
+        return solution, rows @ solution - rhs.ravel()
+
+    values = start[searched]
+    if searched.any():  # variable projection over the extras (module docstring)
+        size = np.maximum(np.abs(values), greybox.scale_floor()[searched])
+        values = least_squares(lambda c: solve(c)[1], values, x_scale=size).x
+    theta = with_extras(values)
+    theta[np.flatnonzero(terms)[free]] = solve(values)[0]
+    A, b = _stacked_regression(logs, greybox, theta)
+    columns = np.zeros((*b.shape, len(names)))
+    columns[..., terms] = A
+    for i in np.flatnonzero(searched):
+        residuals = []
+        for sign in (1.0, -1.0):
+            moved = theta.copy()
+            moved[i] += sign * EXTRA_STEP
+            rows, rhs = _stacked_regression(logs, greybox, moved)
+            residuals.append(rows @ theta[terms] - rhs)
+        columns[..., i] = (residuals[0] - residuals[1]) / (2 * EXTRA_STEP)
+    return theta, columns, b
 
 
 @dataclass
@@ -376,37 +565,46 @@ def output_error(
     """Output-error refinement (module docstring, steps 2 and 3) of ``greybox`` (default
     the 3-DOF model of ``vehicle``) from whichever of the ``candidates`` (p,) simulates the
     log best; the ``fixed`` parameters stay at that candidate's values. ``weight`` (ny,):
-    per output, 1 / its noise level (default: the filter's estimate)."""
+    per output, 1 / its noise level (default: the filter's estimate). Each segment's free
+    initial state is the model's (the velocity through the water); the output map's offset
+    (the current's body components at the logged headings) is added to what it predicts."""
     greybox = greybox or HorizontalGreyBox(vehicle)
     sample_time = logs[0].sample_time
     model = model or _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
     start = greybox.start()
     scale = _scales(start, candidates[0], greybox)
     weight = 1.0 / noise_levels(logs) if weight is None else np.asarray(weight, dtype=float)
-    n_parameters, nx, seen = len(greybox.parameters), greybox.state_size, list(greybox.measured)
+    n_parameters, nx = len(greybox.parameters), greybox.state_size
     z = ca.MX.sym("z", n_parameters)
     theta = z * scale
     length = max(MIN_SAMPLES // 4, round(SEGMENT_S / sample_time))
-    initial, guesses, residuals = [], [], []
+    initial, starts, residuals = [], [], []
     for log in logs:
         tau = greybox.applied(log)
-        nu_smooth = greybox.filtered(log)[0]
         for a, b in _segments(log, length):
             x0 = ca.MX.sym(f"x0_{len(initial)}", nx)
             initial.append(x0)
-            guesses.append(nu_smooth[a])
+            starts.append((log, a))
             steps = b - a
-            predicted = model.rollout(steps)(x0, tau[a:b].T, ca.repmat(theta, 1, steps))
+            inputs = greybox.input(tau[a:b].T, theta)
+            predicted = model.rollout(steps)(x0, inputs, ca.repmat(theta, 1, steps))
             measured = log.velocity[a + 1 : b + 1].T
-            residuals.append(ca.vec((predicted[seen, :] - measured) * weight))
-            residuals.append((x0[seen] - log.velocity[a]) * weight)
+            observed = _observed(greybox, predicted, theta, log, a + 1)
+            residuals.append(ca.vec((observed - measured) * weight))
+            first = _observed(greybox, x0, theta, log, a)
+            residuals.append((first - log.velocity[a]) * weight)
     x = ca.vertcat(z, *initial)
     residual = ca.vertcat(*residuals)
     lower, upper = _bounds(greybox)
     is_fixed = np.array([name in fixed for name in greybox.parameters])
-    guess = np.concatenate(guesses)
+
+    def guess(candidate: np.ndarray) -> np.ndarray:
+        """The segments' initial states from the filtered logs under ``candidate``'s maps."""
+        states = {id(log): greybox.filtered(log, candidate)[0] for log in logs}
+        return np.concatenate([states[id(log)][a] for log, a in starts])
+
     cost = ca.Function("cost", [x], [0.5 * ca.sumsqr(residual)])
-    costs = [float(cost(np.concatenate([c / scale, guess]))) for c in candidates]
+    costs = [float(cost(np.concatenate([c / scale, guess(c)]))) for c in candidates]
     best = min(range(len(costs)), key=lambda i: costs[i] if math.isfinite(costs[i]) else math.inf)
     z0 = np.clip(candidates[best] / scale, lower, upper)
     lower = np.where(is_fixed, z0, lower)
@@ -429,7 +627,7 @@ def output_error(
         },
     )
     solution = solver(
-        x0=np.concatenate([z0, guess]),
+        x0=np.concatenate([z0, guess(candidates[best])]),
         lbx=np.concatenate([lower, np.full(n_initial, -np.inf)]),
         ubx=np.concatenate([upper, np.full(n_initial, np.inf)]),
     )
@@ -453,7 +651,8 @@ def output_error(
     except np.linalg.LinAlgError:
         std = np.full(int((~is_fixed).sum()), np.inf)
     half_width[~is_fixed] = Z95 * std * scale[~is_fixed]
-    residual_rms = np.sqrt(np.mean(r_value.reshape(-1, len(seen)) ** 2, axis=0)) / weight
+    outputs = len(greybox.measured)
+    residual_rms = np.sqrt(np.mean(r_value.reshape(-1, outputs) ** 2, axis=0)) / weight
     return _Fit(
         theta=optimum[:n_parameters] * scale,
         half_width=half_width,
@@ -486,6 +685,7 @@ class ParameterEstimate:
     value: float  # what the vehicle file gets (the start value where not excited)
     ci95: tuple[float, float]
     excited: bool
+    fixed: bool = False  # held at the start value as asked (``--fix``): not estimated
 
 
 @dataclass
@@ -508,20 +708,35 @@ class Identification:
     outputs: tuple[str, ...] = VELOCITY_NAMES  # what the logs measured (the RMS' order)
     units: tuple[str, ...] = HorizontalGreyBox.units
     model: str = HorizontalGreyBox.title
+    # The model's extras (thrust gain, current: GreyBox.extras), estimated like the
+    # parameters, not the vehicle file's fields.
+    extras: list[ParameterEstimate] = field(default_factory=list)
 
     @property
     def unexcited(self) -> list[str]:
-        return [p.name for p in self.parameters if not p.excited]
+        return [p.name for p in self.parameters + self.extras if not (p.excited or p.fixed)]
+
+    @property
+    def fixed(self) -> list[str]:
+        return [p.name for p in self.parameters + self.extras if p.fixed]
 
     def vehicle_values(self) -> dict[str, float]:
         return {p.name: p.value for p in self.parameters}
 
+    def extra(self, name: str) -> ParameterEstimate | None:
+        """The estimate of the extra ``name`` (:data:`EXTRAS`), or None where the model had
+        none."""
+        return next((p for p in self.extras if p.name == name), None)
 
-def _excited(theta, half_width, A, b) -> np.ndarray:
-    """Module docstring, step 4."""
+
+def _excited(theta, half_width, A, b, terms) -> np.ndarray:
+    """Module docstring, step 4. ``terms`` (p,): the parameters whose columns of ``A`` are
+    terms of the equations (not the extras' derivatives), which make up each equation's
+    force with ``b``."""
     relative = half_width <= RELATIVE_HALF_WIDTH * np.abs(theta)
-    force = np.sqrt(np.mean((A * theta) ** 2, axis=(1, 2)) * A.shape[2] + np.mean(b**2, axis=1))
-    column = np.sqrt(np.mean(A**2, axis=1))  # (3, 9) each regressor's RMS per axis
+    products = (A[..., terms] * theta[terms]) ** 2
+    force = np.sqrt(np.mean(products, axis=(1, 2)) * products.shape[2] + np.mean(b**2, axis=1))
+    column = np.sqrt(np.mean(A**2, axis=1))  # (axes, p) each regressor's RMS per axis
     moved = half_width[None, :] * column  # force the interval moves, per axis
     share = np.where(column > 0, moved / np.maximum(force[:, None], 1e-12), np.inf).min(axis=0)
     return relative | (share <= SENSITIVITY_SHARE)
@@ -532,10 +747,11 @@ def identify(
     vehicle: VehicleParams,
     holdout: float = 0.2,
     greybox: GreyBox | None = None,
+    fixed: tuple[str, ...] = (),
 ) -> Identification:
     """Identify the parameters of ``greybox`` (default the 3-DOF model's, :data:`PARAMETERS`)
-    from ``logs`` starting from ``vehicle`` (module docstring); the last ``holdout`` share of
-    each log validates."""
+    from ``logs`` starting from ``vehicle`` (module docstring), the ``fixed`` ones held at
+    their start values; the last ``holdout`` share of each log validates."""
     greybox = greybox or HorizontalGreyBox(vehicle)
     if not logs:
         raise ConfigError("LOG", None, "give at least one log")
@@ -554,6 +770,7 @@ def identify(
                 log.name,
                 f"has {log.thrust.shape[1]} thrusters, the start vehicle {greybox.thrusters}",
             )
+    greybox.check(logs, fixed)
     if not 0.0 < holdout < 0.5:
         raise ConfigError("--holdout", holdout, "must be in (0, 0.5)")
     fit_logs, check_logs = [], []
@@ -570,38 +787,43 @@ def identify(
         check_logs.append(log.part(cut, log.steps))
 
     start = greybox.start()
-    first, A, b = equation_error(fit_logs, vehicle, greybox)
+    estimated = np.array([name not in fixed for name in greybox.parameters])
+    first, A, b = equation_error(fit_logs, vehicle, greybox, fixed)
     # A least-squares value outside the physics (a negative mass, a positive damping) is
     # noise's: the fit starts from the start file's value there.
     lower, upper = greybox.lower, greybox.upper
     initial = np.where((first >= lower) & (first <= upper), first, start)
     model = _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
     # Weighted first by the filter's noise estimate, then again by the residuals' (the
-    # filter also removes fast dynamics it cannot follow), all parameters free; those the
-    # second fit finds unexcited are then fixed at their start values for a third.
-    first_fit = output_error(fit_logs, vehicle, [initial, start], model=model, greybox=greybox)
+    # filter also removes fast dynamics it cannot follow), all parameters free but the held
+    # ones; those the second fit finds unexcited are then fixed at their start values for a
+    # third.
+    first_fit = output_error(
+        fit_logs, vehicle, [initial, start], fixed, model=model, greybox=greybox
+    )
     weight = 1.0 / np.maximum(first_fit.residual_rms, 1e-9)
     fit = output_error(
-        fit_logs, vehicle, [first_fit.theta], weight=weight, model=model, greybox=greybox
+        fit_logs, vehicle, [first_fit.theta], fixed, weight=weight, model=model, greybox=greybox
     )
-    excited = _excited(fit.theta, fit.half_width, A, b)
+    terms = np.array([name not in greybox.extras for name in greybox.parameters])
+    excited = _excited(fit.theta, fit.half_width, A, b, terms) & estimated
     final = fit
-    if not excited.all():
-        fixed = tuple(name for name, ok in zip(greybox.parameters, excited, strict=True) if not ok)
+    if not excited[estimated].all():
+        held = tuple(name for name, ok in zip(greybox.parameters, excited, strict=True) if not ok)
         final = output_error(
             fit_logs,
             vehicle,
             [np.where(excited, fit.theta, start)],
-            fixed=fixed,
+            fixed=held,
             weight=weight,
             model=model,
             greybox=greybox,
         )
     # An excited parameter's interval is the final fit's; an unexcited one's the fit that
-    # judged it (the final one holds it fixed).
+    # judged it (the final one holds it fixed); a held one's is its value.
     center = np.where(excited, final.theta, fit.theta)
     half_width = np.where(excited, final.half_width, fit.half_width)
-    parameters = [
+    estimates = [
         ParameterEstimate(
             name=name,
             start=float(start[i]),
@@ -609,23 +831,16 @@ def identify(
             value=float(final.theta[i]) if excited[i] else float(start[i]),
             ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
+            fixed=name in fixed,
         )
         for i, name in enumerate(greybox.parameters)
     ]
-    identified = np.array([p.value for p in parameters])
+    identified = np.array([p.value for p in estimates])
     traces, errors, errors_start = [], [], []
     for whole, log in zip(logs, check_logs, strict=True):
-        tau = greybox.applied(log)
-        seen = list(greybox.measured)
-        if whole.steps > filter_window(sample_time):
-            # From the filter over the whole log: at the cut an inner point, not the filter's
-            # extrapolated end (a heave rate from the depth there drifts the simulated depth)
-            nu0 = greybox.filtered(whole)[0][whole.steps - log.steps]
-        else:  # too short to filter: the first measurement, the rest of the state at rest
-            nu0 = np.zeros(greybox.state_size)
-            nu0[seen] = log.velocity[0]
-        simulated = model.simulate(nu0, tau, identified)[:, seen]
-        simulated_start = model.simulate(nu0, tau, start)[:, seen]
+        simulated, simulated_start = (
+            _held_out(greybox, model, whole, log, theta) for theta in (identified, start)
+        )
         errors.append(simulated - log.velocity)
         errors_start.append(simulated_start - log.velocity)
         traces.append(
@@ -637,7 +852,7 @@ def identify(
             }
         )
     return Identification(
-        parameters=parameters,
+        parameters=[p for p in estimates if p.name not in greybox.extras],
         logs=[log.name for log in logs],
         sample_time=sample_time,
         fit_samples=sum(log.steps for log in fit_logs),
@@ -653,4 +868,23 @@ def identify(
         outputs=greybox.outputs,
         units=greybox.units,
         model=greybox.title,
+        extras=[p for p in estimates if p.name in greybox.extras],
     )
+
+
+def _held_out(
+    greybox: GreyBox, model: _Model, whole: VelocityLog, log: VelocityLog, theta: np.ndarray
+) -> np.ndarray:
+    """The outputs (N+1, ny) ``theta`` predicts over the held-out end ``log`` of ``whole``
+    from its first filtered state, under its commands."""
+    seen = list(greybox.measured)
+    if whole.steps > filter_window(log.sample_time):
+        # From the filter over the whole log: at the cut an inner point, not the filter's
+        # extrapolated end (a heave rate from the depth there drifts the simulated depth)
+        x0 = greybox.filtered(whole, theta)[0][whole.steps - log.steps]
+    else:  # too short to filter: the first measurement, the rest of the state at rest
+        x0 = np.zeros(greybox.state_size)
+        offset = greybox.offset(theta, log, 0, 1)
+        x0[seen] = log.velocity[0] - (0.0 if offset is None else offset[:, 0])
+    states = model.simulate(x0, greybox.input(greybox.applied(log), theta), theta)
+    return _observed(greybox, states.T, theta, log, 0).T

@@ -159,16 +159,18 @@ def _clip_to_limits(thrust: np.ndarray, actuators: ActuatorSet, sample_time: flo
 
 
 def simulate_open_loop(
-    vehicle: VehicleParams, thrust: np.ndarray, sample_time: float
+    vehicle: VehicleParams, thrust: np.ndarray, sample_time: float, current_world=None
 ) -> np.ndarray:
     """The 3-DOF model's states (N+1, 6) from rest at the origin under ``thrust`` (N, n),
-    each row held over its sample (RK4 at the plant's stable step)."""
+    each row held over its sample (RK4 at the plant's stable step), in a constant
+    ``current_world`` (2,: m/s) if given."""
     substeps = substeps_for(sample_time, stable_plant_step(vehicle, DEFAULT_PLANT_STEP_S))
     states = np.zeros((len(thrust) + 1, HORIZONTAL.size))
     for k, row in enumerate(thrust):
         states[k + 1] = rk4(
-            lambda x, u: dynamics(x, u, vehicle), states[k], row, sample_time, substeps
-        )
+            lambda x, u: dynamics(x, u, vehicle, current_world=current_world),
+            states[k], row, sample_time, substeps,
+        )  # fmt: skip
     return states
 
 

@@ -97,9 +97,12 @@ class HeaveGreyBox(GreyBox):
         """The vertical force of the commands (N, 1): the thrusts' sum (or the log's own)."""
         return log.force if log.force is not None else log.thrust.sum(axis=1, keepdims=True)
 
-    def filtered(self, log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
+    def filtered(
+        self, log: VelocityLog, theta: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """[z, w] and [w, w'] smoothed (N+1, 2) each: w and w' from the logged w, or the
-        first and second derivatives of z where the log has the depth alone."""
+        first and second derivatives of z where the log has the depth alone (the output map
+        has no parameters: ``theta`` is not read)."""
         signals, rates = smoothed(log)
         if self.outputs == DEPTH_AND_RATE:
             return signals, np.column_stack([signals[:, 1], rates[:, 1]])

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.sim.log import read_log_table
 
 __all__ = ["MIN_SAMPLES", "LogOptions", "VelocityLog", "read_log", "read_run_folder", "resample"]
@@ -35,6 +36,7 @@ MIN_SAMPLES = 100
 # The sample times of a log may wander by this share of a sample (written to 1 us).
 _TIME_JITTER = 1e-3
 VELOCITY_NAMES = ("u", "v", "r")
+HEADING = HORIZONTAL.names[HORIZONTAL.heading]  # the log's heading column, psi
 
 
 @dataclass(frozen=True)
@@ -42,7 +44,9 @@ class VelocityLog:
     """Body velocities and the applied force of one log, sampled every ``sample_time``.
 
     Exactly one of ``thrust`` (per thruster, mapped to the body by the vehicle's allocation
-    ``tau = T F``) and ``force`` (the body force itself) is given. A log of the heave model
+    ``tau = T F``) and ``force`` (the body force itself) is given. ``heading``, where the log
+    has it, is what a constant current is estimated in (``identify --current``): the
+    current rotates in the body as the vehicle turns. A log of the heave model
     (identification/heave.py) holds in ``velocity`` what ``outputs`` names instead: the
     depth z (m, up) and, where logged, the heave rate w (m/s), and the vertical thrusts.
     """
@@ -53,6 +57,7 @@ class VelocityLog:
     thrust: np.ndarray | None  # (N, n) N, held over [t_k, t_k+1)
     force: np.ndarray | None = None  # (N, 3) X, Y (N), N (N m), held over [t_k, t_k+1)
     outputs: tuple[str, ...] = VELOCITY_NAMES  # what ``velocity``'s columns are
+    heading: np.ndarray | None = None  # (N+1,) psi (rad, unwrapped) at t_k, if logged
 
     def __post_init__(self) -> None:
         given = [name for name in ("thrust", "force") if getattr(self, name) is not None]
@@ -63,6 +68,11 @@ class VelocityLog:
             raise ValueError(
                 f"VelocityLog: {len(self.velocity)} velocities need {len(self.velocity) - 1} "
                 f"commands, got {len(held)}"
+            )
+        if self.heading is not None and len(self.heading) != len(self.velocity):
+            raise ValueError(
+                f"VelocityLog: {len(self.velocity)} velocities need as many headings, "
+                f"got {len(self.heading)}"
             )
 
     @property
@@ -78,6 +88,7 @@ class VelocityLog:
             None if self.thrust is None else self.thrust[start:stop],
             None if self.force is None else self.force[start:stop],
             self.outputs,
+            None if self.heading is None else self.heading[start : stop + 1],
         )
 
 
@@ -140,6 +151,7 @@ def resample(
     command: np.ndarray,
     what: tuple[str, str],
     as_force: bool = False,
+    heading: np.ndarray | None = None,
 ) -> VelocityLog:
     """Measured velocities and commands, each at its own times, on one grid t_k = t0 + k Te.
 
@@ -157,6 +169,8 @@ def resample(
       velocity is a continuous signal sampled by the sensor; linear interpolation adds no
       overshoot and, where a measurement falls on the grid (``auvmpc export``'s bags), it
       returns that measurement exactly.
+    - The ``heading`` (rad, at the velocities' times, if given) is unwrapped and
+      interpolated like a velocity.
     - Times are integer nanoseconds throughout, so that a grid point equal to a stamp is
       equal, not within round-off of it.
 
@@ -209,10 +223,13 @@ def resample(
             f"{MAX_GAP_SAMPLES} samples): cut the log there",
         )
     origin = grid[0]  # interpolate in ns from the grid's start: float64 keeps them exact
+    measured = np.asarray(velocity, dtype=float)
+    if heading is not None:
+        measured = np.column_stack([measured, np.unwrap(np.asarray(heading, dtype=float))])
     sampled = np.column_stack(
         [
             np.interp((grid - origin).astype(float), (measured_t - origin).astype(float), column)
-            for column in np.asarray(velocity, dtype=float).T
+            for column in measured.T
         ]
     )
     held = np.asarray(command, dtype=float)[np.searchsorted(command_t, grid[:-1], side="right") - 1]
@@ -221,16 +238,18 @@ def resample(
     if np.ptp(held, axis=0).max() == 0.0:
         raise ConfigError(field_name, name, f"{command_what} never changes: nothing to identify")
     sample_s = step_ns / 1e9
+    velocities, psi = sampled[:, :3], (sampled[:, 3] if heading is not None else None)
     if as_force:
-        return VelocityLog(name, sample_s, sampled, None, held)
-    return VelocityLog(name, sample_s, sampled, held)
+        return VelocityLog(name, sample_s, velocities, None, held, heading=psi)
+    return VelocityLog(name, sample_s, velocities, held, heading=psi)
 
 
 def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:
-    """The velocities and thrusts in a run folder's log.csv (columns t, u, v, r, F1..Fn),
-    read by the log's own table reader (sim/log.py, :class:`~auvmpc.sim.log.LogTable`): a
-    file that is not a log, a cut or edited row, a cell that is not a number, a NaN or t
-    not increasing is one line naming the file and the line."""
+    """The velocities and thrusts in a run folder's log.csv (columns t, u, v, r, F1..Fn; the
+    heading psi where the log has it), read by the log's own table reader (sim/log.py,
+    :class:`~auvmpc.sim.log.LogTable`): a file that is not a log, a cut or edited row, a
+    cell that is not a number, a NaN or t not increasing is one line naming the file and
+    the line."""
     table, log_file = run_table(folder)
     return log_from_table(table, log_file, folder, VELOCITY_NAMES, "F", n_thrusters)
 
@@ -288,6 +307,7 @@ def log_from_table(
     t = table.numbers("t")
     table.increasing("t", t)
     velocity = np.column_stack([table.numbers(name) for name in signals])
+    heading = np.unwrap(table.numbers(HEADING)) if HEADING in table.header else None
     commands = slice(0, rows - 1)  # the last row has no command
     thrust = np.column_stack([table.numbers(name, commands) for name in inputs])
     steps = np.diff(t)
@@ -296,4 +316,5 @@ def log_from_table(
         raise ConfigError(field, str(log_file), "t is not evenly sampled")
     if np.ptp(thrust, axis=0).max() == 0.0:
         raise ConfigError(field, str(log_file), "the thrust never changes: nothing to identify")
-    return VelocityLog(str(folder), sample_time, velocity, thrust, outputs=outputs)
+    return VelocityLog(str(folder), sample_time, velocity, thrust, outputs=outputs,
+                       heading=heading)  # fmt: skip

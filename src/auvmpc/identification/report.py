@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from auvmpc.atomic_write import atomic_write_text
 from auvmpc.errors import ConfigError
-from auvmpc.identification.estimation import Identification
+from auvmpc.identification.estimation import CURRENT, GAIN, Identification, ParameterEstimate
 from auvmpc.identification.excitation import Dof
 from auvmpc.identification.logs import LogOptions
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
@@ -48,15 +48,30 @@ def _put(data: dict[str, Any], name: str, value: float) -> None:
     data[key] = value
 
 
+# The thrust gain goes into the vehicle file as these fields times the gain.
+GAIN_SCALED = ("thrust_limits", "thrust_rate_limit")
+
+
 def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: str) -> str:
     """The start file's fields with the identified values, ``estimated`` listing them and
-    a header saying where they came from (the logs, the intervals)."""
+    a header saying where they came from (the logs, the intervals).
+
+    An identified thrust gain g scales the horizontal thrusters' limits (``thrust_limits``,
+    ``thrust_rate_limit``): the file then says what the thrusters deliver in the water, in
+    the scale of the masses and dampings (docs/identification.md). A current is not a
+    vehicle's: it is only in the header."""
     data = dict(start)
     identified = [p for p in found.parameters if p.excited]
     for estimate in identified:
         _put(data, estimate.name, _number(estimate.value))
+    gain = found.extra(GAIN)
+    scaled = gain is not None and gain.excited
+    if scaled:
+        data["thrust_limits"] = [_number(gain.value * limit) for limit in start["thrust_limits"]]
+        data["thrust_rate_limit"] = _number(gain.value * start["thrust_rate_limit"])
     listed = list(data.get("estimated", ()))
-    data["estimated"] = listed + [p.name for p in identified if p.name not in listed]
+    names = [p.name for p in identified] + list(GAIN_SCALED if scaled else ())
+    data["estimated"] = listed + [name for name in names if name not in listed]
     logs = ", ".join(found.logs)
     note = f"identified from {len(found.logs)} log(s) by auvmpc identify (start: {start_name})"
     description = str(data.get("description", "")).strip()
@@ -70,9 +85,19 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
         "# 95 % intervals from the Fisher information (identification.json beside this file):",
     ]
     for estimate in found.parameters:
-        low, high = estimate.ci95
-        kept = "" if estimate.excited else "  NOT EXCITED: start value kept"
-        header.append(f"#   {estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}")
+        header.append(f"#   {_estimate_line(estimate)}")
+    if gain is not None:
+        header.append(f"#   {_estimate_line(gain)}")
+        if scaled:
+            header.append(
+                f"#     thrust_limits, thrust_rate_limit: the start file's x {gain.value:.6g}, "
+                "the force the logged commands gave; command F / gain through the thrust map "
+                "the log was made with"
+            )
+    current = [found.extra(name) for name in CURRENT]
+    if current[0] is not None:
+        header.append("#   not a vehicle parameter, in the log's heading frame (m/s):")
+        header += [f"#   {_estimate_line(estimate)}" for estimate in current]
     rms = ", ".join(f"{value:.3g}" for value in found.validation_rms)
     header.append(
         f"# held-out validation RMS {', '.join(found.outputs)}: {rms} ({', '.join(found.units)})"
@@ -81,20 +106,50 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     return "\n".join(header) + "\n" + body
 
 
+def _estimate_line(estimate: ParameterEstimate) -> str:
+    low, high = estimate.ci95
+    kept = ""
+    if estimate.fixed:
+        kept = "  held at the start value (--fix)"
+    elif not estimate.excited:
+        kept = "  NOT EXCITED: start value kept"
+    return f"{estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}"
+
+
+def _entry(p: ParameterEstimate) -> dict[str, Any]:
+    return {
+        "value": p.value,
+        "ci95": list(p.ci95),
+        "excited": p.excited,
+        "start": p.start,
+        "equation_error": p.equation_error,
+        "fixed": p.fixed,
+    }
+
+
+# identification.json's keys of the current's components.
+CURRENT_KEYS = dict(zip(CURRENT, ("x", "y"), strict=True))
+CURRENT_FRAME = (
+    "world, as the log's heading: x where psi = 0, y where psi = 90 deg (NED logs: north, "
+    "east); m/s"
+)
+
+
 def identification_json(found: Identification) -> dict[str, Any]:
     """identification.json: per parameter ``value``, ``ci95`` and ``excited`` (the
-    contract), plus the start value and how the fit went."""
+    contract), plus the start value and how the fit went; the thrust gain and the current,
+    where asked for, in the same form beside them."""
+    extras: dict[str, Any] = {}
+    gain = found.extra(GAIN)
+    if gain is not None:
+        extras[GAIN] = _entry(gain)
+    current = {key: found.extra(name) for name, key in CURRENT_KEYS.items()}
+    if current["x"] is not None:
+        extras["current"] = {key: _entry(p) for key, p in current.items()}
+        extras["current"]["frame"] = CURRENT_FRAME
     return {
-        "parameters": {
-            p.name: {
-                "value": p.value,
-                "ci95": list(p.ci95),
-                "excited": p.excited,
-                "start": p.start,
-                "equation_error": p.equation_error,
-            }
-            for p in found.parameters
-        },
+        "parameters": {p.name: _entry(p) for p in found.parameters},
+        **extras,
         "logs": found.logs,
         "sample_time_s": found.sample_time,
         "fit_samples": found.fit_samples,
@@ -108,6 +163,7 @@ def identification_json(found: Identification) -> dict[str, Any]:
         "iterations": found.iterations,
         "started_from_equation_error": found.equation_error_used,
         "not_excited": found.unexcited,
+        "fixed": found.fixed,
     }
 
 
@@ -124,11 +180,21 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
         "| parameter | start | equation error | identified | 95 % interval | excited |",
         "|---|---|---|---|---|---|",
     ]
-    for p in found.parameters:
+    for p in found.parameters + found.extras:
+        excited = "fixed" if p.fixed else ("yes" if p.excited else "**no**")
         lines.append(
             f"| {p.name} | {p.start:.4g} | {p.equation_error:.4g} | {p.value:.4g} | "
-            f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] | {'yes' if p.excited else '**no**'} |"
+            f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] | {excited} |"
         )
+    if found.extra(CURRENT[0]) is not None:
+        lines += ["", f"The current (current_x, current_y) is not the vehicle's: {CURRENT_FRAME}."]
+    gain = found.extra(GAIN)
+    if gain is not None and gain.excited:
+        lines += [
+            "",
+            f"The vehicle file's thrust_limits and thrust_rate_limit are the start file's x "
+            f"{gain.value:.4g} (thrust_gain): the force the logged commands gave.",
+        ]
     lines += [
         "",
         f"Held-out validation (simulated {', '.join(found.outputs)} vs the log, RMS):",
@@ -180,6 +246,9 @@ def write_identification(
     overwrite: bool = False,
     options: LogOptions | None = None,
     dof: Dof | None = None,
+    current: bool = False,
+    thrust_gain: bool = False,
+    fixed: tuple[str, ...] = (),
 ) -> Identification:
     """``auvmpc identify``: identify from logs (run folders, ROS 2 bags, DataFlash logs:
     :func:`~auvmpc.identification.logs.read_log`, read as ``options`` say) starting from
@@ -188,8 +257,11 @@ def write_identification(
 
     ``dof``: the model to identify, the 3-DOF one (horizontal) or the heave one; None picks
     heave when the first log is a run folder with vertical thrusts (a depth run's log.csv,
-    :func:`~auvmpc.identification.heave.is_heave_log`), else horizontal."""
-    from auvmpc.identification.estimation import identify
+    :func:`~auvmpc.identification.heave.is_heave_log`), else horizontal. The 3-DOF model
+    also estimates a constant ``current`` and a ``thrust_gain`` if asked
+    (:class:`~auvmpc.identification.estimation.HorizontalGreyBox`); the ``fixed`` parameters
+    are held at the start file's values."""
+    from auvmpc.identification.estimation import HorizontalGreyBox, identify
     from auvmpc.identification.heave import HeaveGreyBox, is_heave_log, read_heave_log
     from auvmpc.identification.logs import read_log
 
@@ -207,7 +279,12 @@ def write_identification(
         raise ConfigError("LOG", None, "give at least one log")
     if dof is None:
         dof = Dof.HEAVE if is_heave_log(log_paths[0]) else Dof.HORIZONTAL
-    greybox = None
+    if dof is Dof.HEAVE and (current or thrust_gain):
+        raise ConfigError(
+            "--current" if current else "--thrust-gain", None,
+            "the heave model has no current or thrust gain: only the horizontal (3-DOF) "
+            "identification estimates them",
+        )  # fmt: skip
     if dof is Dof.HEAVE:
         heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section
         logs = [read_heave_log(path, heave.thrusters) for path in log_paths]
@@ -219,7 +296,8 @@ def write_identification(
         greybox = HeaveGreyBox(start, logs[0].outputs)
     else:
         logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
-    found = identify(logs, start, holdout, greybox)
+        greybox = HorizontalGreyBox(start, current, thrust_gain)
+    found = identify(logs, start, holdout, greybox, fixed)
     text = vehicle_file_text(start_data, found, vehicle)
     load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
     folder.mkdir(parents=True, exist_ok=True)

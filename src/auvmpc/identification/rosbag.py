@@ -7,8 +7,9 @@ Topics (``auvmpc identify`` flags; the defaults are what ``auvmpc export`` write
 
 - ``--odometry-topic`` (``/odom``), ``nav_msgs/msg/Odometry``: the body velocities. By the
   message's definition its twist is in ``child_frame_id``, the body: ``u = linear.x``,
-  ``v = linear.y``, ``r = angular.z`` up to the body frame's signs (below). The pose is not
-  used: the 3-DOF velocity model needs no heading.
+  ``v = linear.y``, ``r = angular.z`` up to the body frame's signs (below). Of the pose only
+  the yaw is read (z-y-x Euler angles of the orientation, with r's sign): the heading a
+  constant current is estimated in (``identify --current``).
 - ``--thrust-topic`` (``/thrust``), ``std_msgs/msg/Float64MultiArray``: every thruster's
   force (N), in the start vehicle's thruster order; or
 - ``--wrench-topic``, ``geometry_msgs/msg/WrenchStamped``: the body force and moment
@@ -34,6 +35,7 @@ velocities interpolated.
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 from pathlib import Path
 
@@ -129,7 +131,8 @@ def read_rosbag(path: str | Path, n_thrusters: int, options: LogOptions) -> Velo
                 topic = connection.topic
                 if topic == options.odometry_topic:
                     twist = message.twist.twist
-                    value = [twist.linear.x, twist.linear.y, twist.angular.z]
+                    value = [twist.linear.x, twist.linear.y, twist.angular.z,
+                             yaw_of(message.pose.pose.orientation)]  # fmt: skip
                     body = body or message.child_frame_id
                 elif options.wrench_topic:
                     wrench = message.wrench
@@ -159,7 +162,8 @@ def read_rosbag(path: str | Path, n_thrusters: int, options: LogOptions) -> Velo
     def column(topic: str, width: int) -> np.ndarray:
         return np.array(values[topic]).reshape(-1, width)
 
-    velocity = column(options.odometry_topic, 3) * signs
+    odometry = column(options.odometry_topic, 4)
+    velocity = odometry[:, :3] * signs
     command = column(command_topic, 3 if options.wrench_topic else n_thrusters)
     if options.wrench_topic:
         command = command * signs
@@ -172,4 +176,12 @@ def read_rosbag(path: str | Path, n_thrusters: int, options: LogOptions) -> Velo
         command,
         (options.odometry_topic, command_topic),
         as_force=bool(options.wrench_topic),
+        heading=odometry[:, 3] * signs[2],  # the yaw turns as r does
     )
+
+
+def yaw_of(orientation) -> float:
+    """The yaw (rad) of a ``geometry_msgs/msg/Quaternion``: the z-y-x Euler angle psi, the
+    inverse of ``auvmpc export``'s ``_quaternion`` for it."""
+    x, y, z, w = orientation.x, orientation.y, orientation.z, orientation.w
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
