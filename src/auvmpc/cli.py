@@ -849,10 +849,7 @@ def identify(
         highlight=False,
     )
     if found.unexcited:
-        errors.print(
-            f"warning: not excited by the logs, start value kept: {', '.join(found.unexcited)}",
-            highlight=False,
-        )
+        _warn([f"not excited by the logs, start value kept: {', '.join(found.unexcited)}"])
     console.print(f"wrote {out} and identification.json, .md, -fit.png beside it")
     if then_run is not None:
         from auvmpc.identification.flight import fly_identified
@@ -1021,7 +1018,10 @@ def verify_c(
         f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM"
     )
     if result.failures:
-        errors.print(f"not reproduced: {'; '.join(result.failures)}")
+        errors.print(
+            f"not reproduced: {'; '.join(result.failures)}",
+            highlight=False, soft_wrap=True, markup=False,
+        )  # fmt: skip
         raise typer.Exit(RUN_FAILED_EXIT)
 
 
@@ -1051,10 +1051,7 @@ def warn_if_not_ok(metrics: dict) -> None:
     """One line on stderr when the run's verdict is not ok (auvmpc.sim.verdict)."""
     verdict = metrics.get("verdict")
     if verdict is not None and verdict != "ok":
-        errors.print(
-            f"warning: run {verdict}: {metrics['verdict_reason']}",
-            highlight=False, soft_wrap=True, markup=False,
-        )  # fmt: skip
+        _warn([f"run {verdict}: {metrics['verdict_reason']}"])
 
 
 def print_metrics(metrics: dict, title: str) -> None:
