@@ -6,7 +6,9 @@ off in every roll and pitch parameter."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import identify
 from auvmpc.identification.excitation import MAX_TILT_RAD, Dof, design_excitation
 from auvmpc.identification.roll_pitch import (
@@ -90,3 +92,13 @@ def test_six_dof_excite_identifies_roll_and_pitch():
         close = abs(estimate.value - value) <= WITHIN * abs(value)
         assert close or low <= value <= high, (estimate, value)
     assert np.all(found.validation_rms < 0.5 * found.validation_rms_start)
+
+
+def test_a_log_too_slow_for_roll_and_pitch_is_refused():
+    """A 6-DOF run's 0.5 s samples cannot follow the BlueROV2 Heavy's 1.5 s pitch period."""
+    truth = load_vehicle(VEHICLE)
+    state = np.zeros((121, SIX_DOF.size))
+    thrust = np.ones((120, truth.six_dof.n_thrusters))
+    log = roll_pitch_log("slow", 0.5, state, thrust, truth)
+    with pytest.raises(ConfigError, match=r"sampled every 0.5 s: roll and pitch oscillate"):
+        identify([log], truth, greybox=RollPitchGreyBox(truth))

@@ -400,6 +400,12 @@ def write_excitation(
         raise ConfigError(
             "--duration", duration, f"too short: at least {MIN_DURATION_FACTOR * FADE_S:g} s"
         )
+    if Dof(dof) is Dof.SIX_DOF:
+        raise ConfigError(
+            "--dof", str(dof), "a 6-DOF scenario cannot play the manoeuvre yet (its depth "
+            "channel splits one heave force equally over the vertical thrusters, so no roll "
+            "or pitch moment): design_excitation(..., dof=Dof.SIX_DOF) gives the table",
+        )  # fmt: skip
     params = load_vehicle(vehicle, "VEHICLE")
     excitation = design_excitation(params, duration, sample_time, seed, box_m, dof=dof)
     named = vehicle

@@ -30,6 +30,7 @@ velocities are through the water) and those translational values right: identify
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import casadi as ca
@@ -51,6 +52,8 @@ from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
     "OUTPUTS",
+    "is_six_dof_log",
+    "read_roll_pitch_log",
     "PARAMETERS",
     "RollPitchGreyBox",
     "six_dof_fields",
@@ -111,11 +114,11 @@ def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str
         short = name.removeprefix(f"{SECTION}.")
         if short in FIELD_OF:
             field, index = FIELD_OF[short]
-            fields[field][index] = value  # type: ignore[index]
+            fields[field][index] = float(value)  # type: ignore[index]
     centre = list(six.center_of_buoyancy)
     if f"{SECTION}.{NAMES[-1]}" in values:
         z_g, weight = six.center_of_gravity[2], six.weight(vehicle.mass)
-        centre[2] = (z_g * weight - values[f"{SECTION}.{NAMES[-1]}"]) / six.buoyancy
+        centre[2] = float((z_g * weight - values[f"{SECTION}.{NAMES[-1]}"]) / six.buoyancy)
     fields["center_of_buoyancy"] = centre
     return fields
 
@@ -144,6 +147,9 @@ def _off_diagonal_moments(vehicle: VehicleParams, nu_dot: np.ndarray) -> np.ndar
     rows[:, [_ROLL, _PITCH]] = 0.0
     return -nu_dot @ rows.T
 
+
+# Fewer samples per natural period of roll or pitch cannot follow the oscillation.
+SAMPLES_PER_PERIOD = 8
 
 # The model's input: the known roll and pitch moments, then the logged u, v, w and r.
 _INPUT_VELOCITIES = ("u", "v", "w", "r")
@@ -294,6 +300,27 @@ class RollPitchGreyBox(GreyBox):
              0.01 * self.iy, 1e-4 * self.weight]
         )  # fmt: skip
 
+    def natural_period(self) -> float:
+        """The start model's shorter small-angle period of roll and pitch (s)."""
+        start = self.start()
+        inertia = min(self.ix - start[0], self.iy - start[1])
+        return 2.0 * math.pi / math.sqrt(max(start[6], 1e-12) / inertia)
+
+    def check(self, logs: list[VelocityLog], fixed: tuple[str, ...]) -> None:
+        """Also a log sampled too slowly to see the roll and pitch oscillation: more than
+        SAMPLES_PER_PERIOD samples per natural period are needed (a 6-DOF run's default
+        0.5 s on the BlueROV2 Heavy's 1.7 s roll period identified nothing true)."""
+        super().check(logs, fixed)
+        period = self.natural_period()
+        for log in logs:
+            if log.sample_time > period / SAMPLES_PER_PERIOD:
+                raise ConfigError(
+                    "LOG", log.name, f"sampled every {log.sample_time:g} s: roll and pitch "
+                    f"oscillate with a period of {period:.3g} s (the start file's), need "
+                    f"{SAMPLES_PER_PERIOD} samples in it (--sample-time at most "
+                    f"{period / SAMPLES_PER_PERIOD:.3g} s)",
+                )  # fmt: skip
+
     def damping_rate(self, logs: list[VelocityLog]) -> float:
         """The fastest of the start model's roll and pitch rates: damping at twice the logged
         rates, and the natural frequency of the righting moment."""
@@ -312,3 +339,27 @@ def read_six_dof_state(path: str | Path, n_thrusters: int) -> tuple[np.ndarray, 
     log = log_from_table(*run_table(path), path, SIX_DOF.names, "F", n_thrusters,
                          outputs=SIX_DOF.names)  # fmt: skip
     return log.velocity, log.thrust, log.sample_time
+
+
+def read_roll_pitch_log(path: str | Path, vehicle: VehicleParams) -> VelocityLog:
+    """The roll and pitch model's log (:func:`roll_pitch_log`) of a 6-DOF run folder, with
+    ``vehicle``'s translational values in the coupling. Like every run folder's log.csv it
+    holds the simulator's true state (a real vehicle's log: its AHRS and DVL)."""
+    state, thrust, sample_time = read_six_dof_state(path, _section(vehicle).n_thrusters)
+    return roll_pitch_log(str(path), sample_time, state, thrust, vehicle)
+
+
+# A log.csv header is one line of column names: far below this.
+_HEADER_BYTES = 64 * 1024
+
+
+def is_six_dof_log(path: str | Path) -> bool:
+    """Whether ``path`` is a run folder whose log.csv has the attitude and rates (``phi``,
+    ``p``): a 6-DOF run's. Anything unreadable is not (its reader names what is wrong)."""
+    try:
+        with (Path(path) / "log.csv").open("rb") as handle:
+            header = handle.readline(_HEADER_BYTES)
+    except OSError:
+        return False
+    names = [name.strip() for name in header.split(b",")]
+    return all(name.encode() in names for name in OUTPUTS)
