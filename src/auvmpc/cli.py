@@ -765,7 +765,8 @@ def identify(
         typer.Option(
             "--dof",
             help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
-            "with Fz1..), or auto: heave if the first log is a depth run's",
+            "with Fz1..), six-dof (roll and pitch, from 6-DOF run folders), or auto: heave "
+            "if the first log is a depth run's, six-dof if a 6-DOF run's",
         ),
     ] = "auto",
     current: Annotated[
@@ -814,9 +815,14 @@ def identify(
     if dof != "auto" and dof not in set(Dof):
         raise ConfigError("--dof", dof, f"one of auto, {', '.join(Dof)}")
     chosen = None if dof == "auto" else Dof(dof)
+    from auvmpc.identification.roll_pitch import is_six_dof_log
+
     heave = chosen is Dof.HEAVE or (chosen is None and is_heave_log(logs[0]))
-    if then_run is not None and heave:
-        raise ConfigError("--then-run", then_run, "flies horizontal scenarios: not after heave")
+    six_dof = chosen is Dof.SIX_DOF or (chosen is None and is_six_dof_log(logs[0]))
+    if then_run is not None and (heave or six_dof):
+        raise ConfigError(
+            "--then-run", then_run, "flies horizontal scenarios: not after heave or six-dof"
+        )
 
     options = LogOptions(
         sample_time=sample_time,

@@ -69,6 +69,8 @@ MIN_HARMONICS = 3
 MIN_DURATION_FACTOR = 4
 # A heave manoeuvre's scenario starts this far below the surface beyond its box (m).
 DEPTH_MARGIN_M = 1.0
+# A 6-DOF manoeuvre keeps the nominal vehicle's roll and pitch within this (rad).
+MAX_TILT_RAD = math.radians(20.0)
 
 
 class Dof(StrEnum):
@@ -76,6 +78,8 @@ class Dof(StrEnum):
 
     HORIZONTAL = "horizontal"  # surge, sway, yaw on the horizontal thrusters: the 3-DOF model
     HEAVE = "heave"  # heave on the heave section's vertical thrusters: the depth model
+    # all six on every six_dof thruster: the 6-DOF model (roll and pitch beside the above)
+    SIX_DOF = "six-dof"
 
 
 @dataclass(frozen=True)
@@ -115,6 +119,8 @@ def _axes(vehicle: VehicleParams, dof: Dof) -> _Axes:
         n = vehicle.n_thrusters
         return _Axes(vehicle.actuators, vehicle.thrust_authority, vehicle.T_pinv, np.zeros(n),
                      planar)  # fmt: skip
+    if dof is Dof.SIX_DOF:
+        return _six_dof_axes(vehicle)
     heave = vehicle.heave
     if heave is None:
         raise ConfigError("VEHICLE", vehicle.name, "has no heave section: nothing to excite")
@@ -131,6 +137,60 @@ def _axes(vehicle: VehicleParams, dof: Dof) -> _Axes:
         np.full(n, -heave.net_buoyancy_N / n),
         vertical,
     )
+
+
+def _six_dof_axes(vehicle: VehicleParams) -> _Axes:
+    """Surge, sway, heave, roll, pitch and yaw on every ``six_dof`` thruster (the minimum-norm
+    allocation ``pinv(T)``; an axis the thrusters cannot push, e.g. jmse2210's pitch, gets no
+    force), about the trim that holds the nominal vehicle's net buoyancy and moments at rest
+    level. The box is the 6-DOF model's distance from its start."""
+    from auvmpc.models.six_dof import (
+        PitchSingularity,
+        integrate,
+        plant_step_length,
+        restoring_forces,
+        six_dof_model,
+    )
+
+    six = vehicle.six_dof
+    if six is None or vehicle.heave is None:
+        raise ConfigError(
+            "VEHICLE", vehicle.name, "needs six_dof and heave sections for a 6-DOF manoeuvre"
+        )
+    T = np.asarray(six.T)
+    limits = vehicle.six_dof_actuators.limits
+    authority = np.maximum(T * limits.upper, T * limits.lower).sum(axis=1)
+    # Roll and pitch get at most the moment that holds a static tilt of MAX_TILT_RAD against
+    # the righting moment (the thrusters could capsize a vehicle a few centimetres stable).
+    righting = (
+        six.center_of_gravity[2] * six.weight(vehicle.mass)
+        - six.center_of_buoyancy[2] * six.buoyancy
+    )
+    authority[3:5] = np.minimum(authority[3:5], righting * math.sin(MAX_TILT_RAD))
+    to_thrust = np.linalg.pinv(T)
+    # Zero for an axis no thruster pushes: the pseudo-inverse maps nothing to it.
+    to_thrust[:, authority <= 1e-9 * np.max(authority)] = 0.0
+    g0 = np.asarray(
+        restoring_forces(six.weight(vehicle.mass), six.buoyancy, six.center_of_gravity,
+                         six.center_of_buoyancy, 0.0, 0.0),
+    ).ravel()  # fmt: skip
+    model = six_dof_model(vehicle)
+    step = plant_step_length(vehicle, DEFAULT_PLANT_STEP_S)
+
+    def motion(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
+        substeps = substeps_for(sample_time, step)
+        states = np.zeros((len(thrust) + 1, 12))
+        try:
+            for k, row in enumerate(thrust):
+                states[k + 1] = integrate(model, states[k], row, sample_time, substeps)
+        except PitchSingularity:
+            return math.inf, np.full(6, math.inf)
+        tilt = float(np.max(np.abs(states[:, 3:5])))
+        distance = float(np.max(np.linalg.norm(states[:, :3], axis=1)))
+        # a tilt beyond MAX_TILT_RAD counts as leaving the box: the amplitude shrinks
+        return (distance if tilt <= MAX_TILT_RAD else math.inf), np.max(np.abs(states[:, 6:]), 0)
+
+    return _Axes(vehicle.six_dof_actuators, authority, to_thrust, to_thrust @ g0, motion)
 
 
 def _multisine(t: np.ndarray, frequencies: np.ndarray, phases: np.ndarray) -> np.ndarray:
@@ -340,6 +400,12 @@ def write_excitation(
         raise ConfigError(
             "--duration", duration, f"too short: at least {MIN_DURATION_FACTOR * FADE_S:g} s"
         )
+    if Dof(dof) is Dof.SIX_DOF:
+        raise ConfigError(
+            "--dof", str(dof), "a 6-DOF scenario cannot play the manoeuvre yet (its depth "
+            "channel splits one heave force equally over the vertical thrusters, so no roll "
+            "or pitch moment): design_excitation(..., dof=Dof.SIX_DOF) gives the table",
+        )  # fmt: skip
     params = load_vehicle(vehicle, "VEHICLE")
     excitation = design_excitation(params, duration, sample_time, seed, box_m, dof=dof)
     named = vehicle

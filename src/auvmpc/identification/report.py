@@ -17,6 +17,8 @@ from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import CURRENT, GAIN, Identification, ParameterEstimate
 from auvmpc.identification.excitation import Dof
 from auvmpc.identification.logs import LogOptions
+from auvmpc.identification.roll_pitch import PARAMETERS as SIX_DOF_PARAMETERS
+from auvmpc.identification.roll_pitch import six_dof_fields
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
 
@@ -62,8 +64,15 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     vehicle's: it is only in the header."""
     data = dict(start)
     identified = [p for p in found.parameters if p.excited]
+    six_dof = {p.name: _number(p.value) for p in identified if p.name in SIX_DOF_PARAMETERS}
     for estimate in identified:
-        _put(data, estimate.name, _number(estimate.value))
+        if estimate.name not in six_dof:
+            _put(data, estimate.name, _number(estimate.value))
+    if six_dof:  # roll and pitch: the six_dof section's lists and centre of buoyancy
+        fields = six_dof_fields(load_vehicle(start, "--vehicle"), six_dof)
+        data["six_dof"] = dict(data["six_dof"]) | {
+            name: [_number(v) for v in value] for name, value in fields.items()
+        }
     gain = found.extra(GAIN)
     scaled = gain is not None and gain.excited
     if scaled:
@@ -264,6 +273,11 @@ def write_identification(
     from auvmpc.identification.estimation import HorizontalGreyBox, identify
     from auvmpc.identification.heave import HeaveGreyBox, is_heave_log, read_heave_log
     from auvmpc.identification.logs import read_log
+    from auvmpc.identification.roll_pitch import (
+        RollPitchGreyBox,
+        is_six_dof_log,
+        read_roll_pitch_log,
+    )
 
     out = Path(out)
     if out.suffix not in (".yaml", ".yml"):
@@ -279,13 +293,17 @@ def write_identification(
         raise ConfigError("LOG", None, "give at least one log")
     if dof is None:
         dof = Dof.HEAVE if is_heave_log(log_paths[0]) else Dof.HORIZONTAL
-    if dof is Dof.HEAVE and (current or thrust_gain):
+        dof = Dof.SIX_DOF if is_six_dof_log(log_paths[0]) else dof
+    if dof is not Dof.HORIZONTAL and (current or thrust_gain):
         raise ConfigError(
             "--current" if current else "--thrust-gain", None,
-            "the heave model has no current or thrust gain: only the horizontal (3-DOF) "
+            f"the {dof} model has no current or thrust gain: only the horizontal (3-DOF) "
             "identification estimates them",
         )  # fmt: skip
-    if dof is Dof.HEAVE:
+    if dof is Dof.SIX_DOF:
+        greybox = RollPitchGreyBox(start)  # one line if the start vehicle has no six_dof
+        logs = [read_roll_pitch_log(path, start) for path in log_paths]
+    elif dof is Dof.HEAVE:
         heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section
         logs = [read_heave_log(path, heave.thrusters) for path in log_paths]
         outputs = {log.outputs for log in logs}

@@ -131,8 +131,9 @@ def coriolis_rigid_body(mass: float, inertia: np.ndarray, r_g: np.ndarray, omega
 
 def coriolis_added_mass(added_mass: np.ndarray, nu_r):
     """C_A(nu_r) = [[0, -S(A11 nu1 + A12 nu2)], [-S(A11 nu1 + A12 nu2), -S(A21 nu1 + A22 nu2)]]
-    (eq. 6.43), M_A = [[A11, A12], [A21, A22]]."""
-    M_A = ca.DM(added_mass)
+    (eq. 6.43), M_A = [[A11, A12], [A21, A22]] (numbers, or a CasADi matrix of symbols:
+    identification's roll and pitch model estimates two of its entries)."""
+    M_A = added_mass if isinstance(added_mass, ca.SX | ca.MX) else ca.DM(added_mass)
     momentum = ca.mtimes(M_A, nu_r)
     linear, angular = _skew(momentum[0:3]), _skew(momentum[3:6])
     return ca.vertcat(ca.horzcat(ca.DM.zeros(3, 3), -linear), ca.horzcat(-linear, -angular))

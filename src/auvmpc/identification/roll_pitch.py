@@ -1,0 +1,365 @@
+"""Grey-box identification of what the 6-DOF model adds to the 3-DOF and heave models: roll
+and pitch.
+
+The roll and pitch rows of the 6-DOF equations (:mod:`auvmpc.models.six_dof`; Fossen 2021,
+eqs. 2.40, 4.6, 6.45), diagonal in roll and pitch, NED body axes::
+
+    phi'   = p + sin(phi) tan(theta) q + cos(phi) tan(theta) r        (T(phi, theta))
+    theta' = cos(phi) q - sin(phi) r
+    (Ix - K_pdot) p' = K_p p + K_pp |p| p - g_K(phi, theta) + K
+    (Iy - M_qdot) q' = M_q q + M_qq |q| q - g_M(phi, theta) + M
+
+with the restoring moments ``g_K``, ``g_M`` of :func:`auvmpc.models.six_dof.restoring_forces`
+(W = m g, B = rho g V). The unknowns (:data:`PARAMETERS`) are the roll and pitch added
+inertias ``K_pdot``, ``M_qdot`` (only the sums with the rigid-body Ix, Iy are observable, as
+Iz_added in the 3-DOF model: Ix, Iy are kept from the start file), the dampings ``K_p``,
+``K_pp``, ``M_q``, ``M_qq`` and the **righting moment** ``z_g W - z_b B`` (N m: the restoring
+moment per radian of small tilt, the centre of buoyancy's height above the centre of
+gravity times the weight when W = B), which the vehicle file holds as the centre of
+buoyancy's z (x_g, y_g, x_b, y_b kept from the start file).
+
+``K`` and ``M`` are the moments the model does not estimate, known from the log (the
+model's input, held over each sample with the yaw rate ``r``): the thrusters' (``T F``, rows
+K and M) and the 6-DOF model's coupling terms, ``-[C_RB(nu) nu + C_A(nu) nu]`` and the
+off-diagonal mass terms ``-M_(K,M),j nu_j'``, from the logged (smoothed) velocities and the
+vehicle's translational and yaw values (:func:`coupling_moments`; the Munk moment
+``(Z_wdot - X_udot) u w`` in pitch the largest of them). Assumed: no current (the log's
+velocities are through the water) and those translational values right: identify the
+3-DOF and heave models first (``auvmpc identify --dof six-dof`` does, on the same log).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from auvmpc.errors import ConfigError
+from auvmpc.identification.estimation import GreyBox, smoothed
+from auvmpc.identification.logs import VelocityLog, log_from_table, run_table
+from auvmpc.models.six_dof import (
+    NX,
+    SIX_DOF,
+    Tzyx,
+    coriolis_added_mass,
+    coriolis_rigid_body,
+    restoring_forces,
+)
+from auvmpc.models.six_dof_params import SixDofParams
+from auvmpc.models.vehicle import VehicleParams
+
+__all__ = [
+    "OUTPUTS",
+    "is_six_dof_log",
+    "read_roll_pitch_log",
+    "PARAMETERS",
+    "RollPitchGreyBox",
+    "six_dof_fields",
+]
+
+SECTION = "six_dof"
+# The unknowns, by the names identification.json and --fix use.
+NAMES = ("K_pdot", "M_qdot", "K_p", "K_pp", "M_q", "M_qq", "righting_moment_Nm")
+PARAMETERS = tuple(f"{SECTION}.{name}" for name in NAMES)
+# What the log measures of the state [phi, theta, p, q] (an AHRS's attitude and rates).
+OUTPUTS = ("phi", "theta", "p", "q")
+# Where each of the 6-DOF vectors' entries sits: nu = [u, v, w, p, q, r].
+_ROLL, _PITCH = 3, 4
+# The vehicle file's field and index of each parameter (the righting moment: see
+# six_dof_fields).
+FIELD_OF = {
+    "K_pdot": ("added_mass", _ROLL),
+    "M_qdot": ("added_mass", _PITCH),
+    "K_p": ("linear_damping", _ROLL),
+    "K_pp": ("quadratic_damping", _ROLL),
+    "M_q": ("linear_damping", _PITCH),
+    "M_qq": ("quadratic_damping", _PITCH),
+}
+
+
+def _section(vehicle: VehicleParams) -> SixDofParams:
+    if vehicle.six_dof is None:
+        raise ConfigError(
+            "--vehicle", vehicle.name, "has no six_dof section: 6-DOF identification starts "
+            "from one (the thruster poses, the inertia, a first guess of each parameter)",
+        )  # fmt: skip
+    if np.ndim(vehicle.six_dof.added_mass) != 1:
+        raise ConfigError(
+            "--vehicle", vehicle.name, "its six_dof added_mass is a 6x6 matrix: roll and "
+            "pitch identification estimates the diagonal form [X_udot, ..., N_rdot]",
+        )  # fmt: skip
+    return vehicle.six_dof
+
+
+def righting_moment(vehicle: VehicleParams) -> float:
+    """z_g W - z_b B (N m) of the vehicle's six_dof section."""
+    six = _section(vehicle)
+    return six.center_of_gravity[2] * six.weight(vehicle.mass) - six.center_of_buoyancy[2] * (
+        six.buoyancy
+    )
+
+
+def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str, object]:
+    """The six_dof section's fields (added_mass, linear_damping, quadratic_damping,
+    center_of_buoyancy) of ``vehicle`` with the identified ``values`` (by :data:`PARAMETERS`
+    name) put in: the righting moment R as z_b = (z_g W - R) / B."""
+    six = _section(vehicle)
+    fields: dict[str, object] = {
+        name: list(getattr(six, name))
+        for name in ("added_mass", "linear_damping", "quadratic_damping")
+    }
+    for name, value in values.items():
+        short = name.removeprefix(f"{SECTION}.")
+        if short in FIELD_OF:
+            field, index = FIELD_OF[short]
+            fields[field][index] = float(value)  # type: ignore[index]
+    centre = list(six.center_of_buoyancy)
+    if f"{SECTION}.{NAMES[-1]}" in values:
+        z_g, weight = six.center_of_gravity[2], six.weight(vehicle.mass)
+        centre[2] = float((z_g * weight - values[f"{SECTION}.{NAMES[-1]}"]) / six.buoyancy)
+    fields["center_of_buoyancy"] = centre
+    return fields
+
+
+def _coupling_function(vehicle: VehicleParams) -> ca.Function:
+    """(nu (6,), a (2,)) -> the roll and pitch moments (2,) of the Coriolis and centripetal
+    terms ``-[C_RB(nu) nu + C_A(nu) nu]`` (module docstring) by the 6-DOF model's own C_RB and
+    C_A, with the roll and pitch added inertias ``a`` = [K_pdot, M_qdot] symbols (C_A is
+    linear in them) and the rest of M_A the vehicle's."""
+    six = _section(vehicle)
+    nu, derivatives = ca.SX.sym("nu", 6), ca.SX.sym("a", 2)
+    r_g = np.array(six.center_of_gravity, dtype=float)
+    added = ca.SX(ca.DM(six.added_mass_matrix))
+    added[_ROLL, _ROLL], added[_PITCH, _PITCH] = -derivatives[0], -derivatives[1]
+    C_RB = coriolis_rigid_body(vehicle.mass, six.inertia_matrix, r_g, nu[3:6])
+    C_A = coriolis_added_mass(added, nu)
+    moments = -(ca.mtimes(C_RB, nu) + ca.mtimes(C_A, nu))
+    return ca.Function("coupling", [nu, derivatives], [moments[_ROLL : _PITCH + 1]])
+
+
+def _off_diagonal_moments(vehicle: VehicleParams, nu_dot: np.ndarray) -> np.ndarray:
+    """``-M_(K,M),j nu_j'`` (N, 2) over j other than roll and pitch: the mass matrix's coupling
+    (a centre of gravity off CO, a full added-mass matrix; zero for a diagonal one)."""
+    mass = np.array(_section(vehicle).mass_matrix(vehicle.mass))
+    rows = mass[_ROLL : _PITCH + 1].copy()
+    rows[:, [_ROLL, _PITCH]] = 0.0
+    return -nu_dot @ rows.T
+
+
+# Fewer samples per natural period of roll or pitch cannot follow the oscillation.
+SAMPLES_PER_PERIOD = 8
+
+# The model's input: the known roll and pitch moments, then the logged u, v, w and r.
+_INPUT_VELOCITIES = ("u", "v", "w", "r")
+
+
+def roll_pitch_log(
+    name: str,
+    sample_time: float,
+    state: np.ndarray,
+    thrust: np.ndarray,
+    vehicle: VehicleParams,
+) -> VelocityLog:
+    """The log the roll and pitch model is fitted to, from 6-DOF samples ``state`` (N+1, 12)
+    in :data:`~auvmpc.models.six_dof.SIX_DOF` order (what was measured: attitude and rates,
+    velocities) and every ``six_dof`` thruster's force ``thrust`` (N, n) held over each
+    sample: ``velocity`` holds [phi, theta, p, q]; ``force`` the model's input over each
+    sample, [K, M] (the thrusters' moments and the mass matrix's coupling) and the logged
+    u, v, w, r (the mean of the sample's two ends)."""
+    six = _section(vehicle)
+    if state.shape[1] != NX:
+        raise ValueError(f"state must have {NX} columns, got {state.shape}")
+    nu_columns = [SIX_DOF.index(n) for n in ("u", "v", "w", "p", "q", "r")]
+    body = VelocityLog(name, sample_time, state[:, nu_columns], None, np.zeros((len(thrust), 3)))
+    nu_dot = smoothed(body)[1]
+    coupled = _off_diagonal_moments(vehicle, nu_dot)
+    moments = thrust @ np.asarray(six.T)[_ROLL : _PITCH + 1].T + 0.5 * (coupled[:-1] + coupled[1:])
+    velocities = state[:, [SIX_DOF.index(n) for n in _INPUT_VELOCITIES]]
+    inputs = np.column_stack([moments, 0.5 * (velocities[:-1] + velocities[1:])])
+    measured = state[:, [SIX_DOF.index(n) for n in OUTPUTS]]
+    return VelocityLog(name, sample_time, measured, None, inputs, outputs=OUTPUTS)
+
+
+class RollPitchGreyBox(GreyBox):
+    """The roll and pitch model (module docstring) of ``vehicle``'s six_dof section, fitted
+    to the logged attitude and rates [phi, theta, p, q]."""
+
+    parameters = PARAMETERS
+    # added inertias and dampings <= 0, the righting moment > 0 (the section's validation:
+    # the centre of buoyancy above the centre of gravity)
+    lower = np.array([-np.inf] * 6 + [1e-9])
+    upper = np.array([0.0] * 6 + [np.inf])
+    outputs = OUTPUTS
+    units = ("rad", "rad", "rad/s", "rad/s")
+    measured = (0, 1, 2, 3)
+    state_size = 4
+    title = "grey-box roll and pitch model"
+
+    def __init__(self, vehicle: VehicleParams) -> None:
+        self.six = _section(vehicle)
+        self.vehicle = vehicle
+        inertia = self.six.inertia_matrix
+        self.ix, self.iy = float(inertia[0, 0]), float(inertia[1, 1])
+        self.weight, self.buoyancy = self.six.weight(vehicle.mass), self.six.buoyancy
+        self.coupling = _coupling_function(vehicle)
+
+    @property
+    def thrusters(self) -> int:
+        return self.six.n_thrusters
+
+    def start(self) -> np.ndarray:
+        added, linear, quadratic = (
+            np.asarray(self.six.added_mass, dtype=float),
+            self.six.linear_damping,
+            self.six.quadratic_damping,
+        )
+        return np.array(
+            [added[_ROLL], added[_PITCH], linear[_ROLL], quadratic[_ROLL], linear[_PITCH],
+             quadratic[_PITCH], righting_moment(self.vehicle)]
+        )  # fmt: skip
+
+    def _restoring(self, righting, phi, theta):
+        """g_K, g_M with the righting moment ``righting`` (z_b from it, the rest the start
+        file's), by the 6-DOF model's own restoring_forces."""
+        r_g = self.six.center_of_gravity
+        x_b, y_b, _ = self.six.center_of_buoyancy
+        z_b = (r_g[2] * self.weight - righting) / self.buoyancy
+        g = restoring_forces(self.weight, self.buoyancy, r_g, (x_b, y_b, z_b), phi, theta)
+        return g[_ROLL], g[_PITCH]
+
+    def _known_restoring(self, phi: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+        """g_K, g_M (2, N) at zero righting moment (the x and y offsets' part)."""
+        angles = ca.SX.sym("angles", 2)
+        g = ca.vertcat(*self._restoring(0.0, angles[0], angles[1]))
+        function = ca.Function("known_restoring", [angles], [g]).map(len(phi))
+        return np.asarray(function(np.vstack([phi, pitch])))
+
+    @staticmethod
+    def _nu(state, inputs):
+        """[u, v, w, p, q, r]: p, q of the state, the rest the logged input."""
+        return ca.vertcat(inputs[2], inputs[3], inputs[4], state[2], state[3], inputs[5])
+
+    def rhs(self) -> ca.Function:
+        x, inputs = ca.SX.sym("x", 4), ca.SX.sym("input", 2 + len(_INPUT_VELOCITIES))
+        theta = ca.SX.sym("theta", len(PARAMETERS))
+        k_pdot, m_qdot, k_p, k_pp, m_q, m_qq, righting = ca.vertsplit(theta)
+        phi, pitch, p, q = ca.vertsplit(x)
+        r = inputs[5]
+        angles = ca.mtimes(Tzyx(phi, pitch), ca.vertcat(p, q, r))
+        g_k, g_m = self._restoring(righting, phi, pitch)
+        coupling = self.coupling(self._nu(x, inputs), ca.vertcat(k_pdot, m_qdot))
+        roll_moment = inputs[0] + coupling[0]
+        pitch_moment = inputs[1] + coupling[1]
+        p_dot = (k_p * p + k_pp * ca.fabs(p) * p - g_k + roll_moment) / (self.ix - k_pdot)
+        q_dot = (m_q * q + m_qq * ca.fabs(q) * q - g_m + pitch_moment) / (self.iy - m_qdot)
+        derivative = ca.vertcat(angles[0], angles[1], p_dot, q_dot)
+        return ca.Function("roll_pitch_rhs", [x, inputs, theta], [derivative])
+
+    def applied(self, log: VelocityLog) -> np.ndarray:
+        """[K, M, u, v, w, r] over each sample (:func:`roll_pitch_log`)."""
+        return log.force
+
+    def filtered(
+        self, log: VelocityLog, theta: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return smoothed(log)
+
+    def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
+        """Two blocks, roll and pitch: the equations of the module docstring with every term
+        in a parameter on the left (the coupling's through C_A's linearity in K_pdot and
+        M_qdot), the rest on the right: ``b = Ix p' - K - c0_K + g_K(R = 0)``, likewise in
+        pitch with Iy, q', M."""
+        phi, pitch, p, q = x.T
+        p_dot, q_dot = x_dot[:, 2], x_dot[:, 3]
+        zero = np.zeros_like(p)
+        # The coupling moments c0 + K_pdot c1 + M_qdot c2 (C_A is linear in them), (2, N) each.
+        nu = np.column_stack([inputs[:, 2:5], p, q, inputs[:, 5]]).T
+        coupling = self.coupling.map(len(p))
+        c0, c1, c2 = (np.asarray(coupling(nu, np.tile(a, (len(p), 1)).T))
+                      for a in ([0.0, 0.0], [1.0, 0.0], [0.0, 1.0]))  # fmt: skip
+        c1, c2 = c1 - c0, c2 - c0
+        roll = [p_dot - c1[0], -c2[0], p, np.abs(p) * p, zero, zero,
+                -np.cos(pitch) * np.sin(phi)]  # fmt: skip
+        pitch_row = [-c1[1], q_dot - c2[1], zero, zero, q, np.abs(q) * q, -np.sin(pitch)]
+        A = np.stack([np.column_stack(roll), np.column_stack(pitch_row)])
+        # g at zero righting moment: the x and y offsets' part, known
+        g_k, g_m = np.asarray(self._known_restoring(phi, pitch))
+        b = np.stack(
+            [self.ix * p_dot - inputs[:, 0] - c0[0] + g_k,
+             self.iy * q_dot - inputs[:, 1] - c0[1] + g_m]
+        )  # fmt: skip
+        return A, b
+
+    def scale_floor(self) -> np.ndarray:
+        """1 % of the rigid-body inertia for the added inertias and the dampings, 1 % of the
+        weight times 1 cm for the righting moment."""
+        return np.array(
+            [0.01 * self.ix, 0.01 * self.iy, 0.01 * self.ix, 0.01 * self.ix, 0.01 * self.iy,
+             0.01 * self.iy, 1e-4 * self.weight]
+        )  # fmt: skip
+
+    def natural_period(self) -> float:
+        """The start model's shorter small-angle period of roll and pitch (s)."""
+        start = self.start()
+        inertia = min(self.ix - start[0], self.iy - start[1])
+        return 2.0 * math.pi / math.sqrt(max(start[6], 1e-12) / inertia)
+
+    def check(self, logs: list[VelocityLog], fixed: tuple[str, ...]) -> None:
+        """Also a log sampled too slowly to see the roll and pitch oscillation: more than
+        SAMPLES_PER_PERIOD samples per natural period are needed (a 6-DOF run's default
+        0.5 s on the BlueROV2 Heavy's 1.7 s roll period identified nothing true)."""
+        super().check(logs, fixed)
+        period = self.natural_period()
+        for log in logs:
+            if log.sample_time > period / SAMPLES_PER_PERIOD:
+                raise ConfigError(
+                    "LOG", log.name, f"sampled every {log.sample_time:g} s: roll and pitch "
+                    f"oscillate with a period of {period:.3g} s (the start file's), need "
+                    f"{SAMPLES_PER_PERIOD} samples in it (--sample-time at most "
+                    f"{period / SAMPLES_PER_PERIOD:.3g} s)",
+                )  # fmt: skip
+
+    def damping_rate(self, logs: list[VelocityLog]) -> float:
+        """The fastest of the start model's roll and pitch rates: damping at twice the logged
+        rates, and the natural frequency of the righting moment."""
+        start = self.start()
+        top = 2.0 * np.max(np.vstack([np.abs(log.velocity[:, 2:4]) for log in logs]), axis=0)
+        inertia = np.array([self.ix - start[0], self.iy - start[1]])
+        damping = np.abs(start[[2, 4]] + 2.0 * start[[3, 5]] * top) / inertia
+        natural = np.sqrt(max(start[6], 0.0) / inertia)
+        return float(max(np.max(damping), np.max(natural)))
+
+
+def read_six_dof_state(path: str | Path, n_thrusters: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """A 6-DOF run folder's log.csv (``kind: six-dof``): the state (N+1, 12) in SIX_DOF order
+    and every ``six_dof`` thruster's force ``F1..Fn`` (N, n), and the sample time (s); checked
+    as :func:`~auvmpc.identification.logs.read_run_folder` checks a horizontal log."""
+    log = log_from_table(*run_table(path), path, SIX_DOF.names, "F", n_thrusters,
+                         outputs=SIX_DOF.names)  # fmt: skip
+    return log.velocity, log.thrust, log.sample_time
+
+
+def read_roll_pitch_log(path: str | Path, vehicle: VehicleParams) -> VelocityLog:
+    """The roll and pitch model's log (:func:`roll_pitch_log`) of a 6-DOF run folder, with
+    ``vehicle``'s translational values in the coupling. Like every run folder's log.csv it
+    holds the simulator's true state (a real vehicle's log: its AHRS and DVL)."""
+    state, thrust, sample_time = read_six_dof_state(path, _section(vehicle).n_thrusters)
+    return roll_pitch_log(str(path), sample_time, state, thrust, vehicle)
+
+
+# A log.csv header is one line of column names: far below this.
+_HEADER_BYTES = 64 * 1024
+
+
+def is_six_dof_log(path: str | Path) -> bool:
+    """Whether ``path`` is a run folder whose log.csv has the attitude and rates (``phi``,
+    ``p``): a 6-DOF run's. Anything unreadable is not (its reader names what is wrong)."""
+    try:
+        with (Path(path) / "log.csv").open("rb") as handle:
+            header = handle.readline(_HEADER_BYTES)
+    except OSError:
+        return False
+    names = [name.strip() for name in header.split(b",")]
+    return all(name.encode() in names for name in OUTPUTS)
