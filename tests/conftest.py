@@ -33,6 +33,19 @@ DRIFT_VELOCITY_TOL = 1e-9
 PAPER_INITIAL_STATE = (7.5, -12.0, math.pi / 2, 0.4, 0.1, 0.02 * math.pi)
 
 
+def run_and_export(base, overrides):
+    """``base`` holding a healthy run folder (``healthy``) of paper-ideal with ``overrides``
+    and an export-c folder (``export``) of the same scenario: what the damaged-folder tests
+    damage copies of."""
+    from auvmpc.experiments.run import simulate, write_run
+    from auvmpc.export.c_library import export_c
+    from auvmpc.scenario import load_scenario
+
+    write_run(simulate(load_scenario("paper-ideal", overrides)), base / "healthy", figures=False)
+    export_c(load_scenario("paper-ideal", overrides), base / "export")
+    return base
+
+
 @pytest.fixture
 def installed_interrupts():
     """auvmpc's SIGINT/SIGTERM handlers installed for the test, as the CLI installs them,

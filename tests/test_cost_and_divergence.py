@@ -174,13 +174,20 @@ def test_a_signal_turned_into_another_exception_is_still_an_interrupt(
     assert raised.value.exit_code == 143
 
 
-def test_a_campaign_whose_every_run_is_refused_ends_non_zero(tmp_path):
+def _two_run_campaign(tmp_path, name: str, overrides: str):
+    """``campaign`` of two baseline runs of paper-ideal with ``overrides`` (YAML list items),
+    into ``out``."""
     (tmp_path / "c.yaml").write_text(
-        "name: refused\nbase: paper-ideal\nruns: 2\nseed: 1\n"
-        "overrides: [controller.type=baseline, duration=4, 'reference={type: circle, speed: 9}']\n"
+        f"name: {name}\nbase: paper-ideal\nruns: 2\nseed: 1\n"
+        f"overrides: [controller.type=baseline, {overrides}]\n"
         "parameters:\n  initial_state.0: {type: uniform, low: -1.0, high: 1.0, apply: add}\n"
     )
-    done = _cli("campaign", "c.yaml", "--out", "out", "--workers", "1", "--no-report", cwd=tmp_path)
+    return _cli("campaign", "c.yaml", "--out", "out", "--workers", "1", "--no-report", cwd=tmp_path)
+
+
+def test_a_campaign_whose_every_run_is_refused_ends_non_zero(tmp_path):
+    too_fast = "'reference={type: circle, speed: 9}'"
+    done = _two_run_campaign(tmp_path, "refused", f"duration=4, {too_fast}")
     assert done.returncode == 1, done.stdout + done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "none of its 2 runs finished" in lines[0], done.stderr
@@ -188,12 +195,7 @@ def test_a_campaign_whose_every_run_is_refused_ends_non_zero(tmp_path):
 
 
 def test_a_campaign_beyond_the_cost_limits_is_refused_before_any_run(tmp_path):
-    (tmp_path / "c.yaml").write_text(
-        "name: long\nbase: paper-ideal\nruns: 2\nseed: 1\n"
-        "overrides: [controller.type=baseline, plant.max_step=1e-6]\n"
-        "parameters:\n  initial_state.0: {type: uniform, low: -1.0, high: 1.0, apply: add}\n"
-    )
-    done = _cli("campaign", "c.yaml", "--out", "out", "--workers", "1", "--no-report", cwd=tmp_path)
+    done = _two_run_campaign(tmp_path, "long", "plant.max_step=1e-6")
     assert done.returncode == 2, done.stdout + done.stderr
     assert "plant.max_step" in done.stderr and "--yes-long" in done.stderr
     assert not (tmp_path / "out" / "results.sqlite").exists()

@@ -13,9 +13,7 @@ import numpy as np
 import pytest
 
 from auvmpc.experiments.campaign import RESULTS_FILE, run_campaign
-from auvmpc.experiments.run import simulate, write_run
-from auvmpc.export.c_library import export_c
-from auvmpc.scenario import load_scenario
+from tests.conftest import run_and_export
 from tests.test_campaign import write_campaign
 from tests.test_cli import run_cli
 
@@ -133,10 +131,7 @@ DAMAGE = {
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
     """One healthy run folder and an export-c folder of its scenario."""
-    base = tmp_path_factory.mktemp("damaged")
-    write_run(simulate(load_scenario("paper-ideal", _SHORT)), base / "healthy", figures=False)
-    export_c(load_scenario("paper-ideal", _SHORT), base / "export")
-    return base
+    return run_and_export(tmp_path_factory.mktemp("damaged"), _SHORT)
 
 
 def _command(name: str, folder, made) -> list[str]:

@@ -16,9 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from auvmpc.experiments.run import simulate, write_run
-from auvmpc.export.c_library import export_c
-from auvmpc.scenario import load_scenario
+from tests.conftest import run_and_export
 from tests.fuzzing import (
     EXAMPLES,
     FUZZ,
@@ -43,10 +41,7 @@ _SHORT = [
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
-    base = tmp_path_factory.mktemp("fuzz-run-folders")
-    write_run(simulate(load_scenario("paper-ideal", _SHORT)), base / "healthy", figures=False)
-    export_c(load_scenario("paper-ideal", _SHORT), base / "export")
-    return base
+    return run_and_export(tmp_path_factory.mktemp("fuzz-run-folders"), _SHORT)
 
 
 LOG_CELLS = st.one_of(
