@@ -39,6 +39,7 @@ import numpy as np
 from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import GreyBox, smoothed
 from auvmpc.identification.logs import VelocityLog, log_from_table, run_table
+from auvmpc.models.actuators import WRENCH
 from auvmpc.models.six_dof import (
     NX,
     SIX_DOF,
@@ -65,8 +66,9 @@ NAMES = ("K_pdot", "M_qdot", "K_p", "K_pp", "M_q", "M_qq", "righting_moment_Nm")
 PARAMETERS = tuple(f"{SECTION}.{name}" for name in NAMES)
 # What the log measures of the state [phi, theta, p, q] (an AHRS's attitude and rates).
 OUTPUTS = ("phi", "theta", "p", "q")
-# Where each of the 6-DOF vectors' entries sits: nu = [u, v, w, p, q, r].
-_ROLL, _PITCH = 3, 4
+# The roll and pitch entries of the 6-DOF vectors: the wrench's K, M rows, which are nu's
+# p, q (nu = [u, v, w, p, q, r] in the wrench's order).
+_ROLL, _PITCH = WRENCH.index("K"), WRENCH.index("M")
 # The vehicle file's field and index of each parameter (the righting moment: see
 # six_dof_fields).
 FIELD_OF = {
