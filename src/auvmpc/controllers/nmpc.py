@@ -63,6 +63,7 @@ import math
 import numpy as np
 
 from auvmpc.controllers.base import (
+    Controller,
     MemoryNeed,
     Observation,
     horizontal_limits,
@@ -85,7 +86,14 @@ from auvmpc.ocp.multiple_shooting import (
 from auvmpc.solvers.ipopt import IpoptSolver
 from auvmpc.solvers.real_time_iteration import RealTimeIteration
 
-__all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]
+__all__ = [
+    "MAX_OBSTACLES",
+    "Iterate",
+    "MultipleShootingProgram",
+    "NonlinearMpc",
+    "Sample",
+    "rescue_solver",
+]
 
 # SQP steps on a sample without a solution to shift (first sample, after a failure): the
 # real-time iteration then goes on from a (nearly) converged solution, as it assumes.
@@ -133,10 +141,17 @@ class NonlinearMpc(ShelledController):
         return nlp_memory_need(config)
 
     @classmethod
-    def from_config(cls, model, config, obstacle_count: int = 0) -> NonlinearMpc:
+    def from_config(cls, model, config, obstacle_count: int = 0) -> Controller:
         """Room for the scenario's obstacles (at most MAX_OBSTACLES; none without obstacles):
-        every unused slot is rows and variables each solve carries."""
-        return cls(model, config, obstacle_slots=min(MAX_OBSTACLES, obstacle_count))
+        every unused slot is rows and variables each solve carries. Where the C controller
+        covers the configuration, it is that (controllers/compiled_nmpc.py)."""
+        from auvmpc.controllers.compiled_nmpc import CompiledNmpc, runs_in_c
+
+        slots = min(MAX_OBSTACLES, obstacle_count)
+        config = config.for_vehicle(model)
+        if runs_in_c(model, config):
+            return CompiledNmpc(model, config, slots)
+        return cls(model, config, obstacle_slots=slots)
 
     # -- the back end of the safety shell -------------------------------------------------
     def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
@@ -215,13 +230,9 @@ class NonlinearMpc(ShelledController):
         )
 
     def _rescue_solver(self) -> IpoptSolver:
-        """IPOPT on the same program, at most RESCUE_IPOPT_ITERATIONS iterations (an
-        iteration limit, not a wall-clock one, so that runs repeat to the bit); built when
-        first needed."""
+        """Built when first needed."""
         if self._rescue is None:
-            limit = self.config.qp_iteration_limit or RESCUE_IPOPT_ITERATIONS
-            config = self.config.model_copy(update={"qp_iteration_limit": limit})
-            self._rescue = IpoptSolver(self.program, config)
+            self._rescue = rescue_solver(self.program, self.config)
         return self._rescue
 
     def forget_plan(self) -> None:
@@ -232,6 +243,14 @@ class NonlinearMpc(ShelledController):
         self._guess = self._next_guess
         if self._observer is not None:
             self._observer.predict(command)
+
+
+def rescue_solver(program: MultipleShootingProgram, config: ControllerConfig) -> IpoptSolver:
+    """The real-time mode's last resort: IPOPT on the same program, at most
+    RESCUE_IPOPT_ITERATIONS iterations (an iteration limit, not a wall-clock one, so that runs
+    repeat to the bit)."""
+    limit = config.qp_iteration_limit or RESCUE_IPOPT_ITERATIONS
+    return IpoptSolver(program, config.model_copy(update={"qp_iteration_limit": limit}))
 
 
 def _aligned_guess(guess: Iterate, state: np.ndarray) -> Iterate:

@@ -95,6 +95,8 @@ def build_controller(
     controller = controller_class.from_config(
         model, filled, obstacle_count=obstacle_count, **surroundings
     )
+    if not isinstance(controller, ShelledController):
+        return controller  # its own safety rules (the C controller's shell is in its C)
     if config.type in RECOVERED_TYPES:
         controller.recovery = StabilisingFeedback(
             model, controller.sample_time, filled.vehicle_radius + filled.obstacle_margin

@@ -65,6 +65,13 @@ class ObstacleState:
             self.largest_position_variance(dts)
         )
 
+    def horizon_radius(self, dts: np.ndarray) -> float:
+        """The one keep-out radius over predictions ``dts`` (s) ahead: the largest predicted
+        one (a tracked obstacle's grows with its uncertainty), the radius if known exactly."""
+        if self.covariance is None:
+            return self.radius
+        return float(self.predict(dts)[1].max())
+
     def largest_position_variance(self, dts: np.ndarray) -> np.ndarray:
         """Largest eigenvalue of the predicted position covariance (n,) (m^2); 0 if known."""
         dts = np.asarray(dts, dtype=float)

@@ -351,6 +351,12 @@ class DisturbanceObserver:
         self._filter.reset(np.concatenate([np.asarray(initial_state, float), np.zeros(ND)]))
 
     @property
+    def plausible(self) -> tuple[float, float]:
+        """The largest force (N) and moment (N m) estimate kept; beyond either the filter
+        starts again from the measurement (:meth:`correct`)."""
+        return self._plausible_force, self._plausible_moment
+
+    @property
     def disturbance_world(self) -> np.ndarray:
         """Current estimate of the world force [X, Y, N]."""
         return self._filter.estimate[NX:].copy()

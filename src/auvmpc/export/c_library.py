@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import re
 import shutil
 import subprocess
 import tempfile
@@ -32,29 +30,19 @@ import casadi as ca
 import numpy as np
 from pydantic import ValidationError
 
-from auvmpc.controllers.base import ControlStatus, horizontal_limits
+from auvmpc.controllers.base import ControlStatus
+from auvmpc.controllers.c_sources import write_sources
 from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
-from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
-from auvmpc.controllers.recovery import StabilisingFeedback
-from auvmpc.controllers.shell import (
-    PLAN_FALLBACK_STEPS,
-    SPIN_ANGLE_PER_SAMPLE_RAD,
-    SPIN_REFERENCE_FACTOR,
-)
-from auvmpc.controllers.tracking_law import LAW_OUTPUTS
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
-from auvmpc.estimation.ekf import AugmentedEkf, DisturbanceObserver
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.experiments.run_folder import RunFolder, read_run_folder
-from auvmpc.models.layout import HORIZONTAL, Layout
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
 from auvmpc.ocp.multiple_shooting import (
-    _PARKED_OBSTACLE_M,
     MAX_OBSTACLES,
     ND,
-    SLOT,
     SLOT_FIELDS,
     MultipleShootingProgram,
 )
@@ -68,7 +56,7 @@ from auvmpc.solvers.blasfeo_target import (
     required_features,
 )
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
-from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
+from auvmpc.solvers.hpipm import hpipm_settings
 
 __all__ = [
     "COMMAND_TOLERANCE_N",
@@ -87,8 +75,7 @@ STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
 COMMAND_TOLERANCE_N = 1e-6
 
 _TEMPLATES = Path(__file__).with_name("c")
-_DRIVER = Path(__file__).parents[1] / "solvers" / "hpipm_ocp_step.c"
-_COPIED = ("auvmpc_controller.h", "auvmpc_controller.c", "replay.c", "README.md")
+_COPIED = ("replay.c", "README.md")
 _DATA = "replay_data.txt"
 _RECORD = "export.json"
 _NX = HORIZONTAL.size
@@ -159,25 +146,6 @@ def _check_supported(resolved) -> tuple[ControllerConfig, int]:
     return config, slots
 
 
-_DEFINITION = re.compile(
-    r"^(?:static |CASADI_SYMBOL_EXPORT )?[\w\s*]+?\b\w+\((?P<params>[^()]*)\) \{$"
-)
-
-
-def _warning_clean(source: str) -> str:
-    """CasADi's generated C with every parameter marked used, ``(void) name;`` (the
-    functions' shared signature leaves some unused), so that it compiles under -Wall -Wextra
-    -Werror. Nothing it computes changes."""
-    lines = []
-    for line in source.splitlines():
-        lines.append(line)
-        match = _DEFINITION.match(line)
-        if match and match["params"].strip() not in ("", "void"):
-            names = [re.findall(r"\w+", p)[-1] for p in match["params"].split(",")]
-            lines.append("  " + " ".join(f"(void) {name};" for name in names))
-    return "\n".join(lines) + "\n"
-
-
 # The arena's room beyond what the driver counts: each of its at most 40 pieces rounded up to
 # 64 bytes, the base aligned, and the six (N + 1)-int temporaries it sizes the QP with.
 _ARENA_PIECES, _ARENA_ALIGN = 40, 64
@@ -195,126 +163,6 @@ def _arena_bytes(qp, program: MultipleShootingProgram, config: ControllerConfig)
         return None
     temporaries = 6 * (program.horizon + 1) * 4
     return step.memory_bytes + _ARENA_PIECES * _ARENA_ALIGN + temporaries + _ARENA_ALIGN
-
-
-def _array(values) -> str:
-    return "{" + ", ".join(f"{float(v):.17g}" for v in np.ravel(values)) + "}"
-
-
-def _names(layout: Layout) -> str:
-    """A C initialiser of the layout's names as strings."""
-    return "{" + ", ".join(json.dumps(name) for name in layout.names) + "}"
-
-
-def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfig) -> str:
-    model, ocp = program.model, program.ocp
-    n = program.n_thrusters
-    limits = horizontal_limits(model)
-    step = program.step
-    macros = {
-        "AUVMPC_NX": _NX,
-        "AUVMPC_HORIZON": program.horizon,
-        "AUVMPC_THRUSTERS": n,
-        "AUVMPC_OBSTACLE_SLOTS": program.n_slots,
-        "AUVMPC_SLOTS_ALLOC": max(program.n_slots, 1),
-        "AUVMPC_NZ": qp.states,
-        "AUVMPC_NV": qp.inputs,
-        "AUVMPC_NG": qp.rows,
-        "AUVMPC_SAMPLE_TIME": f"{program.sample_time:.17g}",
-        "AUVMPC_ITERATIONS": config.linearisation_iterations,
-        "AUVMPC_COLD_ITERATIONS": _COLD_START_ITERATIONS,
-        "AUVMPC_KEEP_OUT_EXTRA": f"{ocp.keep_out_extra:.17g}",
-        "AUVMPC_SLACK_SCALE": f"{slack_scale(ocp.slack_penalty):.17g}",
-        "AUVMPC_PARKED_M": f"{_PARKED_OBSTACLE_M:.17g}",
-        "AUVMPC_STEP_SZ_ARG": step.sz_arg(),
-        "AUVMPC_STEP_SZ_RES": step.sz_res(),
-        "AUVMPC_STEP_SZ_IW": step.sz_iw(),
-        "AUVMPC_STEP_SZ_W": step.sz_w(),
-        "AUVMPC_THRUST_LOWER": _array(np.broadcast_to(limits.lower, n)),
-        "AUVMPC_THRUST_UPPER": _array(np.broadcast_to(limits.upper, n)),
-        "AUVMPC_THRUST_RATE": _array(np.broadcast_to(limits.rate, n)),
-        "AUVMPC_STAGE_WEIGHT": _array(ocp.stage_weight),
-        "AUVMPC_HPIPM_SETTINGS": _array(hpipm_settings(config.qp_iteration_limit)),
-        "AUVMPC_OFFSET_FREE": int(config.offset_free),
-    }
-    macros.update(_layout_macros(program))
-    macros.update(_recovery_macros(program))
-    if config.offset_free:
-        macros.update(_observer_macros(model, config))
-    lines = [
-        f"/* Generated by auvmpc export-c for vehicle {model.name}: sizes and settings. */",
-        "#ifndef AUVMPC_CONFIG_H",
-        "#define AUVMPC_CONFIG_H",
-        "",
-        *(f"#define {name} {value}" for name, value in macros.items()),
-        "",
-        "#endif",
-        "",
-    ]
-    return "\n".join(lines)
-
-
-def _layout_macros(program: MultipleShootingProgram) -> dict[str, object]:
-    """Where the C finds each quantity it reads by name (models/layout.py and the program's
-    obstacle slot): the state's and inputs' names (replay's columns), the state entries, the
-    disturbance's size and each slot field."""
-    return {
-        "AUVMPC_STATE_NAMES": _names(HORIZONTAL),
-        "AUVMPC_INPUT_NAMES": _names(program.model.actuators.layout),
-        "AUVMPC_X": HORIZONTAL.index("x"),
-        "AUVMPC_Y": HORIZONTAL.index("y"),
-        "AUVMPC_HEADING": HORIZONTAL.heading,
-        "AUVMPC_YAW_RATE": HORIZONTAL.index("r"),
-        "AUVMPC_ND": ND,
-        "AUVMPC_SLOT_FIELDS": SLOT_FIELDS,
-        **{f"AUVMPC_SLOT_{name.upper()}": SLOT.index(name) for name in SLOT.names},
-    }
-
-
-def _recovery_law(program: MultipleShootingProgram) -> ca.Function:
-    """The stabilising feedback the registry gives the Python controller: its tracking law,
-    generated to C as ``tracking_law``."""
-    feedback = StabilisingFeedback(program.model, program.sample_time, program.ocp.keep_out_extra)
-    return feedback.law
-
-
-def _recovery_macros(program: MultipleShootingProgram) -> dict:
-    """The shell's recovery rules (controllers/shell.py) and the law's work sizes."""
-    law = _recovery_law(program)
-    return {
-        "AUVMPC_PLAN_FALLBACK_STEPS": PLAN_FALLBACK_STEPS,
-        "AUVMPC_SPIN_ANGLE_PER_SAMPLE": f"{SPIN_ANGLE_PER_SAMPLE_RAD:.17g}",
-        "AUVMPC_SPIN_REFERENCE_FACTOR": f"{SPIN_REFERENCE_FACTOR:.17g}",
-        "AUVMPC_LAW_THRUST": LAW_OUTPUTS.index("thrust"),
-        "AUVMPC_LAW_SZ_ARG": law.sz_arg(),
-        "AUVMPC_LAW_SZ_RES": law.sz_res(),
-        "AUVMPC_LAW_SZ_IW": law.sz_iw(),
-        "AUVMPC_LAW_SZ_W": law.sz_w(),
-    }
-
-
-def _observer(model, config: ControllerConfig) -> AugmentedEkf:
-    """The estimator the Python controller builds (DisturbanceObserver): its update and
-    propagation functions are generated to C, its prior and bounds are the C's constants."""
-    return DisturbanceObserver(
-        model, config.sample_time, config.observer, config.model_substeps
-    ).filter
-
-
-def _observer_macros(model, config: ControllerConfig) -> dict[str, object]:
-    """The EKF's prior covariance, eigenvalue bounds and work sizes."""
-    ekf = _observer(model, config)
-    floor, ceiling = ekf.bounds
-    functions = (ekf.update, ekf.propagation)
-    return {
-        "AUVMPC_PRIOR_COVARIANCE": _array(np.diag(ekf.prior)),
-        "AUVMPC_COVARIANCE_FLOOR": f"{floor:.17g}",
-        "AUVMPC_COVARIANCE_CEILING": f"{ceiling:.17g}",
-        "AUVMPC_OBSERVER_SZ_ARG": max(f.sz_arg() for f in functions),
-        "AUVMPC_OBSERVER_SZ_RES": max(f.sz_res() for f in functions),
-        "AUVMPC_OBSERVER_SZ_IW": max(f.sz_iw() for f in functions),
-        "AUVMPC_OBSERVER_SZ_W": max(f.sz_w() for f in functions),
-    }
 
 
 def _replay_data(resolved, horizon: int, sample_time: float) -> str:
@@ -362,22 +210,9 @@ def export_c(
     program = MultipleShootingProgram(model, config, slots)
     qp = stage_qp(program)
     with staged_folder(out, OutputKind.EXPORT_C, overwrite=overwrite) as folder:
-        generator = ca.CodeGenerator("rti_qp_data.c", {"with_header": True})
-        generator.add(qp.stage)
-        generator.add(qp.terminal)
-        generator.add(program.step)  # rk4_step: the cold-start rollout and the shift
-        generator.add(_recovery_law(program))  # the shell's stabilising feedback
-        if config.offset_free:  # the EKF's update and propagation (estimation/ekf.py)
-            ekf = _observer(model, config)
-            generator.add(ekf.update)
-            generator.add(ekf.propagation)
-        generator.generate(str(folder) + os.sep)
-        generated = folder / "rti_qp_data.c"
-        generated.write_text(_warning_clean(generated.read_text()))
-        (folder / "auvmpc_config.h").write_text(_config_header(program, qp, config))
+        write_sources(program, qp, config, folder)
         for name in _COPIED:
             shutil.copyfile(_TEMPLATES / name, folder / name)
-        shutil.copyfile(_DRIVER, folder / _DRIVER.name)
         makefile = (_TEMPLATES / "Makefile.in").read_text()
         makefile = makefile.replace("@CASADI_DIR@", str(libraries))
         makefile = makefile.replace("@CASADI_VERSION@", ca.__version__)

@@ -221,11 +221,7 @@ class MultipleShootingProgram:
             # A slot holds one radius for the whole horizon: a tracked obstacle's is its
             # largest predicted one (the horizon's end; a per-step radius would need a slot
             # field, which changes the compiled QP layout).
-            radius = (
-                obstacle.radius
-                if obstacle.covariance is None
-                else float(obstacle.predict(steps)[1].max())
-            )
+            radius = obstacle.horizon_radius(steps)
             slots[o] = [*obstacle.center, *obstacle.velocity, radius + extra]
             used[o] = True
         return Sample(state, previous, reference, disturbance, slots, used)

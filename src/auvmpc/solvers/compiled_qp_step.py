@@ -122,36 +122,43 @@ def compiled_qp_step(qp: StageQp, horizon: int, thrusters: int, slots: int,
 
 
 def _library(stage: ca.Function, terminal: ca.Function) -> ctypes.CDLL | None:
-    hpipm = _casadi_hpipm()
-    if native.compiler() is None or hpipm is None:
+    linking = hpipm_linking()
+    if native.compiler() is None or linking is None:
         return None
-    blasfeo = runtime_blasfeo(hpipm[0]) or hpipm[1]
-    return _built_library(stage, terminal, native.cache_folder(), blasfeo)
+    return _built_library(stage, terminal, native.cache_folder(), *linking)
+
+
+def hpipm_linking() -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+    """(compiler options, salt) that link a library against the casadi wheel's HPIPM, with
+    the BLASFEO in ``$AUVMPC_BLASFEO_DIR`` or the wheel's own (its folder first, so HPIPM's
+    linear algebra resolves to it, as in export-c); None without HPIPM. The library folders
+    are baked in by -rpath, so they are the salt: another venv needs its own build."""
+    hpipm = _casadi_hpipm()
+    if hpipm is None:
+        return None
+    include, libraries = hpipm
+    blasfeo = runtime_blasfeo(include) or libraries
+    options = (
+        f"-I{include}", "-Wl,--no-as-needed", f"-L{blasfeo}", "-lblasfeo",
+        f"-L{libraries}", "-lhpipm", f"-Wl,-rpath,{blasfeo}", f"-Wl,-rpath,{libraries}",
+    )  # fmt: skip
+    return options, (str(libraries), str(blasfeo))
 
 
 # Per process too: generating the C and hashing it costs ~8 ms a controller.
 @functools.lru_cache(maxsize=16)
 def _built_library(
-    stage: ca.Function, terminal: ca.Function, folder: Path, blasfeo: Path
-) -> ctypes.CDLL | None:
+    stage: ca.Function, terminal: ca.Function, folder: Path, options: tuple[str, ...],
+    salt: tuple[str, ...],
+) -> ctypes.CDLL | None:  # fmt: skip
     """The library in the cache ``folder`` (native.cache_folder(), where shared_library
-    looks), built there unless it is there already, with the BLASFEO in the folder
-    ``blasfeo`` under the wheel's HPIPM (the wheel's own, or $AUVMPC_BLASFEO_DIR's)."""
-    include, libraries = _casadi_hpipm()
+    looks), built there unless it is there already."""
     with tempfile.TemporaryDirectory(prefix="auvmpc-rti-") as scratch:
         generator = ca.CodeGenerator(_DATA_NAME + ".c", {"with_header": True})
         generator.add(stage)
         generator.add(terminal)
         generator.generate(scratch + os.sep)
-        # BLASFEO's folder first, so HPIPM's linear algebra resolves to it (as in export-c).
-        options = [
-            f"-I{scratch}", f"-I{include}", "-Wl,--no-as-needed", f"-L{blasfeo}", "-lblasfeo",
-            f"-L{libraries}", "-lhpipm", f"-Wl,-rpath,{blasfeo}", f"-Wl,-rpath,{libraries}",
-        ]  # fmt: skip
-        # The library folders are baked in by -rpath: another venv needs its own build.
         return native.shared_library(
-            "rti",
-            [Path(scratch) / (_DATA_NAME + ".c"), _DRIVER],
-            options,
-            salt=[str(libraries), str(blasfeo)],
-        )
+            "rti", [Path(scratch) / (_DATA_NAME + ".c"), _DRIVER], [f"-I{scratch}", *options],
+            salt=list(salt),
+        )  # fmt: skip
