@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any, Protocol
@@ -9,9 +10,18 @@ from typing import Any, Protocol
 import casadi as ca
 import numpy as np
 
+from auvmpc.errors import FieldError
 from auvmpc.models.layout import Layout
 
-__all__ = ["WRENCH", "Actuator", "ActuatorLimits", "cross", "elementwise", "wrench_of"]
+__all__ = [
+    "WRENCH",
+    "Actuator",
+    "ActuatorLimits",
+    "check_fields",
+    "cross",
+    "elementwise",
+    "wrench_of",
+]
 
 # The generalised force on the body, Fossen's tau: force X, Y, Z (N) and moment K, M, N (N m)
 # about the body origin, body axes x forward, y starboard, z down.
@@ -48,6 +58,23 @@ def wrench_of(force: Any, position: Any, maths: Any, moment: Any = (0.0, 0.0, 0.
     if maths is ca:
         return ca.vertcat(*entries)
     return np.array(np.broadcast_arrays(*entries), dtype=float)
+
+
+def check_fields(actuator: Any, positive: tuple[str, ...], unit: str) -> None:
+    """Refuse an actuator, naming the field and its value, whose ``positive`` fields are not
+    > 0, whose command box is upside down or whose ``unit`` direction is not of unit length."""
+    for field in positive:
+        value = getattr(actuator, field)
+        if not value > 0.0:
+            raise FieldError(f"{actuator.name}.{field}", value, f"{value}, must be > 0")
+    if not actuator.lower <= actuator.upper:
+        raise FieldError(f"{actuator.name}.lower", actuator.lower,
+                         f"{actuator.lower}, above upper {actuator.upper}")  # fmt: skip
+    direction = getattr(actuator, unit)
+    if not math.isclose(math.hypot(*direction), 1.0, rel_tol=1e-9):
+        raise FieldError(
+            f"{actuator.name}.{unit}", direction, f"{direction}, must be a unit vector"
+        )
 
 
 class Actuator(Protocol):

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from auvmpc.errors import FieldError
-from auvmpc.models.actuators.base import cross, elementwise, wrench_of
+from auvmpc.models.actuators.base import check_fields, cross, elementwise, wrench_of
 
 __all__ = ["ControlSurface"]
 
@@ -68,15 +68,7 @@ class ControlSurface:
     linear = False
 
     def __post_init__(self) -> None:
-        for field in ("area", "lift_slope", "stall_angle", "density", "rate"):
-            if not getattr(self, field) > 0.0:
-                value = getattr(self, field)
-                raise FieldError(f"{self.name}.{field}", value, f"{value}, must be > 0")
-        if not self.lower <= self.upper:
-            raise FieldError(f"{self.name}.lower", self.lower,
-                             f"{self.lower}, above upper {self.upper}")  # fmt: skip
-        if not math.isclose(math.hypot(*self.axis), 1.0, rel_tol=1e-9):
-            raise FieldError(f"{self.name}.axis", self.axis, f"{self.axis}, must be a unit vector")
+        check_fields(self, ("area", "lift_slope", "stall_angle", "density", "rate"), unit="axis")
         if abs(self.axis[0]) > 1e-9:
             raise FieldError(f"{self.name}.axis", self.axis,
                              f"{self.axis}, must be at right angles to x")  # fmt: skip

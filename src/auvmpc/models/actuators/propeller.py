@@ -23,14 +23,12 @@ plant's actuator state (docs/remus100.md, "What the actuator protocol cannot say
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from auvmpc.errors import FieldError
-from auvmpc.models.actuators.base import elementwise, wrench_of
+from auvmpc.models.actuators.base import check_fields, elementwise, wrench_of
 
 __all__ = ["Propeller"]
 
@@ -60,16 +58,7 @@ class Propeller:
     linear = False
 
     def __post_init__(self) -> None:
-        for field in ("diameter", "density", "rate"):
-            if not getattr(self, field) > 0.0:
-                value = getattr(self, field)
-                raise FieldError(f"{self.name}.{field}", value, f"{value}, must be > 0")
-        if not self.lower <= self.upper:
-            raise FieldError(f"{self.name}.lower", self.lower,
-                             f"{self.lower}, above upper {self.upper}")  # fmt: skip
-        if not math.isclose(math.hypot(*self.direction), 1.0, rel_tol=1e-9):
-            raise FieldError(f"{self.name}.direction", self.direction,
-                             f"{self.direction}, must be a unit vector")  # fmt: skip
+        check_fields(self, ("diameter", "density", "rate"), unit="direction")
 
     @property
     def column(self) -> np.ndarray:
