@@ -23,7 +23,7 @@ Multiplied through by u_f, u_f sat(alpha) = clip(u_f delta - v_n, -s |u_f|, s |u
 division, defined at rest (no force there), so the wrench is CasADi-differentiable everywhere
 except on the stall and zero-flow kinks (piecewise linear: fmin, fmax, fabs), where CasADi
 takes one side's derivative. At small angles it is Prestero's linear fin model: with
-q C_La = Y_uudr his fin derivatives Y_uvf = -Y_uudr, Y_urf = -x_fin Y_uvf, N_uudr =
+q C_La = Y_uudr his fin derivatives Y_uvf = -Y_uudr, Y_urf = x_fin Y_uvf, N_uudr =
 x_fin Y_uudr, ... all follow (tests/test_actuator_kinds.py checks his Table C.10).
 
 Units: the command, its limits and rate in degrees and degrees per second; the lift slope
