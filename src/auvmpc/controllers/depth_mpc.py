@@ -78,7 +78,9 @@ class DepthMpc(IncrementalMpc):
         )
         self._rollout = step.mapaccum("heave_rollout", config.prediction_horizon)
         augmented = ca.SX.sym("z", NX + 1)
-        next_augmented = ca.vertcat(healthy(augmented[:NX], acting, augmented[NX])[0], augmented[NX])
+        next_augmented = ca.vertcat(
+            healthy(augmented[:NX], acting, augmented[NX])[0], augmented[NX]
+        )
         healthy_observer = ca.Function(
             "heave_observer_acting",
             [augmented, acting],
