@@ -38,6 +38,13 @@ typedef enum {
 int auvmpc_init(const double initial_state[AUVMPC_NX],
                 const double initial_thrust[AUVMPC_THRUSTERS]);
 
+/* Each thruster's effectiveness from the next step on (1 healthy, 0 dead, 0.5 half force;
+ * all ones after auvmpc_init, kept by auvmpc_reset): what the prediction model, the
+ * estimator and the stabilising feedback's allocation assume, as the Python controller's
+ * Observation.effectiveness. 0 on success, -1 (nothing changed) if a value is outside
+ * [0, 1] or not a number. */
+int auvmpc_set_effectiveness(const double effectiveness[AUVMPC_THRUSTERS]);
+
 /* Forget the warm start and the fallback plan; initial_thrust is F(-1) for the first rate
  * limit. */
 void auvmpc_reset(const double initial_state[AUVMPC_NX],
