@@ -49,8 +49,10 @@ def _program(preset: str, penalty: ThrustPenalty, slots: int) -> MultipleShootin
     return MultipleShootingProgram(load_vehicle(preset), config, slots)
 
 
-def _qp_arguments(program: MultipleShootingProgram, solver, rng: np.random.Generator):
-    """A perturbed iterate (shooting gaps, moved thrusts) near two obstacles, one moving."""
+def _qp_arguments(program: MultipleShootingProgram, solver, rng: np.random.Generator,
+                  effectiveness=None):  # fmt: skip
+    """A perturbed iterate (shooting gaps, moved thrusts) near two obstacles, one moving;
+    ``effectiveness`` None: every thruster healthy."""
     N, n = program.horizon, program.n_thrusters
     t = program.sample_time * np.arange(N + 1)
     reference = np.zeros((N + 1, 6))
@@ -61,14 +63,17 @@ def _qp_arguments(program: MultipleShootingProgram, solver, rng: np.random.Gener
         ObstacleState(np.array([4.0, -1.0]), 0.4, np.array([0.0, 0.1])),
     )
     limit = 0.3 * program.ocp.input_upper
-    sample = program.sample(state, rng.uniform(-limit, limit), reference, np.zeros(3), obstacles)
+    sample = program.sample(
+        state, rng.uniform(-limit, limit), reference, np.zeros(3), obstacles, effectiveness
+    )
     states = reference + rng.normal(0.0, 0.05, reference.shape)
     states[0] = state
     thrust = rng.uniform(-limit, limit, (N, n))
     previous = np.vstack([sample.previous, thrust])
     used = sample.used.astype(float)
     return (states, previous, thrust, sample.state, sample.previous, sample.reference,
-            solver._weights, sample.disturbance, sample.slots, used, solver._movable)  # fmt: skip
+            solver._weights, sample.disturbance, sample.slots, used, solver._movable,
+            sample.effectiveness)  # fmt: skip
 
 
 def _exact_step(program: MultipleShootingProgram) -> compiled_qp_step.CompiledQpStep:
@@ -85,8 +90,10 @@ def test_compiled_step_solves_the_same_qp_as_casadi(preset, penalty, slots):
     reference = RealTimeIteration(program, compiled=False)
     assert not reference.compiled
     rng = np.random.default_rng(7)
-    for _ in range(3):
-        arguments = _qp_arguments(program, reference, rng)
+    weak_and_dead = np.ones(program.n_thrusters)
+    weak_and_dead[:2] = (0.5, 0.0)
+    for effectiveness in (None, None, weak_and_dead):  # the last through the runtime input
+        arguments = _qp_arguments(program, reference, rng, effectiveness)
         status, iterations = compiled(*arguments)
         expected_status, _ = reference._step(*arguments)
         assert status == expected_status == 0
@@ -252,3 +259,24 @@ def test_cache_pruning_deletes_only_libraries_auvmpc_named(tmp_path):
     assert user.exists()
     assert sum(path.exists() for path in ours) == native._CACHE_LIMIT
     assert not ours[0].exists()  # the oldest went
+
+
+def test_the_stage_qp_thrust_columns_scale_exactly_with_effectiveness():
+    """Effectiveness is a runtime input of the stage QP: B's thrust columns (and the
+    obstacle rows' D, through them) are the healthy ones times each thruster's
+    effectiveness, evaluated at the thrust that acts."""
+    program = _program("jmse2210", ThrustPenalty.ABSOLUTE, 1)
+    qp, n = stage_qp(program), program.n_thrusters
+    rng = np.random.default_rng(2)
+    X, X_next = rng.normal(0.0, 0.3, 6), rng.normal(0.0, 0.3, 6)
+    P, F = rng.uniform(-5.0, 5.0, n), rng.uniform(-5.0, 5.0, n)
+    common = (X, X_next, P, P, F, np.zeros(6), np.ones(6), np.zeros(3), np.zeros((5, 1)),
+              np.zeros(1), 1.0, 1.0)  # fmt: skip
+    effectiveness = np.array([1.0, 0.5, 0.0, 1.0])[:n]
+    _, B, *_ = qp.stage(*common, effectiveness)
+    # The healthy Jacobian at the thrust that acts, e * F, times e: the chain rule, exactly.
+    acting = qp.stage(*common[:4], effectiveness * F, *common[5:], np.ones(n))
+    expected = np.asarray(acting[1])[:6, :n] * effectiveness
+    np.testing.assert_array_equal(np.asarray(B)[:6, :n], expected)
+    assert not np.asarray(B)[:6, 2].any(), "a dead thruster moves nothing"
+    assert np.asarray(B)[:6, 1].any() and np.asarray(B)[:6, 3].any()

@@ -123,6 +123,8 @@ def test_one_step_map_is_rk4_of_the_vehicle_dynamics(jmse, substeps):
     simulator.set_tvp_fun(lambda t_now: tvp)
     simulator.setup()
     rng = np.random.default_rng(4)
+    effectiveness = np.array([1.0, 0.5, 1.0, 0.0])  # a weak and a dead thruster: a parameter
+    tvp["effectiveness"] = effectiveness
     for gate in (1.0, 0.0):  # a free move, then a held one (after the control horizon)
         tvp["gate"] = gate
         for _ in range(3):
@@ -132,7 +134,10 @@ def test_one_step_map_is_rk4_of_the_vehicle_dynamics(jmse, substeps):
             simulator.x0 = np.concatenate([state, previous])
             following = simulator.make_step(move.reshape(-1, 1)).ravel()
             thrust = previous + gate * move
-            expected = rk4(lambda x, f: dynamics(x, f, jmse), state, thrust, SAMPLE_TIME, substeps)
+            expected = rk4(
+                lambda x, f: dynamics(x, f, jmse, effectiveness=effectiveness),
+                state, thrust, SAMPLE_TIME, substeps,
+            )  # fmt: skip
             scale = 1.0 + np.abs(expected)
             assert np.max(np.abs(following[:6] - expected) / scale) < ROUND_OFF_TOL
             np.testing.assert_array_equal(following[6:], thrust)

@@ -81,7 +81,7 @@ POSTERIOR_REL_TOL = 1e-9
 def _linear_filter(prior: np.ndarray, measurement: np.ndarray, measured: int) -> AugmentedEkf:
     n = prior.shape[0]
     z, u = ca.SX.sym("z", n), ca.SX.sym("u", 1)
-    step = ca.Function("identity", [z, u], [z, ca.jacobian(z, z)])
+    step = ca.Function("identity", [z, u, ca.SX.sym("e", 1)], [z, ca.jacobian(z, z)])
     return AugmentedEkf(step, measured, np.eye(n) * 1e-4, measurement, prior)
 
 
@@ -224,10 +224,10 @@ def test_covariance_stays_symmetric_positive_definite_and_bounded_over_a_long_ru
 
 
 def test_a_diverged_prediction_restarts_the_filter_instead_of_crashing():
-    z, u = ca.SX.sym("z", 3), ca.SX.sym("u", 1)
+    z, u, e = ca.SX.sym("z", 3), ca.SX.sym("u", 1), ca.SX.sym("e", 1)
     # A model that blows up when u > 0 (as an RK4 step too long for the speed does).
-    blow_up = ca.if_else(u[0] > 0, ca.inf, 1.0)
-    step = ca.Function("unstable", [z, u], [z * blow_up, ca.jacobian(z * blow_up, z)])
+    blow_up = ca.if_else(e[0] * u[0] > 0, ca.inf, 1.0)
+    step = ca.Function("unstable", [z, u, e], [z * blow_up, ca.jacobian(z * blow_up, z)])
     prior = np.diag([1e-4, 1e-4, 4.0])
     ekf = AugmentedEkf(step, 2, np.eye(3) * 1e-6, np.eye(2) * 1e-4, prior)
     ekf.reset(np.array([0.0, 0.0, 3.0]))

@@ -10,11 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import auvmpc
 from auvmpc.errors import ConfigError, RunFailed
-from auvmpc.experiments.run import simulate, write_run
+from auvmpc.experiments.run import run_plant, simulate, write_run
+from auvmpc.experiments.run_folder import read_run_folder
 from auvmpc.export.c_library import export_c, verify_c
 from auvmpc.native import compiler
 from auvmpc.scenario import load_scenario
+from auvmpc.sim.loop import run_session
 from auvmpc.solvers.blasfeo_target import BLASFEO_ENV, missing_features, required_features
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm
 from tests.conftest import C_EXPORT_COMMAND_TOL_N
@@ -259,3 +262,23 @@ def test_the_status_numbers_are_the_headers():
         name.lower(): int(number) for name, number in re.findall(r"AUVMPC_([A-Z]+) = (\d+)", header)
     }
     assert numbers == {str(status): i for i, status in enumerate(_C_STATUS)}
+
+
+@needs_cc
+def test_the_effectiveness_setter_changes_the_c_command_as_python_does(tmp_path):
+    """A controller told from its first sample that the third thruster is dead: the C told
+    the same by auvmpc_set_effectiveness commands what Python did, nothing to the dead
+    thruster (paper-ideal as exported: no estimator, the quickest export to build)."""
+    dead_third = [1.0, 1.0, 0.0, 1.0]
+    overrides = _FREE
+    session = auvmpc.session(load_scenario("paper-ideal", overrides))
+    session.effectiveness = dead_third
+    run_session(session, *run_plant(session.resolved))
+    session.close(tmp_path / "run", figures=False)
+    export_c(load_scenario("paper-ideal", overrides), tmp_path / "export")
+    result = verify_c(tmp_path / "export", tmp_path / "run", effectiveness=dead_third)
+    assert result.steps == 10 and result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
+    assert result.status_differences == 0
+    log = read_run_folder(tmp_path / "run").log()
+    assert not log.column(log.input_names[2]).any()
+    assert log.column(log.input_names[0]).any()

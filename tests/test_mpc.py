@@ -187,7 +187,8 @@ def test_linearised_rollout_matches_rk4_and_finite_differences(preset, substeps,
     world_force = np.array([10.0, 5.0, 0.5]) if disturbed else np.zeros(3)
     rollout = linearised_rollout(params, SAMPLE_TIME, substeps, horizon)
     states, jac_x, jac_u = (
-        np.asarray(v) for v in rollout(x0, thrusts.T, np.tile(world_force[:, None], (1, horizon)))
+        np.asarray(v)
+        for v in rollout(x0, thrusts.T, np.tile(world_force[:, None], (1, horizon)), np.ones(n))
     )
 
     def rhs(x, F):

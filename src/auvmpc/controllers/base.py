@@ -44,6 +44,10 @@ class Observation:
     state: np.ndarray  # measured, possibly noisy: (6,) [x, y, psi, u, v, r]; depth: (1,) [z]
     reference: np.ndarray  # (preview_steps + 1, nx): reference at t_k + i * Te, i = 0..
     obstacles: tuple[ObstacleState, ...] = ()
+    # (n,) each input's actuator effectiveness as the controller should assume it, in input
+    # order (1 healthy, 0 dead, 0.5 half force; ActuatorSet.force): what its prediction
+    # model and its allocation use this sample. None: all healthy.
+    effectiveness: np.ndarray | None = None
 
 
 class ControlStatus(StrEnum):

@@ -223,13 +223,14 @@ class BaselineController(ShelledController):
                 f"got {reference.shape}"
             )
 
-        law = apply_law(self._law, state, reference, self.disturbance_estimate)
+        law = apply_law(self._law, state, reference, self.disturbance_estimate, self.effectiveness)
         tau_des, errors, integrated, target, requested = law
         # Each thruster clipped into the box one rate step around the previous command; since
         # both ends are within the force limits, so is the result.
         thrust, _ = project_to_limits(target, previous, self.model, self.sample_time)
         saturated = bool(np.any(np.abs(thrust - requested) > _SATURATION_TOLERANCE_N))
-        deficit = tau_des - self.model.T @ thrust  # zero unless a limit cut the demand
+        # Zero unless a limit cut the demand (or the thrusters left cannot make it).
+        deficit = tau_des - self.model.T @ (self.effectiveness * thrust)
         self._integrate(state[_HEADING], reference[0, _HEADING], integrated, deficit, saturated)
 
         details = {

@@ -62,14 +62,27 @@ class ThrustMapping:
         self.n_horizontal = n = vehicle.n_thrusters
         self.n_total = six.n_thrusters
         heave_row = np.asarray(six.T)[_HEAVE, n:]  # NED Z force per unit thrust of each vertical
+        self._heave_row = heave_row
         # Least-norm F_v with heave_row @ F_v = Z: F_v = pinv(heave_row) Z.
-        self.heave_split = heave_row / float(heave_row @ heave_row)
+        self.heave_split = self._healthy_split = heave_row / float(heave_row @ heave_row)
+        self._split_effectiveness = np.ones(heave_row.size)
         limits = vehicle.six_dof_actuators.limits
         self.lower, self.upper, self.rate_limit = limits.lower, limits.upper, limits.rate
         self.max_step = sample_time * self.rate_limit
 
-    def vertical(self, heave_force_up: float) -> np.ndarray:
-        """The vertical thrusters' forces for an upward heave force (N): NED Z = -force."""
+    def vertical(
+        self, heave_force_up: float, effectiveness: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The vertical thrusters' forces for an upward heave force (N): NED Z = -force, the
+        least-norm split over the verticals as they act (``effectiveness``, theirs only; None:
+        all healthy), so a dead one gets nothing."""
+        if effectiveness is None:
+            return self._healthy_split * (-heave_force_up)
+        if not np.array_equal(effectiveness, self._split_effectiveness):
+            self._split_effectiveness = np.array(effectiveness, dtype=float)
+            acting = self._heave_row * self._split_effectiveness
+            strength = float(acting @ acting)
+            self.heave_split = acting / strength if strength > 0.0 else np.zeros(acting.size)
         return self.heave_split * (-heave_force_up)
 
     def apply(self, demand: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, int]:
@@ -137,12 +150,16 @@ class HorizontalAndDepth(Controller):
 
     def compute(self, observation: Observation) -> ChannelResult:
         mapping, measured, reference = self.mapping, observation.state, observation.reference
+        # Every thruster's effectiveness: the horizontal ones' first, then the verticals'.
+        told = observation.effectiveness
+        n = mapping.n_horizontal
         horizontal_observation = Observation(
             k=observation.k,
             t=observation.t,
             state=measured[_MEASURED_HORIZONTAL],
             reference=reference[: self.horizontal.preview_steps + 1, : HORIZONTAL.size],
             obstacles=observation.obstacles,
+            effectiveness=None if told is None else told[:n],
         )
         result, horizontal, horizontal_ms = timed_command(
             self.horizontal, horizontal_observation, mapping.n_horizontal
@@ -156,11 +173,16 @@ class HorizontalAndDepth(Controller):
             t=observation.t,
             state=np.array([-measured_depth, -measured_rate]),
             reference=np.column_stack([-target[:, 0], -target[:, 1]]),
+            effectiveness=None if told is None else told[n:],
         )
         depth_result, heave, depth_ms = timed_command(
             self.depth, depth_observation, self._heave_count, "depth controller"
         )
-        demand = np.concatenate([horizontal, mapping.vertical(float(heave.sum()))])
+        if told is None:
+            vertical = mapping.vertical(float(heave.sum()))
+        else:  # the heave force the depth MPC predicts its thrusts make, as they act
+            vertical = mapping.vertical(float(heave @ told[n:]), told[n:])
+        demand = np.concatenate([horizontal, vertical])
         thrust, saturated = mapping.apply(demand, self._previous)
         self._previous = thrust
         return ChannelResult(

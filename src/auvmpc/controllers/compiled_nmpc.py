@@ -111,6 +111,8 @@ class CompiledNmpc(Controller):
         self._obstacles = np.zeros((max(obstacle_slots, 1), _OBSTACLE_FIELDS))
         self._prediction_times = self.sample_time * np.arange(1, N + 1)  # as the program's
         self._command = np.zeros(n)
+        self._healthy = np.ones(n)
+        self._effectiveness = np.ones(n)  # what the C was told last (all ones after init)
         self._predicted = np.zeros((N + 1, NX))
         self._report = _Report()
         self._observation: Observation | None = None  # the sample the rescue is asked for
@@ -128,6 +130,7 @@ class CompiledNmpc(Controller):
         thrust = np.ascontiguousarray(initial_thrust, dtype=float)
         if self._c.auvmpc_controller_init(self._handle, state.ctypes.data, thrust.ctypes.data):
             raise MemoryError("the C controller's HPIPM workspace could not be allocated")
+        self._effectiveness[:] = 1.0  # as the shell's reset: healthy until told otherwise
 
     def compute(self, observation: Observation) -> ControlResult:
         obstacles = observation.obstacles
@@ -136,6 +139,13 @@ class CompiledNmpc(Controller):
         for row, obstacle in zip(self._obstacles, obstacles, strict=False):
             radius = obstacle.horizon_radius(self._prediction_times)
             row[:] = [*obstacle.center, *obstacle.velocity, obstacle.radius, radius]
+        told = self._healthy if observation.effectiveness is None else observation.effectiveness
+        if not np.array_equal(told, self._effectiveness):
+            np.copyto(self._effectiveness, told)
+            if self._c.auvmpc_controller_set_effectiveness(
+                self._handle, self._effectiveness.ctypes.data
+            ):
+                raise ValueError(f"effectiveness {told}: each in [0, 1]")
         np.copyto(self._state, observation.state)
         np.copyto(self._reference, observation.reference[: self.horizon + 1])
         self._observation = observation
@@ -191,7 +201,9 @@ class CompiledNmpc(Controller):
             self.sample_time,
         )  # fmt: skip
         program = self.program
-        sample = program.sample(state, previous, reference, disturbance, observation.obstacles)
+        sample = program.sample(
+            state, previous, reference, disturbance, observation.obstacles, self._effectiveness
+        )
         if self._rescue is None:
             self._rescue = rescue_solver(program, self.config)
         solution = self._rescue.solve(program.resting_guess(sample), sample, 0, True)
@@ -215,6 +227,8 @@ def _declare(library: ctypes.CDLL) -> None:
     library.auvmpc_controller_init.argtypes = [pointer] * 3
     library.auvmpc_controller_step.restype = ctypes.c_int
     library.auvmpc_controller_step.argtypes = [pointer] * 4 + [ctypes.c_int, pointer]
+    library.auvmpc_controller_set_effectiveness.restype = ctypes.c_int
+    library.auvmpc_controller_set_effectiveness.argtypes = [pointer, pointer]
     library.auvmpc_controller_set_rescue.argtypes = [pointer, _RESCUE, pointer]
     library.auvmpc_controller_last.argtypes = [pointer, ctypes.POINTER(_Report), pointer]
 

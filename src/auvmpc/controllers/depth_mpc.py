@@ -57,26 +57,45 @@ class DepthMpc(IncrementalMpc):
         state = ca.SX.sym("x", NX)
         thrust = ca.SX.sym("F", heave.thruster_count)
         force = ca.SX.sym("d")
+        # The model in the vertical thrust that acts, a = e * F (e: each thruster's
+        # effectiveness, 1 healthy, 0 dead, a runtime input), evaluated at a = e * F with the
+        # thrust Jacobian's columns times e: differentiated in a, the healthy model's numbers
+        # are what they were before e was an input (models/discrete.py says why).
+        acting = ca.SX.sym("a", heave.thruster_count)
+        effectiveness = ca.SX.sym("e", heave.thruster_count)
         next_state = rk4(
-            lambda x, u: heave_dynamics(x, u, heave, force), state, thrust, config.sample_time
+            lambda x, u: heave_dynamics(x, u, heave, force), state, acting, config.sample_time
         )
+        healthy = ca.Function(
+            "heave_step_acting",
+            [state, acting, force],
+            [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, acting)],
+        )
+        following, jac_x, jac_a = healthy.call([state, thrust * effectiveness, force])
+        jac_u = jac_a * ca.repmat(effectiveness.T, NX, 1)
         step = ca.Function(
-            "heave_step",
-            [state, thrust, force],
-            [next_state, ca.jacobian(next_state, state), ca.jacobian(next_state, thrust)],
+            "heave_step", [state, thrust, force, effectiveness], [following, jac_x, jac_u]
         )
         self._rollout = step.mapaccum("heave_rollout", config.prediction_horizon)
         augmented = ca.SX.sym("z", NX + 1)
-        next_augmented = ca.vertcat(step(augmented[:NX], thrust, augmented[NX])[0], augmented[NX])
+        next_augmented = ca.vertcat(
+            healthy(augmented[:NX], acting, augmented[NX])[0], augmented[NX]
+        )
+        healthy_observer = ca.Function(
+            "heave_observer_acting",
+            [augmented, acting],
+            [next_augmented, ca.jacobian(next_augmented, augmented)],
+        )
+        observer_step = ca.Function(
+            "heave_observer",
+            [augmented, thrust, effectiveness],
+            healthy_observer.call([augmented, thrust * effectiveness]),
+        )
         observer = config.observer
         rate = observer.disturbance_rate_std if config.offset_free else 0.0
         prior = observer.initial_disturbance_std if config.offset_free else 0.0
         self._observer = AugmentedEkf(
-            ca.Function(
-                "heave_observer",
-                [augmented, thrust],
-                [next_augmented, ca.jacobian(next_augmented, augmented)],
-            ),
+            observer_step,
             measured=1,
             process_covariance=np.diag(
                 [
@@ -99,14 +118,14 @@ class DepthMpc(IncrementalMpc):
         return estimate[:NX], estimate[NX:]
 
     def after_command(self, command: np.ndarray) -> None:
-        self._observer.predict(command)
+        self._observer.predict(command, self.effectiveness)
 
     def prediction_model(
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
         ny, n = self.horizon, self.heave.thruster_count
         forces = np.full((1, ny), float(disturbance[0]))
-        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces)
+        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces, self.effectiveness)
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
         nominal = np.vstack([state, np.asarray(states).T])

@@ -126,12 +126,21 @@ class DoMpcController(ShelledController):
         move = model.set_variable("_u", "dF", (n, 1))
         model.set_variable("_tvp", "reference", (NX, 1))
         gate = model.set_variable("_tvp", "gate")
+        # The thrusters' effectiveness (1 healthy, 0 dead): a parameter, so a fault needs no
+        # rebuild.
+        effectiveness = model.set_variable("_tvp", "effectiveness", (n, 1))
         if slots:  # per slot: centre x, centre y, reach (m)
             model.set_variable("_tvp", "obstacles", (3 * slots, 1))
         thrust = previous + gate * move
         model.set_rhs(
             "state",
-            rk4(lambda x, f: dynamics(x, f, p), state, thrust, ocp.sample_time, cfg.model_substeps),
+            rk4(
+                lambda x, f: dynamics(x, f, p, effectiveness=effectiveness),
+                state,
+                thrust,
+                ocp.sample_time,
+                cfg.model_substeps,
+            ),
         )
         model.set_rhs("F_prev", thrust)
         model.setup()
@@ -188,7 +197,7 @@ class DoMpcController(ShelledController):
         stages = range(self.horizon + 1)
         self._tvp_index = {
             name: np.array([tvp.f["_tvp", k, name] for k in stages]).reshape(len(stages), -1)
-            for name in ("reference", "gate", *(("obstacles",) if slots else ()))
+            for name in ("reference", "gate", "effectiveness", *(("obstacles",) if slots else ()))
         }
         opt_x = mpc.opt_x
         self._state_index = np.array([opt_x.f["_x", k, 0, -1, "state"] for k in stages])
@@ -253,12 +262,14 @@ class DoMpcController(ShelledController):
 
     # -- pieces --------------------------------------------------------------------------
     def _set_parameters(self, state: np.ndarray, observation: Observation) -> None:
-        """Reference (heading aligned by 2 pi k to the measured one), gates and obstacles."""
+        """Reference (heading aligned by 2 pi k to the measured one), gates, the thrusters'
+        effectiveness and obstacles."""
         ny = self.horizon
         reference = align_heading(state, observation.reference[: ny + 1])
         values = np.zeros(self._tvp.cat.shape[0])
         values[self._tvp_index["reference"]] = reference
         values[self._tvp_index["gate"][:, 0]] = self._gates
+        values[self._tvp_index["effectiveness"]] = self.effectiveness
         if self._slots:
             slots = np.tile([_PARKED_OBSTACLE_M, _PARKED_OBSTACLE_M, 0.0], (ny + 1, self._slots, 1))
             times = np.arange(ny + 1) * self.sample_time

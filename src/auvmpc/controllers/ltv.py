@@ -91,12 +91,16 @@ class LtvMpc(LinearMpc):
             rollout = self._sampled.disturbed_linearised_rollout(ny)
             steps = self._sampled.disturbed_linearised_nodes(ny)
         if nodes is None:
-            successors, jac_x, jac_u, *jac_d = rollout(state, nominal_input.T, forces)
+            successors, jac_x, jac_u, *jac_d = rollout(
+                state, nominal_input.T, forces, self.effectiveness
+            )
             successors = np.asarray(successors).T  # (ny, 6)
             nodes = np.vstack([state, successors[:-1]])
         else:
             nodes = np.vstack([state, nodes[1:ny]])
-            successors, jac_x, jac_u, *jac_d = steps(nodes.T, nominal_input.T, forces)
+            successors, jac_x, jac_u, *jac_d = steps(
+                nodes.T, nominal_input.T, forces, self.effectiveness
+            )
             successors = np.asarray(successors).T
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)

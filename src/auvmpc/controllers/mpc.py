@@ -94,7 +94,7 @@ class LinearMpc(IncrementalMpc):
 
     def after_command(self, command: np.ndarray) -> None:
         if self._observer is not None:
-            self._observer.predict(command)
+            self._observer.predict(command, self.effectiveness)
 
     def aligned_reference(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
         return align_heading(state, reference)
@@ -228,7 +228,9 @@ def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tighten
         at = np.array([0.0, 0.0, 0.0, speed, 0.0, 0.0])
         drag = -(model.Xu * speed + model.Xuu * speed * abs(speed))
         holding = allocation @ np.array([drag, 0.0, 0.0])  # the thrust that keeps the speed
-        _, A, B = sampled.linearised_step(at, holding, np.zeros(PLANAR_FORCE.size))
+        # The tube's gains are the healthy vehicle's (built once, not per fault).
+        healthy = np.ones(model.n_thrusters)
+        _, A, B = sampled.linearised_step(at, holding, np.zeros(PLANAR_FORCE.size), healthy)
         gains.append(tube_gain(np.asarray(A), np.asarray(B), half_range))
     return Tightening(bound.total_force_N, bound.moment_Nm, speeds, np.array(gains), half_range)
 
@@ -261,8 +263,11 @@ class PaperMpc(LinearMpc):
             "turning: without sway thrust the lateral position is uncontrollable in it",
         )
         super().__init__(model, config)
-        # Thrust and body-frame disturbance enter the same velocity rows: [B_c, G_c].
+        # Thrust and body-frame disturbance enter the same velocity rows: [B_c, G_c]; B_c's
+        # columns scaled by the thrusters' effectiveness, remade when that changes.
         self._input_matrix = np.hstack([input_matrix(model), disturbance_matrix(model)])
+        self._healthy_input_matrix = self._input_matrix
+        self._input_effectiveness = np.ones(model.n_thrusters)
         config = self.config  # with what the vehicle decides filled in
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self._rollout = sampled.rollout(config.prediction_horizon)  # for plan_check
@@ -290,7 +295,8 @@ class PaperMpc(LinearMpc):
         if not self.config.rollout_check or not observation.obstacles:
             return None
         forces = np.tile(np.reshape(disturbance, (PLANAR_FORCE.size, 1)), (1, self.horizon))
-        rollout = np.asarray(self._rollout(state, plan.T, forces)).T[:, HORIZONTAL.position]
+        rolled = self._rollout(state, plan.T, forces, self.effectiveness)
+        rollout = np.asarray(rolled).T[:, HORIZONTAL.position]
         steps = np.arange(1, self.horizon + 1)
         errors, entered = [], False
         for obstacle in observation.obstacles:
@@ -307,6 +313,12 @@ class PaperMpc(LinearMpc):
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
         h = self.sample_time / self.config.model_substeps
+        if not np.array_equal(self.effectiveness, self._input_effectiveness):
+            self._input_effectiveness = np.array(self.effectiveness, dtype=float)
+            n = self.model.n_thrusters
+            scaled = self._healthy_input_matrix.copy()
+            scaled[:, :n] *= self._input_effectiveness
+            self._input_matrix = scaled
         step_A, step_B = rk4_discretize(sdc_matrix(state, self.model), self._input_matrix, h)
         Ad, Bd = step_A, step_B
         for _ in range(self.config.model_substeps - 1):  # compose the sub-steps, inputs held

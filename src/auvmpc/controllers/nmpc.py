@@ -175,7 +175,9 @@ class NonlinearMpc(ShelledController):
         if not (finite and np.isfinite(reference).all()):
             # Never hand NaN to a solver (IPOPT raises on it): a failed step, not an error.
             return Proposal(plan=None, disturbance=disturbance)
-        sample = self.program.sample(state, previous, reference, disturbance, observation.obstacles)
+        sample = self.program.sample(
+            state, previous, reference, disturbance, observation.obstacles, self.effectiveness
+        )
         cold = self._guess is None
         cold_iterations = max(_COLD_START_ITERATIONS, self.config.linearisation_iterations)
         if cold:
@@ -218,7 +220,7 @@ class NonlinearMpc(ShelledController):
         # starting point may be what made it fail).
         resume = solution.iterate if solution.iterate is not None else solution.resume
         if resume is not None:
-            self._next_guess = self.program.shifted(resume, disturbance)
+            self._next_guess = self.program.shifted(resume, sample)
         iterate = solution.iterate
         return Proposal(
             plan=None if iterate is None else self.program.plan(iterate),
@@ -242,7 +244,7 @@ class NonlinearMpc(ShelledController):
         """Propagate the estimator with the applied thrust; move the warm start on."""
         self._guess = self._next_guess
         if self._observer is not None:
-            self._observer.predict(command)
+            self._observer.predict(command, self.effectiveness)
 
 
 def rescue_solver(program: MultipleShootingProgram, config: ControllerConfig) -> IpoptSolver:

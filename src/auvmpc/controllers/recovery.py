@@ -57,6 +57,7 @@ class StabilisingFeedback:
         self.law = tracking_law(model, sample_time, RECOVERY_GAINS, settling_yaw=True)
         self._keep_out_extra = keep_out_extra  # vehicle radius + margin, m
         self._hold: np.ndarray | None = None  # (2,) world position held, m
+        self._healthy = np.ones(model.n_thrusters)
 
     def release(self) -> None:
         """The optimiser is in control again: the next hold starts afresh."""
@@ -66,7 +67,8 @@ class StabilisingFeedback:
         self, observation: Observation, previous: np.ndarray, proposal: Proposal
     ) -> np.ndarray:
         """Thrust for the coming sample within the force limits (the shell's projection
-        applies the rate limit around ``previous``)."""
+        applies the rate limit around ``previous``), allocated to the thrusters as the
+        observation's effectiveness says they act."""
         state = np.asarray(observation.state, dtype=float)
         target = observation.reference[:2]
         if self._blocked(state[_POSITION], target[0, _POSITION], observation):
@@ -80,7 +82,11 @@ class StabilisingFeedback:
         disturbance = proposal.disturbance
         if disturbance is None or np.size(disturbance) != PLANAR_FORCE.size:
             disturbance = np.zeros(PLANAR_FORCE.size)
-        return apply_law(self.law, state, target, np.ravel(disturbance))[_THRUST]
+        effectiveness = observation.effectiveness
+        if effectiveness is None:
+            effectiveness = self._healthy
+        law = apply_law(self.law, state, target, np.ravel(disturbance), effectiveness)
+        return law[_THRUST]
 
     def _blocked(self, start: np.ndarray, end: np.ndarray, observation: Observation) -> bool:
         """Whether the segment start-end passes inside any obstacle's keep-out disc."""
@@ -125,7 +131,9 @@ class DepthFeedback:
     def command(
         self, observation: Observation, previous: np.ndarray, proposal: Proposal
     ) -> np.ndarray:
-        """Thrust for the coming sample (the shell projects it into the hard limits)."""
+        """Thrust for the coming sample (the shell projects it into the hard limits), shared
+        by the vertical thrusters in proportion to their effectiveness (the minimum-norm
+        share: equal when all are healthy, none to a dead one)."""
         heave = self._heave
         if proposal.estimated_state is not None:
             z, w = proposal.estimated_state[[_Z, _W]]
@@ -139,4 +147,10 @@ class DepthFeedback:
         acceleration = wn**2 * (target[_Z] - z) + 2.0 * wn * (target[_W] - w)
         drag = heave_damping_force(heave, w)
         force = heave.m_heave * acceleration - drag - heave.net_buoyancy_N - disturbance
-        return np.full(len(previous), force / len(previous))
+        effectiveness = observation.effectiveness
+        if effectiveness is None:
+            return np.full(len(previous), force / len(previous))
+        acting = float(effectiveness @ effectiveness)
+        if acting == 0.0:  # none left to push: ask for nothing
+            return np.zeros(len(previous))
+        return (force / acting) * effectiveness

@@ -159,6 +159,12 @@ class ShelledController(Controller):
     # -- the shell ---------------------------------------------------------------------
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._previous = np.array(initial_thrust, dtype=float)
+        self._healthy = np.ones(self._previous.size)
+        self._healthy.setflags(write=False)
+        # The actuators' effectiveness this sample (Observation.effectiveness), what the back
+        # end predicts and allocates with; read-only, all ones until an observation says
+        # otherwise.
+        self.effectiveness = self._healthy
         self._plan: np.ndarray | None = None  # what a fallback follows
         self._unsolved = 0  # samples in a row without an applied proposal
         self._predicted_yaw_rate: float | None = None  # at this sample, by the applied plan
@@ -173,6 +179,8 @@ class ShelledController(Controller):
 
     def compute(self, observation: Observation) -> ControlResult:
         previous = self._previous
+        told = observation.effectiveness
+        self.effectiveness = self._healthy if told is None else told
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             # An overflow in a back end is judged below by its result (not finite: a
             # fallback); numpy's warnings were lines of source code before the run's line.

@@ -8,10 +8,12 @@ shell's recovery (controllers/recovery.py) and the exported C controller (export
 its C), so the feedback a vehicle falls back on is the same in Python and on board.
 
 The function :func:`tracking_law` builds takes the state ``[x y psi u v r]``, the reference
-now and one sample ahead, and the disturbance estimate (world force X, Y and yaw moment N)
-and returns the generalised force asked for, the errors, what the integrators are to see,
-the thrust (within the force limits where they allow zero thrust; before the rate limit,
-which the caller's projection applies) and the unlimited allocation.
+now and one sample ahead, the disturbance estimate (world force X, Y and yaw moment N) and
+the thrusters' effectiveness (1 healthy, 0 dead: the allocation is the minimum-norm one of
+the effective thrusters, so a dead one gets nothing) and returns the generalised force asked
+for, the errors, what the integrators are to see, the thrust (within the force limits where
+they allow zero thrust; before the rate limit, which the caller's projection applies) and
+the unlimited allocation.
 """
 
 from __future__ import annotations
@@ -34,10 +36,17 @@ from auvmpc.models.vehicle import VehicleParams, yaw_damping_moment
 if TYPE_CHECKING:
     from auvmpc.controllers.baseline import BaselineConfig
 
-__all__ = ["LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "apply_law", "tracking_law"]
+__all__ = [
+    "LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "apply_law", "effective_allocation",
+    "tracking_law",
+]  # fmt: skip
 
-LAW_INPUTS = ("state", "reference_now", "reference_ahead", "disturbance")
+LAW_INPUTS = ("state", "reference_now", "reference_ahead", "disturbance", "effectiveness")
 LAW_OUTPUTS = ("tau", "errors", "integrated", "thrust", "requested")
+# The damping of the faulted allocation's least squares, relative to the mean eigenvalue of
+# T T': small enough to be the pseudo-inverse's allocation to ~1e-9, large enough that a set
+# of effective thrusters that no longer spans the plane (or none at all) stays finite.
+_ALLOCATION_DAMPING = 1e-9
 # The law's ``errors`` and ``integrated``: the position error along and across the
 # reference's heading (m, path frame) and the heading error (rad, wrapped).
 PATH_ERRORS = Layout(names=("along", "cross", "heading"))
@@ -47,13 +56,36 @@ _FORCE_X, _FORCE_Y = (PLANAR_FORCE.index(name) for name in ("X", "Y"))
 
 
 def apply_law(
-    law: ca.Function, state: np.ndarray, reference: np.ndarray, disturbance: np.ndarray
+    law: ca.Function,
+    state: np.ndarray,
+    reference: np.ndarray,
+    disturbance: np.ndarray,
+    effectiveness: np.ndarray,
 ) -> list[np.ndarray]:
     """``law``'s outputs (LAW_OUTPUTS, as NumPy vectors) for ``state``, the reference rows
-    from now on (the second is one sample ahead; a single row is held) and the disturbance
-    estimate."""
+    from now on (the second is one sample ahead; a single row is held), the disturbance
+    estimate and the thrusters' effectiveness (n,)."""
     ahead = reference[1] if len(reference) > 1 else reference[0]
-    return [value.full().ravel() for value in law(state, reference[0], ahead, disturbance)]
+    values = law(state, reference[0], ahead, disturbance, effectiveness)
+    return [value.full().ravel() for value in values]
+
+
+def effective_allocation(model: VehicleParams, effectiveness):
+    """The minimum-norm allocation (n, 3) of the thrusters as they act, ``F = A tau`` with
+    ``T diag(e) F = tau``: the vehicle's ``T_pinv`` itself where every ``e`` is 1 (so a
+    healthy vehicle's law is the one it always was, to the bit), else the damped least
+    squares ``M' (M M' + eps I)^-1`` of ``M = T diag(e)``, whose row of a dead thruster is
+    zero. ``effectiveness`` is CasADi (n,)."""
+    T = np.asarray(model.T)
+    n = T.shape[1]
+    effective = ca.DM(T) @ ca.diag(effectiveness)
+    damping = _ALLOCATION_DAMPING * float(np.trace(T @ T.T)) / T.shape[0]
+    gram = effective @ effective.T + damping * ca.SX.eye(T.shape[0])
+    damped = effective.T @ ca.inv(gram)
+    healthy = ca.SX(1.0)
+    for i in range(n):
+        healthy = ca.logic_and(healthy, effectiveness[i] == 1.0)
+    return ca.if_else(healthy, ca.DM(np.asarray(model.T_pinv)), damped)
 
 
 def _rotate(angle, vector) -> list:
@@ -97,13 +129,14 @@ def _largest_step(start, direction, lower: float, upper: float):
 def tracking_law(
     model: VehicleParams, sample_time: float, gains: BaselineConfig, settling_yaw: bool = False
 ) -> ca.Function:
-    """The law as ``tracking_law(state, reference_now, reference_ahead, disturbance) ->
-    (tau, errors, integrated, thrust, requested)`` (module docstring) for ``model`` held over
-    ``sample_time`` with ``gains``; ``settling_yaw``: the shell's recovery, whose yaw term
-    holds the wanted rate against the damping where the yaw settles within the sample."""
+    """The law as ``tracking_law(state, reference_now, reference_ahead, disturbance, effectiveness)
+    -> (tau, errors, integrated, thrust, requested)`` (module docstring) for ``model`` held
+    over ``sample_time`` with ``gains``; ``settling_yaw``: the shell's recovery, whose yaw
+    term holds the wanted rate against the damping where the yaw settles within the sample."""
     p, te, g = model, float(sample_time), gains
     state, now, ahead = (ca.SX.sym(name, HORIZONTAL.size) for name in LAW_INPUTS[:3])
     disturbance = ca.SX.sym("disturbance", PLANAR_FORCE.size)
+    effectiveness = ca.SX.sym("effectiveness", p.n_thrusters)
     psi, u, v, r = state[_PSI], state[_U], state[_V], state[_R]
     psi_r, r_r = now[_PSI], now[_R]
 
@@ -185,9 +218,9 @@ def tracking_law(
     # own direction into the force limits; if the moment alone does not fit, it is scaled
     # and the planar force dropped (a heading error rotates every other error). Scaling
     # towards zero keeps the direction only where zero thrust is allowed.
-    allocation = np.asarray(p.T_pinv)
-    thrust_yaw = ca.DM(allocation[:, PLANAR_MOMENT]) * tau[PLANAR_MOMENT]
-    thrust_planar = ca.mtimes(ca.DM(allocation[:, PLANAR_FORCE_XY]), tau[PLANAR_FORCE_XY])
+    allocation = effective_allocation(p, effectiveness)
+    thrust_yaw = allocation[:, PLANAR_MOMENT] * tau[PLANAR_MOMENT]
+    thrust_planar = ca.mtimes(allocation[:, PLANAR_FORCE_XY], tau[PLANAR_FORCE_XY])
     requested = thrust_yaw + thrust_planar
     lower, upper = p.thrust_min, p.thrust_max
     if lower <= 0.0 <= upper:
@@ -204,7 +237,7 @@ def tracking_law(
         thrust = requested
     return ca.Function(
         "tracking_law",
-        [state, now, ahead, disturbance],
+        [state, now, ahead, disturbance, effectiveness],
         [tau, errors, integrated, thrust, requested],
         list(LAW_INPUTS),
         list(LAW_OUTPUTS),

@@ -158,7 +158,8 @@ def condition_covariance(covariance: np.ndarray, floor: float, ceiling: float) -
 class AugmentedEkf:
     """Extended Kalman filter for a state augmented with a random-walk disturbance.
 
-    ``step`` is a CasADi function (z, u) -> (z_next, dz_next/dz) over one sample; the
+    ``step`` is a CasADi function (z, u, e) -> (z_next, dz_next/dz) over one sample, ``e``
+    the actuators' effectiveness (n,; 1 healthy, 0 dead) that scales what ``u`` does; the
     first ``measured`` entries of z are measured directly (H = [I 0]). The covariance
     is updated in Joseph form and kept symmetric with bounded eigenvalues (module
     docstring), so it stays positive definite however long the filter runs.
@@ -187,6 +188,7 @@ class AugmentedEkf:
         self.update, self.propagation = ekf_functions(
             step, measured, process_covariance, measurement_covariance
         )
+        self._healthy = np.ones(step.size1_in(2))
         self.restarts = 0
         self.reset(np.zeros(prior_covariance.shape[0]))
 
@@ -212,8 +214,9 @@ class AugmentedEkf:
         self.covariance = condition_covariance(np.asarray(joseph), self._floor, self._ceiling)
         return self.estimate.copy()
 
-    def predict(self, applied_input: np.ndarray) -> None:
-        """Propagate over one sample with the input actually applied.
+    def predict(self, applied_input: np.ndarray, effectiveness: np.ndarray | None = None) -> None:
+        """Propagate over one sample with the input actually applied, acting with
+        ``effectiveness`` (n,; None: all healthy).
 
         If the prediction is not finite (the model's integration diverged, e.g. an RK4
         step too long for the estimated speed), the filter restarts from the next
@@ -222,7 +225,12 @@ class AugmentedEkf:
         """
         next_estimate, propagated = (
             np.asarray(value)
-            for value in self.propagation(self.estimate, self.covariance, applied_input)
+            for value in self.propagation(
+                self.estimate,
+                self.covariance,
+                applied_input,
+                self._healthy if effectiveness is None else effectiveness,
+            )
         )
         next_estimate = next_estimate.ravel()
         if not (np.all(np.isfinite(next_estimate)) and np.all(np.isfinite(propagated))):
@@ -245,7 +253,8 @@ def ekf_functions(
 
     ``ekf_update`` (z, P, innovation) -> (z + K innovation, the Joseph form
     (I - K H) P (I - K H)' + K R K'), K = P H' (H P H' + R)^-1 by a Cholesky factorisation;
-    ``ekf_propagation`` (z, P, u) -> (step(z, u), A P A' + Q), A the step's Jacobian.
+    ``ekf_propagation`` (z, P, u, e) -> (step(z, u, e), A P A' + Q), A the step's Jacobian
+    and ``e`` the actuators' effectiveness.
 
     Both are written once, symbolically, so that Python (CasADi's virtual machine) and the
     exported C (CasADi's generated code) evaluate the same operations in the same order.
@@ -253,6 +262,7 @@ def ekf_functions(
     n, m = step.size1_in(0), measured
     z, P = ca.SX.sym("z", n), ca.SX.sym("P", n, n)
     innovation, u = ca.SX.sym("innovation", m), ca.SX.sym("u", step.size1_in(1))
+    effectiveness = ca.SX.sym("e", step.size1_in(2))
     R = ca.SX(measurement_covariance)
     S = P[:m, :m] + R  # H P H' + R, positive definite
     # K' = S^-1 P[:m, :], column by column through S = L L'.
@@ -266,11 +276,12 @@ def ekf_functions(
         "ekf_update", [z, P, innovation], [z + gain @ innovation, ca.densify(joseph)],
         ["z", "P", "innovation"], ["z_corrected", "P_joseph"],
     )  # fmt: skip
-    following, A = step(z, u)
+    following, A = step(z, u, effectiveness)
     propagated = A @ P @ A.T + ca.SX(process_covariance)
     propagation = ca.Function(
-        "ekf_propagation", [z, P, u], [ca.densify(following), ca.densify(propagated)],
-        ["z", "P", "u"], ["z_next", "P_next"],
+        "ekf_propagation", [z, P, u, effectiveness],
+        [ca.densify(following), ca.densify(propagated)],
+        ["z", "P", "u", "e"], ["z_next", "P_next"],
     )  # fmt: skip
     return update, propagation
 
@@ -372,9 +383,10 @@ class DisturbanceObserver:
             estimate = self._filter.estimate
         return estimate[:NX].copy(), estimate[NX:].copy()
 
-    def predict(self, applied_thrust: np.ndarray) -> None:
-        """Propagate the estimate over one sample with the thrust actually applied."""
-        self._filter.predict(applied_thrust)
+    def predict(self, applied_thrust: np.ndarray, effectiveness: np.ndarray | None = None) -> None:
+        """Propagate the estimate over one sample with the thrust actually applied, acting
+        with the thrusters' ``effectiveness`` (n,; None: all healthy)."""
+        self._filter.predict(applied_thrust, effectiveness)
 
 
 # Smallest measurement variance the obstacle tracker uses (m^2): a noise-free sensor still

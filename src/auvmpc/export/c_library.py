@@ -23,6 +23,7 @@ import json
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -101,7 +102,8 @@ def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
     N, n, S = horizon, thrusters, max(slots, 1)
     nz, nv = _NX + n, n + (1 if slots else 0)
     iterates = 3 * ((N + 1) * _NX + N * n)  # guess, next guess, iterate
-    shell = n * (1 + N) + 3  # previous command, fallback plan, predicted yaw rate, hold
+    # previous command, fallback plan, predicted yaw rate, hold, the thrusters' effectiveness
+    shell = n * (2 + N) + 3
     # state, disturbance, reference, obstacle slots with their used flags, weights, movable
     sample = _NX + ND + (N + 1) * _NX + (SLOT_FIELDS + 1) * S + N * _NX + N
     step = (N + 1) * n + (N + 1) * nz + N * nv + N  # P, dz, dv, slack
@@ -364,9 +366,14 @@ def _check_blasfeo(export: Path, record: _ExportRecord) -> None:
         )  # fmt: skip
 
 
-def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
+def verify_c(
+    export: Path | str, run_dir: Path | str, effectiveness: Sequence[float] | None = None
+) -> VerifyResult:
     """Build ``export`` with the system C compiler (in a temporary folder), replay
     ``run_dir``'s log.csv through it and compare its commands with the logged ones.
+    ``effectiveness``: the thrusters' effectiveness the run's controller was told from its
+    first sample (``Session.effectiveness``), which the replay sets by
+    ``auvmpc_set_effectiveness``; None: all healthy.
 
     The run folder is read by the one reader (:mod:`auvmpc.experiments.run_folder`): a log
     that is not whole (cut mid-row or at a row boundary, edited) is refused in one line
@@ -392,8 +399,10 @@ def verify_c(export: Path | str, run_dir: Path | str) -> VerifyResult:
             lines = made.stderr.strip().splitlines()
             first = next((line for line in lines if "error" in line), "make failed")
             raise RunFailed(f"the export did not build: {first}")
+        told = [] if effectiveness is None else [",".join(f"{e:.17g}" for e in effectiveness)]
         replay = subprocess.run(
-            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(log.steps)],
+            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(log.steps),
+             *told],
             capture_output=True, text=True,
         )  # fmt: skip
         if replay.returncode:

@@ -72,6 +72,7 @@ class Sample:
     disturbance: np.ndarray  # (3,) world force and moment
     slots: np.ndarray  # (slots, 5) obstacle data, parked where unused
     used: np.ndarray  # (slots,) bool
+    effectiveness: np.ndarray  # (n,) each thruster's share of its command that acts
 
 
 @dataclass
@@ -88,10 +89,11 @@ class MultipleShootingProgram:
 
     ``w`` stacks the states X_0..X_ny (6 each), the thrusts at the move steps (n each) and one
     slack per predicted step and obstacle slot. ``p`` stacks the last applied thrust (n), the
-    aligned reference rows 1..ny (6 each), the world-frame force and moment (3) and the
-    obstacle slots (5 each). ``g`` stacks the shooting gaps X_{n+1} - RK4(X_n, F_n) (6 per
-    step), the thrust changes at the move steps (n each) and, per step and slot, the distance
-    to the obstacle minus its reach plus the slack.
+    aligned reference rows 1..ny (6 each), the world-frame force and moment (3), the
+    obstacle slots (5 each) and the thrusters' effectiveness (n: 1 healthy, 0 dead), so a
+    fault changes a parameter, not the program. ``g`` stacks the shooting gaps
+    X_{n+1} - RK4(X_n, F_n) (6 per step), the thrust changes at the move steps (n each) and,
+    per step and slot, the distance to the obstacle minus its reach plus the slack.
     """
 
     def __init__(
@@ -111,6 +113,7 @@ class MultipleShootingProgram:
 
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self.step = sampled.step
+        self.acting_step = sampled.acting_step
         self.numeric_step = sampled.numeric_step
         self.rollout = sampled.rollout(ny)
         # The step with its Jacobians, evaluated at every shooting node in one call.
@@ -134,10 +137,14 @@ class MultipleShootingProgram:
         reference = ca.SX.sym("ref", NX, ny)  # column i: r_{i+1}
         disturbance = ca.SX.sym("d_world", ND)
         slots = ca.SX.sym("obstacles", SLOT_FIELDS, n_slots)
-        p = ca.vertcat(previous, ca.vec(reference), disturbance, ca.vec(slots))
+        effectiveness = ca.SX.sym("effectiveness", n)
+        p = ca.vertcat(previous, ca.vec(reference), disturbance, ca.vec(slots), effectiveness)
 
         thrust_at = [U[:, int(j)] for j in self.held]
-        gaps = [X[:, i + 1] - self.step(X[:, i], thrust_at[i], disturbance) for i in range(ny)]
+        gaps = [
+            X[:, i + 1] - self.step(X[:, i], thrust_at[i], disturbance, effectiveness)
+            for i in range(ny)
+        ]
         changes = [U[:, 0] - previous] + [U[:, j] - U[:, j - 1] for j in range(1, self.n_moves)]
         clearances = []
         for i in range(1, ny + 1):
@@ -184,6 +191,7 @@ class MultipleShootingProgram:
                 sample.reference[1:].ravel(),
                 sample.disturbance,
                 sample.slots.ravel(),
+                sample.effectiveness,
             ]
         )
 
@@ -209,8 +217,12 @@ class MultipleShootingProgram:
         reference: np.ndarray,
         disturbance: np.ndarray,
         obstacles: tuple[ObstacleState, ...],
+        effectiveness: np.ndarray | None = None,
     ) -> Sample:
-        """The sample's data; the nearest obstacles fill the slots, the rest are parked."""
+        """The sample's data; the nearest obstacles fill the slots, the rest are parked;
+        ``effectiveness`` None: every thruster healthy."""
+        if effectiveness is None:
+            effectiveness = np.ones(self.n_thrusters)
         slots = np.zeros((self.n_slots, SLOT_FIELDS))
         slots[:, SLOT_CENTRE] = state[_POSITION] + _PARKED_OBSTACLE_M
         used = np.zeros(self.n_slots, dtype=bool)
@@ -224,20 +236,23 @@ class MultipleShootingProgram:
             radius = obstacle.horizon_radius(steps)
             slots[o] = [*obstacle.center, *obstacle.velocity, radius + extra]
             used[o] = True
-        return Sample(state, previous, reference, disturbance, slots, used)
+        return Sample(state, previous, reference, disturbance, slots, used, effectiveness)
 
     def plan(self, iterate: Iterate) -> np.ndarray:
         """Thrust at every step of the horizon (ny, n)."""
         return iterate.thrust[self.held]
 
-    def shifted(self, iterate: Iterate, disturbance: np.ndarray) -> Iterate:
+    def shifted(self, iterate: Iterate, sample: Sample) -> Iterate:
         """The iterate one sample on: states, plan and slacks advanced by one step.
 
-        The new terminal state is the model's step from the old one under the last thrust;
-        the thrusts at the move steps are read from the plan shifted by one sample.
+        The new terminal state is the model's step from the old one under the last thrust
+        (with the sample's disturbance and effectiveness); the thrusts at the move steps are
+        read from the plan shifted by one sample.
         """
         plan = self.plan(iterate)
-        terminal = self.numeric_step(iterate.states[-1], plan[-1], disturbance)
+        terminal = self.numeric_step(
+            iterate.states[-1], plan[-1], sample.disturbance, sample.effectiveness
+        )
         return Iterate(
             states=np.concatenate([iterate.states[1:], terminal[None]]),
             thrust=np.concatenate([plan[1:], plan[-1:]])[self.move_steps],

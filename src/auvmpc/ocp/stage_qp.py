@@ -66,9 +66,12 @@ class StageQp(NamedTuple):
         lbp <= dp_{k+1} <= ubp   (the thrust part of the next state)
 
     ``stage`` maps (X_k, X_{k+1}, P_k, P_{k+1}, F_k, r_k, W_k, d, slots, used, movable_k,
-    k + 1) to (A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu, lbp, ubp), every matrix dense
+    k + 1, e) to (A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu, lbp, ubp), every matrix dense
     and column-major; ``terminal`` maps (X_N, r_N) to (Q, q) of the last stage. Both are
-    expanded SX, so the same functions are evaluated by CasADi or compiled to C.
+    expanded SX, so the same functions are evaluated by CasADi or compiled to C. ``e`` is
+    the thrusters' effectiveness (n,; 1 healthy, 0 dead), a runtime input like the others:
+    the model's thrust acts as ``e * F`` (ActuatorSet.force), so B's thrust columns scale
+    with it and a fault rebuilds nothing.
     """
 
     stage: ca.Function
@@ -112,6 +115,7 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     used = ca.SX.sym("used", S)
     movable = ca.SX.sym("movable")
     step_index = ca.SX.sym("step")  # k + 1: the step whose obstacle rows this stage carries
+    effectiveness = ca.SX.sym("e", n)  # each thruster's share of its command that acts
 
     # The input is the change of the thrust's increment, w_k = dF_k - dp_k, so that the
     # rate limit is a bound on w and the thrust limit a bound on the next state's dp (box
@@ -139,13 +143,19 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         r = ca.vertcat(2.0 * R_weight * change, *slack_gradient)
 
     # Dynamics: dX_{k+1} = A dX_k + B (dp_k + w_k) + gap, dp_{k+1} = dp_k + w_k + (F_k - P_{k+1}).
-    successor = program.step(X, F, force)
+    # The model's thrust that acts is a = e * F: differentiated in a and evaluated there, B's
+    # thrust columns times e (the chain rule; models/discrete.py says why not through e * F).
+    acting = ca.SX.sym("a", n)
+    successor = program.acting_step(X, acting, force)
     # Both Jacobians from one reverse sweep per successor component (6), where ca.jacobian
     # takes forward mode, one sweep per input (6 + n): with 7 RK4 substeps (BlueROV2 Heavy)
     # the successor and its Jacobians take 16 331 SX operations against 19 425, and the whole
     # stage 15 521 against 19 935 with its common subexpressions merged (cse below).
-    transposed = ca.jtimes(successor, ca.vertcat(X, F), ca.SX.eye(NX), True)  # (NX + n, NX)
-    A_x, B_x = transposed[:NX, :].T, transposed[NX:, :].T
+    transposed = ca.jtimes(successor, ca.vertcat(X, acting), ca.SX.eye(NX), True)  # (NX + n, NX)
+    linearised = ca.Function("rk4_step_transposed", [X, acting, force], [successor, transposed])
+    successor, transposed = linearised.call([X, F * effectiveness, force])
+    A_x, B_acting = transposed[:NX, :].T, transposed[NX:, :].T
+    B_x = B_acting * ca.repmat(effectiveness.T, NX, 1)
     A = ca.SX(nz, nz)
     A[:NX, :NX] = A_x
     A[:NX, NX:] = B_x
@@ -184,12 +194,13 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     ug = ca.vertcat(*upper) if S else ca.SX(0, 1)
 
     outputs = (A, B, b, Q, S_cross, R, q, r, C, D, lg, ug, lbu, ubu, lbp_next, ubp_next)
-    inputs = (X, X_next, P, P_next, F, reference, weight, force, slots, used, movable, step_index)
+    inputs = (X, X_next, P, P_next, F, reference, weight, force, slots, used, movable, step_index,
+              effectiveness)  # fmt: skip
     stage = ca.Function(
         "rti_stage",
         list(inputs),
         [ca.densify(ca.SX(e)) for e in outputs],
-        "X X_next P P_next F ref W d_world slots used movable step".split(),
+        "X X_next P P_next F ref W d_world slots used movable step e".split(),
         "A B b Q S R q r C D lg ug lbu ubu lbp_next ubp_next".split(),
         {"cse": True},
     )

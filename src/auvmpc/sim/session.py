@@ -116,10 +116,38 @@ class Session:
         )
         log.initial_thrust = previous.copy()
         self._initial_state = np.asarray(initial_state, dtype=float).copy()
+        self._effectiveness: np.ndarray | None = None  # all healthy
         controller.reset(self._initial_state.copy(), previous.copy())
         self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
         # Created last: a session that could not be set up leaves no file behind.
         self.live_log = None if live_log is None else LiveLog(live_log, log)
+
+    @property
+    def effectiveness(self) -> np.ndarray | None:
+        """Each input's actuator effectiveness the controller assumes from the next sample on,
+        in ``input_names`` order (1 healthy, 0 dead, 0.5 half force), or None: all healthy.
+        Set it when you learn of a fault (a detector, a mission's declared faults): the
+        controller's prediction model and allocation use it from the next :meth:`step`, with
+        nothing rebuilt."""
+        return None if self._effectiveness is None else self._effectiveness.copy()
+
+    @effectiveness.setter
+    def effectiveness(self, values: Any) -> None:
+        if values is None:
+            self._effectiveness = None
+            return
+        try:
+            checked = np.array(values, dtype=float)
+        except (TypeError, ValueError):
+            raise ConfigError("effectiveness", values, "must be numbers") from None
+        if checked.shape != (self.n_inputs,):
+            raise ConfigError(
+                "effectiveness", values, f"must have one value per input ({self.n_inputs})"
+            )
+        if not np.all((checked >= 0.0) & (checked <= 1.0)):
+            raise ConfigError("effectiveness", values, "must be between 0 and 1 (1 healthy)")
+        checked.setflags(write=False)
+        self._effectiveness = checked
 
     @property
     def initial_state(self) -> np.ndarray:
@@ -163,6 +191,7 @@ class Session:
             state=measurement,
             reference=self._preview,
             obstacles=self._detections(log.t[k], measurement) if detections is None else detections,
+            effectiveness=self._effectiveness,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
         log.record_command(k, result, thrust, solve_ms)

@@ -44,8 +44,8 @@ void *auvmpc_rti_create(int horizon, int n, int slots, int nz, int nv, int ng,
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
-                    const double *movable, int hot_start, double *dz, double *dv,
-                    int *iterations);
+                    const double *movable, const double *e, int hot_start, double *dz,
+                    double *dv, int *iterations);
 long auvmpc_rti_memory_bytes(const void *handle);
 void auvmpc_rti_free(void *handle);
 
@@ -76,6 +76,7 @@ struct auvmpc_controller {
     double predicted_yaw_rate;    /* at this sample, by the last applied plan */
     int has_predicted_yaw_rate;
     double hold[2];               /* where the recovery holds station, while it does */
+    double effectiveness[NT];     /* each thruster's share of its command that acts (1 healthy)*/
     int holding;
     Iterate guess, next_guess;    /* where the next solve starts (warm start) */
     int has_guess, has_next_guess;
@@ -115,11 +116,13 @@ struct auvmpc_controller {
     int spinning; /* the last step judged the vehicle to spin */
 };
 
-/* x_next = RK4(x, F, d) over one sample (models/discrete.py). 0 on success. */
+/* x_next = RK4(x, F, d, e) over one sample (models/discrete.py), e the thrusters'
+ * effectiveness. 0 on success. */
 static int model_step(Controller *c, const double *x, const double *F, const double *d, double *x_next) {
     c->step_arg[0] = x;
     c->step_arg[1] = F;
     c->step_arg[2] = d;
+    c->step_arg[3] = c->effectiveness;
     c->step_res[0] = x_next;
     return rk4_step(c->step_arg, c->step_res, c->step_iw, c->step_w, 0);
 }
@@ -249,14 +252,16 @@ static void condition_covariance(Controller *c, double m[NA][NA]) {
 }
 
 /* Evaluate a generated EKF function (ekf_update or ekf_propagation: estimation/ekf.py,
- * ekf_functions) on (z, P, x): into z_out and P_out (column-major). 0 on success. The
- * covariance is symmetric (condition_covariance), so its rows are its columns. */
+ * ekf_functions) on (z, P, x) (and the thrusters' effectiveness, which only the propagation
+ * reads): into z_out and P_out (column-major). 0 on success. The covariance is symmetric
+ * (condition_covariance), so its rows are its columns. */
 static int observer_call(Controller *c, int (*function)(const casadi_real **, casadi_real **, casadi_int *,
                                          casadi_real *, int),
                          const double *x, double *z_out, double *P_out) {
     c->observer_arg[0] = c->estimate;
     c->observer_arg[1] = c->covariance[0];
     c->observer_arg[2] = x;
+    c->observer_arg[3] = c->effectiveness;
     c->observer_res[0] = z_out;
     c->observer_res[1] = P_out;
     return function(c->observer_arg, c->observer_res, c->observer_iw, c->observer_w, 0);
@@ -325,7 +330,15 @@ int auvmpc_controller_init(Controller *c, const double initial_state[NX],
         for (int i = 0; i < NX; ++i) c->weights[k][i] = k == 0 ? 0.0 : stage_weight[i];
         c->movable[k] = 1.0; /* every move free */
     }
+    for (int i = 0; i < NT; ++i) c->effectiveness[i] = 1.0; /* healthy until told otherwise */
     auvmpc_controller_reset(c, initial_state, initial_thrust);
+    return 0;
+}
+
+int auvmpc_controller_set_effectiveness(Controller *c, const double effectiveness[NT]) {
+    for (int i = 0; i < NT; ++i)
+        if (!(effectiveness[i] >= 0.0 && effectiveness[i] <= 1.0)) return -1;
+    memcpy(c->effectiveness, effectiveness, sizeof c->effectiveness);
     return 0;
 }
 
@@ -366,6 +379,10 @@ int auvmpc_init(const double initial_state[NX], const double initial_thrust[NT])
 
 void auvmpc_reset(const double initial_state[NX], const double initial_thrust[NT]) {
     auvmpc_controller_reset(&instance, initial_state, initial_thrust);
+}
+
+int auvmpc_set_effectiveness(const double effectiveness[NT]) {
+    return auvmpc_controller_set_effectiveness(&instance, effectiveness);
 }
 
 auvmpc_status auvmpc_step(const double measured_state[NX], const double reference[(N + 1) * NX],
@@ -450,8 +467,8 @@ static int solve(Controller *c, const Iterate *guess, int iterations, int cold, 
         memcpy(c->P[1], it->thrust, sizeof it->thrust);
         int code = auvmpc_rti_step(c->qp, it->states[0], c->P[0], it->thrust[0], c->state,
                                    c->previous, c->reference[0], c->weights[0], c->disturbance,
-                                   c->slots[0], c->used, c->movable, pass == 0 && !cold, c->dz[0],
-                                   c->dv[0], &used_iterations);
+                                   c->slots[0], c->used, c->movable, c->effectiveness,
+                                   pass == 0 && !cold, c->dz[0], c->dv[0], &used_iterations);
         c->iterations += used_iterations;
         if (code != SOLVED) return -1; /* NOT_FINITE data, an evaluation error, HPIPM failed */
         if (!all_finite(c->dz[0], (N + 1) * NZ) || !all_finite(c->dv[0], N * NV)) return -1;
@@ -617,6 +634,7 @@ static void recover(Controller *c, const double *measured, const double *referen
     c->law_arg[1] = target[0];
     c->law_arg[2] = target[1]; /* the reference one sample ahead (N >= 1) */
     c->law_arg[3] = c->disturbance;
+    c->law_arg[4] = c->effectiveness;
     for (int i = 0; i < AUVMPC_LAW_SZ_RES; ++i) c->law_res[i] = NULL; /* only the thrust */
     c->law_res[AUVMPC_LAW_THRUST] = thrust;
     tracking_law(c->law_arg, c->law_res, c->law_iw, c->law_w, 0);

@@ -66,6 +66,13 @@ typedef int (*auvmpc_rescue)(void *user, const double *state, const double *dist
 int auvmpc_init(const double initial_state[AUVMPC_NX],
                 const double initial_thrust[AUVMPC_THRUSTERS]);
 
+/* Each thruster's effectiveness from the next step on (1 healthy, 0 dead, 0.5 half force;
+ * all ones after auvmpc_init, kept by auvmpc_reset): what the prediction model, the
+ * estimator and the stabilising feedback's allocation assume, as the Python controller's
+ * Observation.effectiveness. 0 on success, -1 (nothing changed) if a value is outside
+ * [0, 1] or not a number. */
+int auvmpc_set_effectiveness(const double effectiveness[AUVMPC_THRUSTERS]);
+
 /* Forget the warm start and the fallback plan; initial_thrust is F(-1) for the first rate
  * limit. */
 void auvmpc_reset(const double initial_state[AUVMPC_NX],
@@ -103,6 +110,8 @@ auvmpc_status auvmpc_controller_step(auvmpc_controller *controller,
                                      const double reference[(AUVMPC_HORIZON + 1) * AUVMPC_NX],
                                      const auvmpc_obstacle *obstacles, int obstacle_count,
                                      double command[AUVMPC_THRUSTERS]);
+int auvmpc_controller_set_effectiveness(auvmpc_controller *controller,
+                                        const double effectiveness[AUVMPC_THRUSTERS]);
 void auvmpc_controller_set_rescue(auvmpc_controller *controller, auvmpc_rescue rescue,
                                   void *user);
 /* The last step's report, and its plan's predicted states ((AUVMPC_HORIZON + 1) x AUVMPC_NX;

@@ -30,6 +30,7 @@ class CasadiQpStep:
         force = ca.SX.sym("d_world", ND)
         slot_data = ca.SX.sym("slots", SLOT_FIELDS, slots)
         used, movable = ca.SX.sym("used", slots), ca.SX.sym("movable", N)
+        effectiveness = ca.SX.sym("e", n)
 
         n_w = (N + 1) * nz + N * nv
         hessian, gradient, rows, lba, uba = [], [], [], [], []
@@ -38,7 +39,7 @@ class CasadiQpStep:
         for k in range(N):
             A, B, b, Q, S, R, q, r, C, D, lg, ug, lbu, ubu, lbp, ubp = qp.stage(
                 X[:, k], X[:, k + 1], P[:, k], P[:, k + 1], F[:, k], reference[:, k],
-                weight[:, k], force, slot_data, used, movable[k], k + 1,
+                weight[:, k], force, slot_data, used, movable[k], k + 1, effectiveness,
             )  # fmt: skip
             hessian.append(ca.blockcat([[Q, S.T], [S, R]]))
             gradient += [q, r]
@@ -56,7 +57,8 @@ class CasadiQpStep:
         gradient.append(q_N)
         self._data = ca.Function(
             "rti_sparse_qp_data",
-            [X, P, F, x_hat, previous, reference, weight, force, slot_data, used, movable],
+            [X, P, F, x_hat, previous, reference, weight, force, slot_data, used, movable,
+             effectiveness],
             [ca.diagcat(*hessian), ca.vertcat(*gradient), ca.vertcat(*rows),
              ca.vertcat(*lba), ca.vertcat(*uba), ca.vertcat(*lbx), ca.vertcat(*ubx)],
         )  # fmt: skip
@@ -74,13 +76,14 @@ class CasadiQpStep:
         self.dv = np.zeros((N, nv))
 
     def __call__(self, X, P, F, x_hat, previous, reference, weight, force, slots, used, movable,
-                 hot_start=False):  # fmt: skip
+                 effectiveness, hot_start=False):  # fmt: skip
         """The arguments of CompiledQpStep, in its (row-major) layout -> (status, iterations).
         Every QP is solved to 1e-8 from HPIPM's cold start: ``hot_start`` changes nothing."""
         N, nz, nv = self._sizes
         H, g, A, lba, uba, lbx, ubx = self._data(
-            X.T, P.T, F.T, x_hat, previous, reference.T, weight.T, force, slots.T, used, movable
-        )
+            X.T, P.T, F.T, x_hat, previous, reference.T, weight.T, force, slots.T, used, movable,
+            effectiveness,
+        )  # fmt: skip
         # The bounds carry the shooting gaps, the first to go non-finite (and the ones CasADi
         # refuses); a NaN elsewhere shows in HPIPM's status or its solution.
         if any(np.isnan(np.asarray(v)).any() for v in (g, lba, uba, lbx, ubx)):

@@ -58,7 +58,7 @@ class CompiledQpStep:
         library.auvmpc_rti_create.argtypes = [ctypes.c_int] * 6 + [_DOUBLE_P, ctypes.c_int]
         library.auvmpc_rti_step.restype = ctypes.c_int
         library.auvmpc_rti_step.argtypes = (
-            [ctypes.c_void_p] * 12 + [ctypes.c_int] + [ctypes.c_void_p] * 3
+            [ctypes.c_void_p] * 13 + [ctypes.c_int] + [ctypes.c_void_p] * 3
         )
         library.auvmpc_rti_free.argtypes = [ctypes.c_void_p]
         library.auvmpc_rti_memory_bytes.restype = ctypes.c_long
@@ -79,7 +79,7 @@ class CompiledQpStep:
         self._inputs = tuple(
             np.zeros(shape)
             for shape in ((N + 1, NX), (N + 1, n), (N, n), NX, n, (N + 1, NX), (N, NX), ND,
-                          (slots, SLOT_FIELDS), slots, N)
+                          (slots, SLOT_FIELDS), slots, N, n)
         )  # fmt: skip
         self._iterations = np.zeros(1, dtype=np.intc)
         self.dz = np.zeros((horizon + 1, qp.states))
@@ -101,7 +101,7 @@ class CompiledQpStep:
         return int(self._library.auvmpc_rti_memory_bytes(self._handle))
 
     def __call__(self, *arrays: np.ndarray, hot_start: bool = False) -> tuple[int, int]:
-        """(X, P, F, x_hat, F_prev, ref, W, d, slots, used, movable) in the layout of
+        """(X, P, F, x_hat, F_prev, ref, W, d, slots, used, movable, e) in the layout of
         hpipm_ocp_step.c -> (status, iterations). ``hot_start``: the first QP of a sample that
         continues a previous solution (solvers/hpipm.py, hpipm_settings)."""
         for buffer, values in zip(self._inputs, arrays, strict=True):

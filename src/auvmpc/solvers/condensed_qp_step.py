@@ -49,8 +49,9 @@ class CondensedQpStep:
                  iteration_limit: int | None, jit: bool) -> None:  # fmt: skip
         """``jit``: evaluate the stages compiled where a C compiler is present (as the sparse
         step does), else through CasADi's virtual machine."""
-        # One evaluation for every stage; the disturbance and the obstacles are the sample's.
-        shared = [qp.stage.index_in(name) for name in ("d_world", "slots", "used")]
+        # One evaluation for every stage; the disturbance, the obstacles and the thrusters'
+        # effectiveness are the sample's.
+        shared = [qp.stage.index_in(name) for name in ("d_world", "slots", "used", "e")]
         stages = qp.stage.map("condensed_stages", "serial", horizon, shared, [])
         self._stages = (native_function(stages) if jit else None) or _flat_outputs(stages)
         self._shapes = [qp.stage.size_out(i) for i in range(qp.stage.n_out())]
@@ -70,7 +71,7 @@ class CondensedQpStep:
         return hpipm_status(code) if code == EVALUATION_FAILED else self._status
 
     def __call__(self, X, P, F, x_hat, previous, reference, weight, force, slots, used, movable,
-                 hot_start=False):  # fmt: skip
+                 effectiveness, hot_start=False):  # fmt: skip
         """The arguments of CompiledQpStep, in its (row-major) layout -> (status, iterations).
         ``hot_start`` changes nothing: the dense solver starts from zero."""
         N = self._horizon
@@ -78,7 +79,7 @@ class CondensedQpStep:
             # Column-major inputs: a (stages, size) C array is the (size, stages) matrix.
             data = self._stages(
                 X[:-1], X[1:], P[:-1], P[1:], F, reference[:-1], weight, force, slots, used,
-                movable, np.arange(1.0, N + 1),
+                movable, np.arange(1.0, N + 1), effectiveness,
             )  # fmt: skip
             terminal = self._terminal(X[N], reference[N])
         except RuntimeError:

@@ -8,7 +8,8 @@
  *
  * Memory layout of the arguments (row-major, one stage per row): X (N+1, 6) the iterate's
  * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
- * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N).
+ * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N), e (n)
+ * the thrusters' effectiveness (1 healthy, 0 dead).
  * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [w; sigma s], w = dF - dp
  * (ocp/stage_qp.py, stage_qp).
  *
@@ -340,8 +341,8 @@ static int hot_try(Step *s, int p, int *iterations) {
 int auvmpc_rti_step(void *handle, const double *X, const double *P, const double *F,
                     const double *x_hat, const double *F_prev, const double *ref,
                     const double *W, const double *d, const double *slots, const double *used,
-                    const double *movable, int hot_start, double *dz, double *dv,
-                    int *iterations) {
+                    const double *movable, const double *e, int hot_start, double *dz,
+                    double *dv, int *iterations) {
     Step *s = (Step *) handle;
     const int N = s->N, n = s->n, nz = s->nz, nv = s->nv;
     *iterations = 0;
@@ -350,9 +351,9 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
     if (!all_finite(s->fixed, nz)) return NOT_FINITE;
     for (int k = 0; k < N; ++k) {
         double step_index = k + 1;
-        const casadi_real *in[12] = {X + NX * k, X + NX * (k + 1), P + n * k, P + n * (k + 1),
+        const casadi_real *in[13] = {X + NX * k, X + NX * (k + 1), P + n * k, P + n * (k + 1),
                                      F + n * k, ref + NX * k, W + NX * k, d, slots, used,
-                                     movable + k, &step_index};
+                                     movable + k, &step_index, e};
         memcpy(s->arg_work, in, sizeof(in));
         memcpy(s->res_work, s->out, sizeof(s->out));
         if (rti_stage(s->arg_work, s->res_work, s->iw, s->w, 0)) return EVALUATION_FAILED;

@@ -87,7 +87,8 @@ class RealTimeIteration:
         thrust = np.asarray(program.plan(guess), dtype=float)  # (N, n)
         used = sample.used.astype(float)
         fixed = (sample.state, sample.previous, sample.reference, self._weights,
-                 sample.disturbance, sample.slots, used, self._movable)  # fmt: skip
+                 sample.disturbance, sample.slots, used, self._movable,
+                 sample.effectiveness)  # fmt: skip
         total, status, slack = 0, "not run", np.zeros(N)
         with np.errstate(over="ignore", invalid="ignore"):
             for sqp_step in range(iterations):
@@ -111,7 +112,9 @@ class RealTimeIteration:
                     slack = dv[:, n] / slack_scale(program.ocp.slack_penalty)
                 if resimulate:
                     disturbance = np.tile(sample.disturbance[:, None], (1, N))
-                    rolled = program.rollout(sample.state, thrust.T, disturbance)
+                    rolled = program.rollout(
+                        sample.state, thrust.T, disturbance, sample.effectiveness
+                    )
                     states = np.vstack([sample.state, np.asarray(rolled).T])
                 else:
                     states = states + dz[:, :NX]  # z_k = [dX_k; dp_k]

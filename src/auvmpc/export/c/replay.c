@@ -1,6 +1,6 @@
 /* Replays a run through the exported controller and prints its commands.
  *
- *   ./replay RUN_DIR/log.csv replay_data.txt [STEPS] > commands.csv
+ *   ./replay RUN_DIR/log.csv replay_data.txt [STEPS [E1,E2,...]] > commands.csv
  *
  * log.csv (written by `auvmpc run`) gives the state the controller saw at every sample
  * (the columns AUVMPC_STATE_NAMES: the true state, so the run must be free of sensor noise);
@@ -9,6 +9,8 @@
  * k, the command per input (AUVMPC_INPUT_NAMES, %.17g), the status and HPIPM's iterations
  * per sample; stderr: the step time (median, max, max after the cold-started first step, in
  * microseconds) and the controller's memory (static, and HPIPM's workspace allocated at init).
+ * E1,E2,...: each thruster's effectiveness, set by auvmpc_set_effectiveness after auvmpc_init
+ * (a run whose controller was told it from its first sample: Session.effectiveness).
  */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
@@ -62,9 +64,24 @@ static int read_state(const char *row, const int columns[AUVMPC_NX], double stat
 }
 
 int main(int argc, char **argv) {
-    if (argc != 3 && argc != 4) {
-        fprintf(stderr, "usage: %s LOG_CSV REPLAY_DATA [STEPS]\n", argv[0]);
+    if (argc < 3 || argc > 5) {
+        fprintf(stderr, "usage: %s LOG_CSV REPLAY_DATA [STEPS [E1,E2,...]]\n", argv[0]);
         return 2;
+    }
+    double effectiveness[AUVMPC_THRUSTERS];
+    for (int i = 0; i < AUVMPC_THRUSTERS; ++i) effectiveness[i] = 1.0;
+    if (argc == 5) {
+        const char *p = argv[4];
+        for (int i = 0; i < AUVMPC_THRUSTERS; ++i) {
+            char *end;
+            effectiveness[i] = strtod(p, &end);
+            if (end == p || (i + 1 < AUVMPC_THRUSTERS && *end != ',')) {
+                fprintf(stderr, "replay: %s is not %d comma-separated numbers\n", argv[4],
+                        AUVMPC_THRUSTERS);
+                return 2;
+            }
+            p = end + 1;
+        }
     }
     FILE *log = fopen(argv[1], "r"), *data = fopen(argv[2], "r");
     if (!log || !data) {
@@ -83,7 +100,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "replay: %s was not written for this export\n", argv[2]);
         return 2;
     }
-    if (argc == 4 && atoi(argv[3]) < steps) steps = atoi(argv[3]); /* a shorter run */
+    if (argc >= 4 && atoi(argv[3]) < steps) steps = atoi(argv[3]); /* a shorter run */
     if (steps < 1) return 2;
     double initial_thrust[AUVMPC_THRUSTERS], state[AUVMPC_NX];
     static double reference[ROWS];
@@ -114,6 +131,10 @@ int main(int argc, char **argv) {
         if (k == 0 && auvmpc_init(state, initial_thrust)) {
             fprintf(stderr, "replay: auvmpc_init failed\n");
             return 1;
+        }
+        if (k == 0 && auvmpc_set_effectiveness(effectiveness)) {
+            fprintf(stderr, "replay: an effectiveness outside [0, 1]\n");
+            return 2;
         }
         double command[AUVMPC_THRUSTERS];
         struct timespec start, stop;
