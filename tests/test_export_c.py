@@ -255,13 +255,15 @@ def test_the_python_step_takes_its_blasfeo_from_the_environment(tmp_path, monkey
 
 def test_the_status_numbers_are_the_headers():
     """verify-c reads the replay's statuses by number: its table is auvmpc_status's order."""
-    from auvmpc.export.c_library import _C_STATUS, _TEMPLATES
+    from auvmpc.controllers.c_sources import FIXED_SOURCES
+    from auvmpc.controllers.compiled_nmpc import C_STATUS
 
-    header = (_TEMPLATES / "auvmpc_controller.h").read_text()
+    header = next(s for s in FIXED_SOURCES if s.name == "auvmpc_controller.h").read_text()
+    header = header[header.index("typedef enum {") : header.index("} auvmpc_status;")]
     numbers = {
         name.lower(): int(number) for name, number in re.findall(r"AUVMPC_([A-Z]+) = (\d+)", header)
     }
-    assert numbers == {str(status): i for i, status in enumerate(_C_STATUS)}
+    assert numbers == {str(status): i for i, status in enumerate(C_STATUS)}
 
 
 @needs_cc

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import auvmpc
+from auvmpc.controllers import compiled_nmpc
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.controllers.nmpc import NonlinearMpc
 from auvmpc.controllers.shell import PLAN_FALLBACK_STEPS
@@ -98,6 +99,9 @@ def test_a_solver_failing_at_a_corner_is_covered_by_the_plan_then_the_feedback(m
     PLAN_FALLBACK_STEPS samples, then applies its feedback (RECOVERY), inside the limits; once
     the solver works again the optimiser takes over at once and the vehicle is back on the
     path."""
+    # The Python controller, whose proposals can be made to fail (the C controller's shell is
+    # held to it sample for sample through a failure: tests/test_compiled_nmpc.py).
+    monkeypatch.setattr(compiled_nmpc, "runs_in_c", lambda model, config: False)
     _fail_within(monkeypatch, NonlinearMpc, FAILURE_WINDOW_S)
     run = auvmpc.simulate(_scenario())
     status, window = _plan_then_feedback(run, FAILURE_WINDOW_S)

@@ -33,6 +33,7 @@ from pydantic import ValidationError
 
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.controllers.c_sources import write_sources
+from auvmpc.controllers.compiled_nmpc import C_STATUS
 from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
@@ -241,16 +242,6 @@ def export_c(
     return Path(out)
 
 
-# auvmpc_status (auvmpc_controller.h) by its number (tests/test_export_c.py reads the header).
-_C_STATUS = (
-    ControlStatus.OK,
-    ControlStatus.RELAXED,
-    ControlStatus.FALLBACK,
-    ControlStatus.SATURATED,
-    ControlStatus.RECOVERY,
-)
-
-
 @dataclass(frozen=True)
 class VerifyResult:
     """What ``verify-c`` measured."""
@@ -420,9 +411,9 @@ def verify_c(
             "with the run's duration",
         )  # fmt: skip
     codes = [int(r["status"]) for r in commands]
-    if not all(0 <= code < len(_C_STATUS) for code in codes):
+    if not all(0 <= code < len(C_STATUS) for code in codes):
         raise RunFailed(f"replay wrote a status auvmpc does not know: {sorted(set(codes))}")
-    c_status = [_C_STATUS[code] for code in codes]
+    c_status = [C_STATUS[code] for code in codes]
     return VerifyResult(
         steps=len(commands),
         max_difference_n=float(difference.max()),
