@@ -802,3 +802,13 @@ CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
 """Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
 controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon;
 other settings come from the scenario."""
+
+
+def __getattr__(name: str) -> Any:
+    """``BaselineConfig``, the baseline's gains, as before they moved next to it (baseline.py
+    imports this module, so it cannot be imported here)."""
+    if name == "BaselineConfig":
+        from auvmpc.controllers.baseline import BaselineConfig
+
+        return BaselineConfig
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
