@@ -58,6 +58,7 @@ __all__ = [
     "controller_config",
     "knob_owners",
     "register_controller",
+    "retyped",
 ]
 
 
@@ -155,7 +156,10 @@ def horizontal_types() -> list[str]:
 def _type_tag(value: Any) -> str:
     """The union member a ``controller`` value is validated as: its built-in type, or the
     member of the registered ones."""
-    given = value.get("type", DEFAULT_TYPE) if isinstance(value, Mapping) else value.type
+    if isinstance(value, Mapping):
+        given = value.get("type", DEFAULT_TYPE)
+    else:  # a configuration, or what is none (the registered member's validation says so)
+        given = getattr(value, "type", None)
     return str(given) if isinstance(given, str) and given in _BUILT_IN else _REGISTERED
 
 
@@ -243,6 +247,18 @@ def controller_config(knobs: Mapping[str, Any], context: dict | None = None) -> 
         return TypeAdapter(ControllerChoice).validate_python(dict(knobs), context=context)
     except ValidationError as error:
         raise format_validation_error(error, "controller") from None
+
+
+def retyped(config: HorizontalControllerConfig, new_type: str, **update: Any) -> Any:
+    """The configuration of ``new_type`` with the knobs ``config`` was given that it has,
+    and ``update`` (what ``model_copy(update={"type": ...})`` did with one flat class)."""
+    target = REGISTRY[new_type].config
+    given = {
+        name: getattr(config, name)
+        for name in config.model_fields_set
+        if name in target.model_fields and name != "type"
+    }
+    return target.model_validate({**given, **update, "type": new_type})
 
 
 def build_controller(

@@ -105,19 +105,14 @@ def exported_config(config: HorizontalControllerConfig) -> NmpcConfig:
     """The controller a run must use to be reproduced by the export: ``nmpc`` real-time with
     every move free (control_horizon = prediction_horizon), with the settings ``config``
     gives that nmpc has."""
-    given = {
-        name: getattr(config, name)
-        for name in config.model_fields_set
-        if name in NmpcConfig.model_fields
-    }
-    return NmpcConfig.model_validate(
-        {
-            **given,
-            "type": ControllerType.NMPC,
-            "nmpc_mode": NmpcMode.REAL_TIME,
-            "control_horizon": None,
-            "move_steps": None,
-        }
+    from auvmpc.controllers.registry import retyped
+
+    return retyped(
+        config,
+        ControllerType.NMPC,
+        nmpc_mode=NmpcMode.REAL_TIME,
+        control_horizon=None,
+        move_steps=None,
     )
 
 

@@ -187,8 +187,8 @@ def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> list[str]
 def _controller_type(data: dict[str, Any]) -> Any:
     from auvmpc.controllers.registry import DEFAULT_TYPE
 
-    controller = data.get("controller")
-    return controller.get("type", DEFAULT_TYPE) if isinstance(controller, dict) else None
+    controller = data.get("controller")  # omitted: the default type's defaults
+    return controller.get("type", DEFAULT_TYPE) if isinstance(controller, dict) else DEFAULT_TYPE
 
 
 def _drop_foreign_knobs(data: dict[str, Any], old_type: Any) -> list[str]:
