@@ -59,8 +59,10 @@ model uses.
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
+from pydantic import Field
 
 from auvmpc.controllers.base import (
     MemoryNeed,
@@ -69,7 +71,15 @@ from auvmpc.controllers.base import (
     nlp_memory_need,
     tracked_reference,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
+from auvmpc.controllers.config import (
+    ControllerType,
+    NmpcMode,
+    OptimisingControllerConfig,
+    PlanLinearisation,
+    QpStructure,
+    Relinearisation,
+    type_field,
+)
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.layout import HORIZONTAL
@@ -85,7 +95,14 @@ from auvmpc.ocp.multiple_shooting import (
 from auvmpc.solvers.ipopt import IpoptSolver
 from auvmpc.solvers.real_time_iteration import RealTimeIteration
 
-__all__ = ["MAX_OBSTACLES", "Iterate", "MultipleShootingProgram", "NonlinearMpc", "Sample"]
+__all__ = [
+    "MAX_OBSTACLES",
+    "Iterate",
+    "MultipleShootingProgram",
+    "NmpcConfig",
+    "NonlinearMpc",
+    "Sample",
+]
 
 # SQP steps on a sample without a solution to shift (first sample, after a failure): the
 # real-time iteration then goes on from a (nearly) converged solution, as it assumes.
@@ -95,11 +112,18 @@ _COLD_START_ITERATIONS = 10
 RESCUE_IPOPT_ITERATIONS = 150
 
 
+class NmpcConfig(PlanLinearisation, Relinearisation, OptimisingControllerConfig):
+    """``nmpc``: the optimising controllers' knobs, the SQP's and how it solves."""
+
+    type: Literal[ControllerType.NMPC] = type_field(ControllerType.NMPC)
+    nmpc_mode: NmpcMode = Field(default=NmpcMode.REAL_TIME, description="nmpc solution mode")
+
+
 class NonlinearMpc(ShelledController):
     """Nonlinear multiple-shooting MPC (``nmpc``): full IPOPT solve or real-time iterations."""
 
     def __init__(
-        self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = MAX_OBSTACLES
+        self, model: VehicleParams, config: NmpcConfig, obstacle_slots: int = MAX_OBSTACLES
     ) -> None:
         config = config.for_vehicle(model)
         self.model = model
