@@ -19,15 +19,23 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from pydantic import Field
 
 import auvmpc
 from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, project_to_limits
+from auvmpc.controllers.config import HorizontalControllerConfig
 from auvmpc.controllers.registry import register_controller
 from auvmpc.models.vehicle import dynamics
 
-# Every axis's closed loop has its three poles at -NATURAL_FREQUENCY (rad/s): well inside
-# the Nyquist rate of a 0.5 s sample.
-NATURAL_FREQUENCY = 0.5
+
+class PidTrackerConfig(HorizontalControllerConfig):
+    """Its knobs: those every controller has (type, sample_time, ...) and one of its own."""
+
+    natural_frequency: float = Field(
+        default=0.5,  # well inside the Nyquist rate of a 0.5 s sample
+        gt=0,
+        description="every axis's closed loop has its three poles at -natural_frequency (rad/s)",
+    )
 
 
 class PidTracker(Controller):
@@ -36,6 +44,7 @@ class PidTracker(Controller):
     def __init__(self, model, config) -> None:
         self.model = model
         self.sample_time = config.sample_time  # filled in for the vehicle by auvmpc
+        self.natural_frequency = config.natural_frequency  # its own knob
         self.preview_steps = 0  # it looks at the reference now only
         self._inertia = np.array([model.m11, model.m22, model.Iz])
 
@@ -60,7 +69,7 @@ class PidTracker(Controller):
         self._integral += self.sample_time * np.array([x_r - x, y_r - y, heading_error])
         ix, iy, iheading = self._integral
         integral = np.array([c * ix + s * iy, -s * ix + c * iy, iheading])
-        wn = NATURAL_FREQUENCY
+        wn = self.natural_frequency
         wanted = 3 * wn**2 * error + 3 * wn * velocity_error + wn**3 * integral
         # What the vehicle does with no thrust (drag, Coriolis, Munk), to be cancelled.
         unforced = np.asarray(dynamics(state, np.zeros(self.model.n_thrusters), self.model))[3:]
@@ -73,7 +82,7 @@ class PidTracker(Controller):
         return ControlResult(thrust=thrust, status=status)
 
 
-register_controller("pid-tracker", PidTracker)
+register_controller("pid-tracker", PidTracker, config=PidTrackerConfig)
 
 
 def main(out: Path) -> None:

@@ -38,6 +38,7 @@ from auvmpc.controllers.base import ControlStatus, Observation, ObstacleState  #
 from auvmpc.controllers.config import ControllerConfig, ThrustPenalty  # noqa: E402
 from auvmpc.controllers.dompc import DoMpcController  # noqa: E402
 from auvmpc.controllers.ltv import LtvMpc  # noqa: E402
+from auvmpc.controllers.registry import retyped  # noqa: E402
 from auvmpc.errors import ConfigError  # noqa: E402
 from auvmpc.experiments.run import simulate  # noqa: E402
 from auvmpc.models.integrators import rk4  # noqa: E402
@@ -240,8 +241,8 @@ def test_solution_agrees_with_our_nonlinear_mpc_in_full_mode(jmse, case):
         previews = reference.states(6.0 + SAMPLE_TIME * np.arange(31))
         observation = Observation(12, 6.0, state, previews, obstacles)
         thrust = np.array([3.0, 1.0, 3.0, 1.0])
-    config = _config(nmpc_mode="full")
-    ours = nmpc.NonlinearMpc(jmse, config.model_copy(update={"type": "nmpc"}))
+    config = _config()
+    ours = nmpc.NonlinearMpc(jmse, retyped(config, "nmpc", nmpc_mode="full"))
     yardstick = DoMpcController(jmse, config, obstacle_slots=len(observation.obstacles))
     for controller in (ours, yardstick):
         controller.reset(observation.state, thrust)

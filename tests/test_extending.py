@@ -58,6 +58,26 @@ def test_a_registered_controller_flies_any_vehicle_like_a_built_in(tmp_path, exa
     assert (folder / "trajectory.png").is_file()
 
 
+def test_a_registered_controller_has_knobs_of_its_own(tmp_path, example):
+    """Its configuration class is the scenario's schema for it: its own knob is read and
+    checked, a built-in controller's knob is refused, the file's type's knobs are dropped."""
+    scenario = auvmpc.load_scenario(
+        "paper-ideal", [f"controller.type={NAME}", "controller.natural_frequency=0.8"]
+    )
+    assert isinstance(scenario.scenario.controller, example.PidTrackerConfig)
+    assert auvmpc.build_controller(scenario).natural_frequency == 0.8
+    assert scenario.notes[0].startswith(f"controller.type: mpc changed to {NAME} by an override")
+    with pytest.raises(ConfigError, match="natural_frequency: input should be greater than 0"):
+        auvmpc.load_scenario("paper-ideal", [f"controller.type={NAME}",
+                                             "controller.natural_frequency=0"])  # fmt: skip
+    # the knobs of paper-ideal's mpc in a file that names this type: refused, not ignored
+    text = (Path(auvmpc.__file__).parent / "presets/scenarios/paper-ideal.yaml").read_text()
+    (tmp_path / "own.yaml").write_text(text.replace("type: mpc", f"type: {NAME}"))
+    with pytest.raises(ConfigError, match=f"controller.prediction_horizon: a knob of mpc, "
+                       f"ltv-mpc, nmpc, do-mpc, not of controller type {NAME}"):  # fmt: skip
+        auvmpc.load_scenario(tmp_path / "own.yaml")
+
+
 def test_registering_is_checked(example):
     with pytest.raises(ValueError, match="is taken"):
         register_controller(NAME, example.PidTracker)
@@ -67,6 +87,8 @@ def test_registering_is_checked(example):
         register_controller("My Controller", example.PidTracker)
     with pytest.raises(ValueError, match="not a controllers.base.Controller"):
         register_controller("not-a-controller", dict)
+    with pytest.raises(ValueError, match="not a controllers.config.HorizontalControllerConfig"):
+        register_controller("no-config", example.PidTracker, config=dict)
     with pytest.raises(ValueError, match="only a ShelledController"):
         register_controller("unshelled", example.PidTracker, recovered=True)
     assert issubclass(example.PidTracker, Controller)

@@ -221,9 +221,12 @@ def test_warnings_are_printed_and_stored(monkeypatch, capsys, tmp_path):
         "--out", str(out),
     )  # fmt: skip
     assert code == 0
-    assert stderr.startswith("warning: reference: needs more thrust than jmse2210's limits")
+    dropped, short = stderr.strip().splitlines()
+    # the file's mpc knobs that the baseline has not, dropped by --controller
+    assert dropped.startswith("warning: controller.type: mpc changed to baseline by an override")
+    assert short.startswith("warning: reference: needs more thrust than jmse2210's limits")
     info = json.loads((out / "run.json").read_text())
-    assert info["warnings"] == [stderr.strip().removeprefix("warning: ")]
+    assert info["warnings"] == [line.removeprefix("warning: ") for line in (dropped, short)]
 
 
 @pytest.mark.parametrize(

@@ -172,3 +172,18 @@ def test_a_depth_duration_between_samples_is_rounded_up_with_a_note():
     (note,) = preflight(resolved)
     assert note.startswith("duration: 40.05 s") and "40.1 s (401 samples)" in note
     assert preflight(load_scenario("paper-depth-calm")) == []  # its 40 s is whole
+
+
+def test_a_knob_of_another_controller_type_is_refused_unless_an_override_changed_the_type():
+    """The file's own type: refused in one line naming the types that have it. A type
+    changed by an override (--controller): the old type's knobs dropped, and said so."""
+    with pytest.raises(
+        ConfigError, match=r"^controller\.nmpc_mode: a knob of nmpc, not of controller type mpc"
+    ):
+        load_scenario("paper-ideal", ["controller.nmpc_mode=full"])
+    resolved = load_scenario("paper-ideal", ["controller.type=baseline"])
+    assert resolved.notes[0] == (
+        "controller.type: mpc changed to baseline by an override; dropped what baseline has "
+        "no knob for: prediction_horizon, control_horizon, Q, S, R, thrust_penalty, offset_free"
+    )
+    assert resolved.scenario.controller.vehicle_radius == 0.5  # a knob both have: kept

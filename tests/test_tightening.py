@@ -209,13 +209,17 @@ def test_worst_direction_current_beside_an_obstacle_tightened_keeps_clear():
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
-        (["controller.disturbance_bound.force_N=-1"], r"controller\.disturbance_bound\.force_N"),
-        (["controller.disturbance_bound.force_N=1"], "nmpc does not tighten"),  # the default
-        (["controller.disturbance_bound.moment_Nm=inf"], r"disturbance_bound\.moment_Nm"),
-        (["controller.disturbance_bound.forse_N=1"], "unknown key"),
+        (
+            [LTV_MPC, "controller.disturbance_bound.force_N=-1"],
+            r"controller\.disturbance_bound\.force_N",
+        ),
+        # the default nmpc does not tighten: it has no such knob
+        (["controller.disturbance_bound.force_N=1"], "not of controller type nmpc"),
+        ([LTV_MPC, "controller.disturbance_bound.moment_Nm=inf"], r"disturbance_bound\.moment_Nm"),
+        ([LTV_MPC, "controller.disturbance_bound.forse_N=1"], "unknown key"),
         (
             ["controller.type=nmpc", "controller.disturbance_bound.force_N=1"],
-            "nmpc does not tighten",
+            r"^controller\.disturbance_bound: a knob of mpc, ltv-mpc, not of controller type nmpc",
         ),
     ],
 )

@@ -10,6 +10,7 @@ from auvmpc.controllers.baseline import BaselineController
 from auvmpc.controllers.config import BaselineConfig, ControllerConfig
 from auvmpc.controllers.ltv import LtvMpc
 from auvmpc.controllers.mpc import PaperMpc
+from auvmpc.controllers.registry import retyped
 from auvmpc.errors import ConfigError
 from auvmpc.models.vehicle import (
     Thruster,
@@ -122,7 +123,7 @@ def test_controllers_that_need_full_actuation_refuse_an_underactuated_vehicle():
     ):
         PaperMpc(vehicle, config)
     # ltv-mpc linearises along its plan, whose heading turns: it accepts the vehicle.
-    assert LtvMpc(vehicle, config.model_copy(update={"type": "ltv-mpc", "jit": False}))
+    assert LtvMpc(vehicle, retyped(config, "ltv-mpc", jit=False))
 
 
 def test_the_frozen_heading_model_cannot_move_an_underactuated_vehicle_sideways():

@@ -73,16 +73,14 @@ def load_scenario(
 
 def override(scenario: Scenario, overrides: Overrides) -> Scenario:
     """A copy of a loaded scenario with more fields changed (the original is untouched)."""
-    from auvmpc.scenario import apply_override
-    from auvmpc.scenario.loader import resolve_document
+    from auvmpc.scenario.loader import apply_overrides, resolve_document
 
     # The scenario as written, not as filled in for its vehicle (a new vehicle or sample time
     # must get its own defaults): only the fields its file set.
     given = scenario.given
     data = given.model_dump(mode="json", exclude_unset=True)
-    for text in _override_strings(overrides):
-        apply_override(data, text)
-    return resolve_document(data, scenario.base_dir)
+    notes = apply_overrides(data, _override_strings(overrides))
+    return resolve_document(data, scenario.base_dir, notes)
 
 
 def build_controller(scenario: Scenario) -> Controller:

@@ -344,10 +344,12 @@ def controller_label(config) -> str:
 
     Parameters
     ----------
-    config : auvmpc.controllers.config.ControllerConfig
+    config : auvmpc.controllers.config.HorizontalControllerConfig
     """
+    from auvmpc.controllers.config import Horizon, OffsetFree
+
     kind = str(config.type)
-    if kind == "baseline":
+    if not isinstance(config, Horizon):  # baseline, thrust-playback, most of your own
         return kind
     moves = len(config.move_schedule())
     parts = [f"nc {moves}/ny {config.prediction_horizon}"]
@@ -355,7 +357,7 @@ def controller_label(config) -> str:
         parts[0] += " blocked"
     if kind == "nmpc":
         parts.append(str(config.nmpc_mode))
-    if config.offset_free:
+    if isinstance(config, OffsetFree) and config.offset_free:
         parts.append("offset-free")
     return f"{kind} ({', '.join(parts)})"
 

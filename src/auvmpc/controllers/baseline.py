@@ -46,19 +46,21 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.controllers.base import Observation, horizontal_limits, project_to_limits
+from auvmpc.controllers.config import ControllerType, HorizontalControllerConfig, type_field
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.controllers.tracking_law import PATH_ERRORS, apply_law, tracking_law
 from auvmpc.errors import FieldError
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_FORCE_XY, PLANAR_MOMENT
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["BaselineConfig", "BaselineController"]
+__all__ = ["BaselineConfig", "BaselineController", "BaselineControllerConfig"]
 
 
 # A command is "saturated" when the limits moved it by more than this (N): float round-off
@@ -142,6 +144,15 @@ class BaselineConfig(StrictModel):
                     f"{axis}_kp = {kp}, {axis}_kd = {kd}",
                 )
         return self
+
+
+class BaselineControllerConfig(HorizontalControllerConfig):
+    """``baseline``: the classical tracker's gains."""
+
+    type: Literal[ControllerType.BASELINE] = type_field(ControllerType.BASELINE)
+    baseline: BaselineConfig = Field(
+        default_factory=BaselineConfig, description="gains of the classical baseline tracker"
+    )
 
 
 class BaselineController(ShelledController):

@@ -19,8 +19,7 @@ import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.base import horizontal_limits
-from auvmpc.controllers.config import ControllerConfig
-from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS
+from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS, NmpcConfig
 from auvmpc.controllers.recovery import StabilisingFeedback
 from auvmpc.controllers.shell import (
     PLAN_FALLBACK_STEPS,
@@ -53,7 +52,7 @@ _NX = HORIZONTAL.size
 
 
 def write_sources(
-    program: MultipleShootingProgram, qp: StageQp, config: ControllerConfig, folder: Path
+    program: MultipleShootingProgram, qp: StageQp, config: NmpcConfig, folder: Path
 ) -> list[Path]:
     """The controller's C for ``program`` (built from the resolved ``config``) written into
     ``folder``; returns the C files to compile (the headers are beside them)."""
@@ -104,7 +103,7 @@ def _names(layout: Layout) -> str:
     return "{" + ", ".join(json.dumps(name) for name in layout.names) + "}"
 
 
-def _config_header(program: MultipleShootingProgram, qp, config: ControllerConfig) -> str:
+def _config_header(program: MultipleShootingProgram, qp, config: NmpcConfig) -> str:
     model, ocp = program.model, program.ocp
     n = program.n_thrusters
     limits = horizontal_limits(model)
@@ -191,14 +190,14 @@ def _recovery_macros(program: MultipleShootingProgram) -> dict:
     }
 
 
-def _observer(model, config: ControllerConfig) -> DisturbanceObserver:
+def _observer(model, config: NmpcConfig) -> DisturbanceObserver:
     """The estimator the Python controller builds: its filter's update and propagation
     functions are generated to C, its prior, bounds and plausible force are the C's
     constants."""
     return DisturbanceObserver(model, config.sample_time, config.observer, config.model_substeps)
 
 
-def _observer_macros(model, config: ControllerConfig) -> dict[str, object]:
+def _observer_macros(model, config: NmpcConfig) -> dict[str, object]:
     """The EKF's prior covariance, eigenvalue bounds and work sizes."""
     observer = _observer(model, config)
     ekf = observer.filter

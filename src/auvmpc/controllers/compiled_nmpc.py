@@ -30,8 +30,8 @@ from auvmpc.controllers.base import (
     tracked_reference,
 )
 from auvmpc.controllers.c_sources import write_sources
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
-from auvmpc.controllers.nmpc import rescue_solver
+from auvmpc.controllers.config import NmpcMode, QpStructure
+from auvmpc.controllers.nmpc import NmpcConfig, rescue_solver
 from auvmpc.controllers.shell import ESTIMATE_KEYS, SLACK_ACTIVE
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.ocp.multiple_shooting import ND, NX, MultipleShootingProgram
@@ -68,10 +68,10 @@ _RESCUE = ctypes.CFUNCTYPE(
 )
 
 
-def runs_in_c(model: VehicleParams, config: ControllerConfig) -> bool:
+def runs_in_c(model: VehicleParams, config: NmpcConfig) -> bool:
     """Whether the C controller covers ``config`` (filled for ``model``): the real-time
     iteration on the sparse QP with every move free, compiled, for a fully actuated vehicle,
-    nominal (no robust tightening) and without a solve-time limit (the C has no clock)."""
+    without a solve-time limit (the C has no clock)."""
     every_move = config.move_schedule() == tuple(range(config.prediction_horizon))
     return (
         config.nmpc_mode is NmpcMode.REAL_TIME
@@ -79,7 +79,6 @@ def runs_in_c(model: VehicleParams, config: ControllerConfig) -> bool:
         and every_move
         and config.jit
         and config.solver_time_limit_ms is None
-        and config.disturbance_bound.is_zero
         and model.unactuated_direction is None
         and native.compiler() is not None
         and hpipm_linking() is not None
@@ -89,7 +88,7 @@ def runs_in_c(model: VehicleParams, config: ControllerConfig) -> bool:
 class CompiledNmpc(Controller):
     """``nmpc`` (real-time) as its C controller (module docstring)."""
 
-    def __init__(self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int) -> None:
+    def __init__(self, model: VehicleParams, config: NmpcConfig, obstacle_slots: int) -> None:
         self.model = model
         self.config = config
         self.sample_time = config.sample_time
@@ -233,7 +232,7 @@ def _declare(library: ctypes.CDLL) -> None:
     library.auvmpc_controller_last.argtypes = [pointer, ctypes.POINTER(_Report), pointer]
 
 
-def _library(program: MultipleShootingProgram, config: ControllerConfig) -> ctypes.CDLL | None:
+def _library(program: MultipleShootingProgram, config: NmpcConfig) -> ctypes.CDLL | None:
     """The C controller for ``program``, built into the cache folder unless it is there."""
     options, salt = hpipm_linking()
     with tempfile.TemporaryDirectory(prefix="auvmpc-nmpc-") as scratch:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from enum import StrEnum
 from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
-from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.errors import FieldError
 from auvmpc.estimation import ObserverConfig
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE_XY
@@ -36,6 +36,17 @@ __all__ = [
     "DEFAULT_VEHICLE_RADIUS_M",
     "HEADING_PER_SAMPLE_RAD",
     "DisturbanceBound",
+    "Horizon",
+    "HorizontalControllerConfig",
+    "OffsetFree",
+    "OptimisingControllerConfig",
+    "PlanLinearisation",
+    "PredictionModel",
+    "Relinearisation",
+    "SolverOptions",
+    "TightenedConstraints",
+    "TrackingWeights",
+    "type_field",
     "NmpcMode",
     "PlaybackConfig",
     "QpStructure",
@@ -79,8 +90,6 @@ class QpStructure(StrEnum):
 
 
 Bound = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-# The controllers that tighten their constraints for a disturbance bound (ocp/tightening.py).
-TIGHTENED_TYPES = (ControllerType.LTV_MPC, ControllerType.MPC)
 
 
 class DisturbanceBound(StrictModel):
@@ -157,16 +166,6 @@ def default_vehicle_radius(model: VehicleParams) -> float:
     return math.hypot(model.size.length, model.size.width) / 2.0
 
 
-def _registered_types(schema: dict[str, Any]) -> None:
-    """The file schema of ``controller.type``: the names registered when it is written (in a
-    fresh process the built-in ones), which are what a scenario may name."""
-    from auvmpc.controllers.registry import REGISTRY
-
-    names = [str(name) for name in REGISTRY if name != DEPTH_MPC]
-    schema.pop("anyOf", None)
-    schema.update({"type": "string", "enum": names})
-
-
 def check_control_horizon(control_horizon: int | None, prediction_horizon: int) -> None:
     """The moves fit in the horizon (a control horizon longer than it means nothing)."""
     if control_horizon is not None and control_horizon > prediction_horizon:
@@ -175,52 +174,43 @@ def check_control_horizon(control_horizon: int | None, prediction_horizon: int) 
         )
 
 
-class ControllerConfig(StrictModel):
-    """Controller choice and tuning (MPC fields follow paper-model.md section 4)."""
+def _foreign_knob(key: str, own_type: object) -> str | None:
+    """Why ``key`` is refused by controller type ``own_type`` when it is a knob of other
+    types: "a knob of nmpc, not of controller type baseline" (None: no type has it)."""
+    from auvmpc.controllers.registry import knob_owners
 
-    type: ControllerType | str = Field(
-        default=ControllerType.NMPC,
+    owners = knob_owners(key)
+    if not owners:
+        return None
+    return f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+
+
+def type_field(name: str) -> Any:
+    """The ``type`` field of controller type ``name``'s configuration."""
+    return Field(
+        default=name,
+        description="which controller: selects this configuration (default nmpc, the "
+        "real-time nmpc that measured best on the hard-survey sweep, docs/recovery.md)",
+    )
+
+
+class HorizontalControllerConfig(StrictModel):
+    """What every horizontal controller's configuration holds: its type, its sample time and
+    the disc round the vehicle that obstacles are kept from (which the metrics measure
+    clearance from, whatever the controller). Each controller type's configuration adds
+    its own knobs (in its module, composed from the blocks below); a scenario's
+    ``controller`` mapping is one of them, chosen by ``type`` (controllers/registry.py)."""
+
+    type: str = Field(
         description="which controller (default: the real-time nmpc, the one that measured best "
         "on the hard-survey sweep, docs/recovery.md); or a name given to "
         "controllers.registry.register_controller (docs/extending.md)",
-        json_schema_extra=_registered_types,
     )
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
         default=None,
         description="Te (s); omitted: 0.5, or shorter where the largest yaw moment turns the "
         "vehicle over half a turn in 0.5 s or an underactuated vehicle's turn is faster than "
         "that (default_sample_time, docs/tuning.md)",
-    )
-    prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
-    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
-        default=None,
-        description="nc (steps): moves after nc are held; omitted = prediction_horizon "
-        "(every move free, the better tracker; the paper uses 2)",
-    )
-    move_steps: tuple[Annotated[int, Field(ge=0)], ...] | None = Field(
-        default=None,
-        description="move blocking: the samples of the horizon at which the thrust may change, "
-        "starting with 0 and increasing; overrides control_horizon (nc = len(move_steps))",
-    )
-    Q: Weights6 = Field(
-        default=(5, 5, 5, 1, 1, 1),
-        description="stage weights on [x y psi u v r], as a list in that order or a mapping "
-        "by state name (names left out weigh 0), e.g. {x: 5, y: 5, psi: 5}",
-    )
-    S: Weights6 = Field(
-        default=(10, 10, 10, 2, 2, 2), description="terminal weights, as Q (list or mapping)"
-    )
-
-    @field_validator("Q", "S", mode="before")
-    @classmethod
-    def _weights_by_name(cls, value: Any) -> Any:
-        return tuple(HORIZONTAL.vector(value)) if isinstance(value, dict) else value
-
-    R: tuple[NonNegative, ...] | None = Field(
-        default=None,
-        description="thrust weights, one per thruster or one for all; omitted: 0.1 / h^2 with "
-        "h half the thrust range, so that (with the increment penalty) a thruster's move by h "
-        "costs the same on any vehicle, see docs/tuning.md",
     )
     vehicle_radius: NonNegative | None = Field(
         default=None,
@@ -229,163 +219,44 @@ class ControllerConfig(StrictModel):
         "diagonal of the vehicle's size, length x width, the disc that holds the hull at any "
         f"heading, or {DEFAULT_VEHICLE_RADIUS_M:g} for a vehicle file without size (m)",
     )
-    thrust_penalty: ThrustPenalty = Field(
-        default=ThrustPenalty.INCREMENT,
-        description="R on dF (the default: the steady thrust that drag and currents need "
-        "costs nothing) or on F (the paper's: it trades tracking error for thrust)",
-    )
     obstacle_margin: NonNegative = Field(
         default=0.1,
         description="extra clearance added to every obstacle constraint (m), covers the "
         "gap between the prediction model and the plant between samples",
     )
-    rollout_check: bool = Field(
-        default=True,
-        description="mpc: after the QP, roll the plan's thrusts through the nonlinear model; "
-        "where that rollout enters an obstacle's keep-out disc, solve the same QP once more "
-        "with those steps' half-planes moved out by the frozen prediction's error there "
-        "(docs/paper-reproduction.md#obstacles-and-the-frozen-model); false: the paper's "
-        "frozen prediction alone",
-    )
-    obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
-        default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
-    )
-    qp_solver: QpSolverName = Field(
-        default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
-    )
-    qp_structure: QpStructure = Field(
-        default=QpStructure.AUTO,
-        description="nmpc real-time and ltv-mpc: sparse QP solved by HPIPM (stays well posed "
-        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver (faster when "
-        "well posed); auto: ltv-mpc solves the condensed QP while its Hessian's condition "
-        "number is below 1e10 and the sparse one otherwise or when the condensed one fails, "
-        "nmpc the sparse one; nmpc with move blocking always uses the condensed QP",
-    )
-    qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
-        default=None,
-        description="cap on QP iterations per interior-point pass (IPOPT iterations for nmpc "
-        "full: below ~20 every step falls back); hitting it counts as a solver failure",
-    )
-    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
-        default=None,
-        description="a step whose optimisation takes longer is treated as a failure "
-        "(the previous plan's next move is applied), as on a real-time computer",
-    )
-    model_substeps: Annotated[int, Field(ge=1, le=50)] | None = Field(
-        default=None,
-        description="RK4 steps per sample in the controllers' prediction models and estimator; "
-        "omitted = the fewest that keep RK4 stable for the vehicle's damping (see "
-        "stable_model_substeps)",
-    )
-    jit: bool = Field(
-        default=True,
-        description="compile the CasADi model functions (ltv-mpc) and the real-time "
-        "iteration's QP step (nmpc) with the system C compiler; falls back to interpreted "
-        "evaluation when there is none",
-    )
-    linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
-        default=1,
-        description="linearise-and-solve passes per sample (ltv-mpc and nmpc real-time: SQP "
-        "iterations; also refreshes the obstacle half-planes around the new plan)",
-    )
-    trust_region_weight: NonNegative | None = Field(
-        default=None,
-        description="penalty on the predicted deviations from the trajectory the model is "
-        "linearised on, per rad^2 (heading) and (m/s)^2 (velocities): ltv-mpc on heading and "
-        "velocities, the real-time nmpc on heading (keeps each step where the linearisation "
-        "holds); omitted: 10 for ltv-mpc, 5 for nmpc",
-    )
-    offset_free: bool = Field(
-        default=True,
-        description="estimate the unknown current and model error online (EKF on a world-frame "
-        "force) and feed it to the prediction; MPC controllers only (the paper: false)",
-    )
-    observer: ObserverConfig = Field(
-        default_factory=ObserverConfig, description="tuning of the offset-free estimator"
-    )
-    disturbance_bound: DisturbanceBound = Field(
-        default_factory=DisturbanceBound,
-        description="bound on the disturbance the prediction does not know; non-zero: ltv-mpc "
-        "and mpc tighten their obstacle and thrust constraints so that the true vehicle keeps "
-        "them under any disturbance inside it (docs/tightening.md)",
-    )
-    nmpc_mode: NmpcMode = Field(default=NmpcMode.REAL_TIME, description="nmpc solution mode")
-    baseline: BaselineConfig = Field(
-        default_factory=BaselineConfig, description="gains of the classical baseline tracker"
-    )
-    playback: PlaybackConfig | None = Field(
-        default=None,
-        description="the thrust table thrust-playback plays (required by it, refused by the "
-        "others); `auvmpc excite` writes one",
-    )
 
-    @field_validator("type", mode="before")
+    @model_validator(mode="before")
     @classmethod
-    def _a_registered_controller(cls, value: Any, info: ValidationInfo) -> Any:
-        """A built-in type as its ControllerType, a registered one as its name; read back
-        from a saved run (context ``saved_run``), any name: the figures of a run need no
-        controller, and the one that flew it need not be registered in this process."""
-        from auvmpc.controllers.registry import REGISTRY
+    def _known_keys_only(cls, data: Any, info: ValidationInfo) -> Any:
+        """A knob of another controller type is named with the types it belongs to; read
+        back from a saved run (context ``saved_run``) it is dropped: run folders written
+        before the per-type configurations hold every type's knobs."""
+        if isinstance(data, Mapping):
+            foreign = [key for key in data if key not in cls.model_fields]
+            if foreign and (info.context or {}).get(SAVED_RUN):
+                return {key: value for key, value in data.items() if key in cls.model_fields}
+            own_type = data.get("type", cls.model_fields["type"].default)
+            for key in foreign:
+                reason = _foreign_knob(str(key), own_type)
+                if reason is not None:
+                    raise FieldError(str(key), data[key], reason)
+        return super()._known_keys_only(data)
 
-        if value == DEPTH_MPC:
-            raise FieldError(
-                "", value, "the depth controller (kind: depth scenarios, six-dof depth_controller)"
-            )
-        if isinstance(value, ControllerType):
-            return value
-        if isinstance(value, str) and value in set(ControllerType):
-            return ControllerType(value)
-        if isinstance(value, str) and (value in REGISTRY or (info.context or {}).get(SAVED_RUN)):
-            return value
-        known = ", ".join(repr(str(name)) for name in REGISTRY if name != DEPTH_MPC)
-        raise FieldError("", value, f"input should be one of {known}")
+    def _has(self, knob: str) -> bool:
+        """Whether this controller type has ``knob``."""
+        return knob in type(self).model_fields
 
-    @model_validator(mode="after")
-    def _playback_table(self) -> ControllerConfig:
-        check_playback(self.type, self.playback)
-        return self
-
-    @model_validator(mode="after")
-    def _tightened_type(self) -> ControllerConfig:
-        if not self.disturbance_bound.is_zero and self.type not in TIGHTENED_TYPES:
-            raise FieldError(
-                "disturbance_bound",
-                self.disturbance_bound.model_dump(),
-                f"{self.type} does not tighten its constraints; only "
-                f"{', '.join(kind.value for kind in TIGHTENED_TYPES)} do (leave it zero)",
-            )
-        return self
-
-    @model_validator(mode="after")
-    def _horizons(self) -> ControllerConfig:
-        check_control_horizon(self.control_horizon, self.prediction_horizon)
-        steps = self.move_steps
-        if steps is not None:
-            if (
-                not steps
-                or steps[0] != 0
-                or any(b <= a for a, b in zip(steps, steps[1:], strict=False))
-            ):
-                raise FieldError("move_steps", list(steps), "must start at 0 and increase")
-            if steps[-1] >= self.prediction_horizon:
-                raise FieldError(
-                    "move_steps",
-                    list(steps),
-                    f"reach past prediction_horizon {self.prediction_horizon}",
-                )
-        return self
-
-    def for_vehicle(self, model: VehicleParams) -> ControllerConfig:
+    def for_vehicle(self, model: VehicleParams) -> HorizontalControllerConfig:
         """This config with every setting that was omitted filled in for ``model``: the
         sample time, the RK4 steps, the thrust weights and the estimator's disturbance statistics
-        (docs/tuning.md says why each scales as it does)."""
+        (docs/tuning.md says why each scales as it does). Filling a filled config returns it."""
         update: dict[str, Any] = {}
         sample_time = self.sample_time or default_sample_time(model)
         if self.sample_time is None:
             update["sample_time"] = sample_time
-        if self.model_substeps is None:
+        if self._has("model_substeps") and self.model_substeps is None:
             update["model_substeps"] = stable_model_substeps(model, sample_time)
-        if self.R is None:
+        if self._has("R") and self.R is None:
             update["R"] = default_thrust_weights(model)
         if self.vehicle_radius is None:
             update["vehicle_radius"] = default_vehicle_radius(model)
@@ -398,17 +269,17 @@ class ControllerConfig(StrictModel):
             iterations = default_sqp_iterations(model)
             if iterations != self.linearisation_iterations:
                 update["linearisation_iterations"] = iterations
-        observer = self.observer.for_vehicle(model)
-        if observer is not self.observer:
-            update["observer"] = observer
+        if self._has("observer"):
+            observer = self.observer.for_vehicle(model)
+            if observer is not self.observer:
+                update["observer"] = observer
         return self.model_copy(update=update) if update else self
 
     @property
     def _linearises_along_a_plan(self) -> bool:
         """ltv-mpc and the real-time nmpc: the controllers with a trust region."""
-        # ==, not is: a model_copy(update=...) keeps the plain string it was given
-        return self.type == ControllerType.LTV_MPC or (
-            self.type == ControllerType.NMPC and self.nmpc_mode == NmpcMode.REAL_TIME
+        return self._has("trust_region_weight") and (
+            self.type != ControllerType.NMPC or self.nmpc_mode == NmpcMode.REAL_TIME
         )
 
     def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
@@ -438,7 +309,7 @@ class ControllerConfig(StrictModel):
                 )
             why += f"; rounded down to the grid {list(SAMPLE_TIME_GRID_S)}"
             chosen["sample_time"] = {"value": filled.sample_time, "why": why}
-        if self.model_substeps is None:
+        if self._has("model_substeps") and self.model_substeps is None:
             rates = damping_rates(model, _STABILITY_SPEED, _STABILITY_SPEED, _STABILITY_YAW_RATE)
             chosen["model_substeps"] = {
                 "value": filled.model_substeps,
@@ -446,7 +317,7 @@ class ControllerConfig(StrictModel):
                 f"{_STABILITY_SPEED:g} m/s and {_STABILITY_YAW_RATE:g} rad/s (fastest rate "
                 f"{max(rates):.3g} /s, RK4 stable below {RK4_STABLE_STEP:g} per step)",
             }
-        if self.R is None:
+        if self._has("R") and self.R is None:
             chosen["R"] = {
                 "value": list(filled.R),
                 "why": f"{THRUST_MOVE_COST:g} / h^2, h half the thrust range "
@@ -480,20 +351,197 @@ class ControllerConfig(StrictModel):
                 "value": filled.trust_region_weight,
                 "why": TRUST_REGION_WHY[self.type],
             }
-        if "prediction_horizon" not in given:
+        if self._has("prediction_horizon") and "prediction_horizon" not in given:
             chosen["prediction_horizon"] = {
                 "value": filled.prediction_horizon,
                 "why": f"the default {filled.prediction_horizon} samples "
                 f"({filled.prediction_horizon * filled.sample_time:g} s ahead)",
             }
-        observer = self.observer
-        if observer.initial_disturbance_std is None or observer.disturbance_rate_std is None:
+        if self._has("observer") and (
+            self.observer.initial_disturbance_std is None
+            or self.observer.disturbance_rate_std is None
+        ):
             chosen["observer"] = {
                 "value": filled.observer.model_dump(mode="json"),
                 "why": "disturbance statistics as fractions of its thrust authority "
                 f"{[round(float(a), 4) for a in model.thrust_authority]} (N, N, N m)",
             }
         return chosen
+
+
+# --- the blocks the controller types' configurations are composed of -------------------------
+
+
+class Horizon(StrictModel):
+    """How far a predictive controller looks ahead and where its moves are free."""
+
+    prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
+    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
+        default=None,
+        description="nc (steps): moves after nc are held; omitted = prediction_horizon "
+        "(every move free, the better tracker; the paper uses 2)",
+    )
+    move_steps: tuple[Annotated[int, Field(ge=0)], ...] | None = Field(
+        default=None,
+        description="move blocking: the samples of the horizon at which the thrust may change, "
+        "starting with 0 and increasing; overrides control_horizon (nc = len(move_steps))",
+    )
+
+    @model_validator(mode="after")
+    def _horizons(self) -> Horizon:
+        check_control_horizon(self.control_horizon, self.prediction_horizon)
+        steps = self.move_steps
+        if steps is not None:
+            if (
+                not steps
+                or steps[0] != 0
+                or any(b <= a for a, b in zip(steps, steps[1:], strict=False))
+            ):
+                raise FieldError("move_steps", list(steps), "must start at 0 and increase")
+            if steps[-1] >= self.prediction_horizon:
+                raise FieldError(
+                    "move_steps",
+                    list(steps),
+                    f"reach past prediction_horizon {self.prediction_horizon}",
+                )
+        return self
+
+    def move_schedule(self) -> tuple[int, ...]:
+        """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
+        if self.move_steps is not None:
+            return self.move_steps
+        return tuple(range(self.control_horizon or self.prediction_horizon))
+
+
+class TrackingWeights(StrictModel):
+    """The tracking cost (paper-model.md section 4)."""
+
+    Q: Weights6 = Field(
+        default=(5, 5, 5, 1, 1, 1),
+        description="stage weights on [x y psi u v r], as a list in that order or a mapping "
+        "by state name (names left out weigh 0), e.g. {x: 5, y: 5, psi: 5}",
+    )
+    S: Weights6 = Field(
+        default=(10, 10, 10, 2, 2, 2), description="terminal weights, as Q (list or mapping)"
+    )
+
+    @field_validator("Q", "S", mode="before")
+    @classmethod
+    def _weights_by_name(cls, value: Any) -> Any:
+        return tuple(HORIZONTAL.vector(value)) if isinstance(value, dict) else value
+
+    R: tuple[NonNegative, ...] | None = Field(
+        default=None,
+        description="thrust weights, one per thruster or one for all; omitted: 0.1 / h^2 with "
+        "h half the thrust range, so that (with the increment penalty) a thruster's move by h "
+        "costs the same on any vehicle, see docs/tuning.md",
+    )
+    thrust_penalty: ThrustPenalty = Field(
+        default=ThrustPenalty.INCREMENT,
+        description="R on dF (the default: the steady thrust that drag and currents need "
+        "costs nothing) or on F (the paper's: it trades tracking error for thrust)",
+    )
+
+
+class PredictionModel(StrictModel):
+    """How the predictive controllers integrate their model over a sample."""
+
+    model_substeps: Annotated[int, Field(ge=1, le=50)] | None = Field(
+        default=None,
+        description="RK4 steps per sample in the controllers' prediction models and estimator; "
+        "omitted = the fewest that keep RK4 stable for the vehicle's damping (see "
+        "stable_model_substeps)",
+    )
+    jit: bool = Field(
+        default=True,
+        description="compile the CasADi model functions (ltv-mpc) and the real-time "
+        "iteration's QP step (nmpc) with the system C compiler; falls back to interpreted "
+        "evaluation when there is none",
+    )
+
+
+class SolverOptions(StrictModel):
+    """The optimiser's back end and budget."""
+
+    obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
+        default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
+    )
+    qp_solver: QpSolverName = Field(
+        default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
+    )
+    qp_iteration_limit: Annotated[int, Field(ge=1)] | None = Field(
+        default=None,
+        description="cap on QP iterations per interior-point pass (IPOPT iterations for nmpc "
+        "full: below ~20 every step falls back); hitting it counts as a solver failure",
+    )
+    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="a step whose optimisation takes longer is treated as a failure "
+        "(the previous plan's next move is applied), as on a real-time computer",
+    )
+
+
+class OffsetFree(StrictModel):
+    """The disturbance estimator that removes the steady offset of a current."""
+
+    offset_free: bool = Field(
+        default=True,
+        description="estimate the unknown current and model error online (EKF on a world-frame "
+        "force) and feed it to the prediction; MPC controllers only (the paper: false)",
+    )
+    observer: ObserverConfig = Field(
+        default_factory=ObserverConfig, description="tuning of the offset-free estimator"
+    )
+
+
+class Relinearisation(StrictModel):
+    """Linearise-and-solve passes per sample (the linear MPCs and the real-time nmpc)."""
+
+    linearisation_iterations: Annotated[int, Field(ge=1, le=10)] = Field(
+        default=1,
+        description="linearise-and-solve passes per sample (ltv-mpc and nmpc real-time: SQP "
+        "iterations; also refreshes the obstacle half-planes around the new plan)",
+    )
+
+
+class PlanLinearisation(StrictModel):
+    """What the controllers that linearise along their previous plan add: the QP's form
+    and the trust region round the plan."""
+
+    qp_structure: QpStructure = Field(
+        default=QpStructure.AUTO,
+        description="nmpc real-time and ltv-mpc: sparse QP solved by HPIPM (stays well posed "
+        "on open-loop-unstable vehicles) or condensed QP solved by qp_solver (faster when "
+        "well posed); auto: ltv-mpc solves the condensed QP while its Hessian's condition "
+        "number is below 1e10 and the sparse one otherwise or when the condensed one fails, "
+        "nmpc the sparse one; nmpc with move blocking always uses the condensed QP",
+    )
+    trust_region_weight: NonNegative | None = Field(
+        default=None,
+        description="penalty on the predicted deviations from the trajectory the model is "
+        "linearised on, per rad^2 (heading) and (m/s)^2 (velocities): ltv-mpc on heading and "
+        "velocities, the real-time nmpc on heading (keeps each step where the linearisation "
+        "holds); omitted: 10 for ltv-mpc, 5 for nmpc",
+    )
+
+
+class TightenedConstraints(StrictModel):
+    """Constraints tightened for a bounded disturbance (ltv-mpc and mpc, ocp/tightening.py)."""
+
+    disturbance_bound: DisturbanceBound = Field(
+        default_factory=DisturbanceBound,
+        description="bound on the disturbance the prediction does not know; non-zero: ltv-mpc "
+        "and mpc tighten their obstacle and thrust constraints so that the true vehicle keeps "
+        "them under any disturbance inside it (docs/tightening.md)",
+    )
+
+
+class OptimisingControllerConfig(  # the bases in reverse: the common fields come first
+    OffsetFree, SolverOptions, PredictionModel, TrackingWeights, Horizon, HorizontalControllerConfig
+):
+    """What every optimising horizontal controller (mpc, ltv-mpc, nmpc, do-mpc) is tuned by:
+    the horizon, the tracking weights, the prediction model, the solver and the offset-free
+    estimator (MPC fields follow paper-model.md section 4)."""
 
     def ocp(self, model: VehicleParams) -> TrackingOcp:
         """The tracking problem this configuration poses for ``model``'s horizontal thrusters."""
@@ -508,11 +556,14 @@ class ControllerConfig(StrictModel):
             keep_out_extra=filled.vehicle_radius + filled.obstacle_margin,
         )
 
-    def move_schedule(self) -> tuple[int, ...]:
-        """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
-        if self.move_steps is not None:
-            return self.move_steps
-        return tuple(range(self.control_horizon or self.prediction_horizon))
+
+def ControllerConfig(**knobs: Any) -> HorizontalControllerConfig:  # noqa: N802 (reads as a class)
+    """The configuration of controller ``type`` (default nmpc) from its knobs, as a scenario's
+    ``controller`` mapping states them: ``ControllerConfig(type="mpc", control_horizon=2)``
+    is a ``PaperMpcConfig``. A knob the type does not have is refused."""
+    from auvmpc.controllers.registry import controller_config
+
+    return controller_config(knobs)
 
 
 # The sample time when none is given: the paper's, for every vehicle it suits.
@@ -751,3 +802,13 @@ CONTROLLER_PRESETS: dict[str, tuple[str, ...]] = {
 """Controller labels and the scenario overrides that select them. ``mpc`` is the paper's
 controller (ny from the scenario, nc 2); ``-nc30`` frees every move of a 30-step horizon;
 other settings come from the scenario."""
+
+
+def __getattr__(name: str) -> Any:
+    """``BaselineConfig``, the baseline's gains, as before they moved next to it (baseline.py
+    imports this module, so it cannot be imported here)."""
+    if name == "BaselineConfig":
+        from auvmpc.controllers.baseline import BaselineConfig
+
+        return BaselineConfig
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -34,12 +34,13 @@ from __future__ import annotations
 
 import time
 import warnings
+from typing import Literal
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.base import MemoryNeed, Observation, align_heading, nlp_memory_need
-from auvmpc.controllers.config import ControllerConfig
+from auvmpc.controllers.config import ControllerType, OptimisingControllerConfig, type_field
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
@@ -47,7 +48,7 @@ from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams, dynamics
 from auvmpc.ocp.tracking import ThrustPenalty
 
-__all__ = ["DoMpcController"]
+__all__ = ["DoMpcConfig", "DoMpcController"]
 
 NX = HORIZONTAL.size
 # Unused obstacle slots sit this far away (m) with zero reach: never active.
@@ -58,6 +59,13 @@ _DISTANCE_REGULARISATION_M2 = 1e-12
 _HELD_MOVE_WEIGHT = 1.0
 
 
+class DoMpcConfig(OptimisingControllerConfig):
+    """``do-mpc``: the optimising controllers' knobs (offset_free must be false: do-mpc has
+    no disturbance estimator)."""
+
+    type: Literal[ControllerType.DO_MPC] = type_field(ControllerType.DO_MPC)
+
+
 class DoMpcController(ShelledController):
     """The paper's OCP (incremental form, nonlinear RK4 model) built and solved by do-mpc.
 
@@ -65,7 +73,7 @@ class DoMpcController(ShelledController):
     ----------
     model : VehicleParams
         The controller's (nominal) vehicle.
-    config : ControllerConfig
+    config : DoMpcConfig
         Horizons, weights, limits and obstacle settings, as for ``mpc`` / ``ltv-mpc``.
     obstacle_slots : int
         Obstacles the problem has room for (give the scenario's count). A sample that sees
@@ -80,9 +88,7 @@ class DoMpcController(ShelledController):
         set (do-mpc has no disturbance estimator).
     """
 
-    def __init__(
-        self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = 0
-    ) -> None:
+    def __init__(self, model: VehicleParams, config: DoMpcConfig, obstacle_slots: int = 0) -> None:
         config = config.for_vehicle(model)
         try:
             with warnings.catch_warnings():

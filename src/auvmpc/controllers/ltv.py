@@ -9,18 +9,28 @@ CasADi Jacobians, so the prediction follows the turn.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import casadi as ca
 import numpy as np
 
 from auvmpc.controllers.base import FLOAT_BYTES, MemoryNeed
-from auvmpc.controllers.config import ControllerConfig, QpStructure
+from auvmpc.controllers.config import (
+    ControllerType,
+    OptimisingControllerConfig,
+    PlanLinearisation,
+    QpStructure,
+    Relinearisation,
+    TightenedConstraints,
+    type_field,
+)
 from auvmpc.controllers.mpc import _TRUST_REGION_SCALE, NX, AffinePrediction, LinearMpc
 from auvmpc.models.discrete import horizontal_model
 from auvmpc.models.layout import PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.solvers.sparse_qp import SparseIncrementalQp
 
-__all__ = ["LtvMpc", "linearised_rollout"]
+__all__ = ["LtvMpc", "LtvMpcConfig", "linearised_rollout"]
 
 
 def linearised_rollout(
@@ -35,6 +45,14 @@ def linearised_rollout(
 
 
 _SPARSE_SETUP_BYTES_PER_ENTRY = 6 * FLOAT_BYTES
+
+
+class LtvMpcConfig(
+    TightenedConstraints, PlanLinearisation, Relinearisation, OptimisingControllerConfig
+):
+    """``ltv-mpc``: the optimising controllers' knobs, the SQP's and the tightening."""
+
+    type: Literal[ControllerType.LTV_MPC] = type_field(ControllerType.LTV_MPC)
 
 
 class LtvMpc(LinearMpc):
@@ -60,7 +78,7 @@ class LtvMpc(LinearMpc):
         what = f"setting up the sparse QP of {config.type} with ny={ny}"
         return MemoryNeed("controller.prediction_horizon", ny, n_bytes, what)
 
-    def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+    def __init__(self, model: VehicleParams, config: LtvMpcConfig) -> None:
         super().__init__(model, config)
         config = self.config  # with what the vehicle decides filled in
         self.trust_region_weights = config.trust_region_weight * _TRUST_REGION_SCALE

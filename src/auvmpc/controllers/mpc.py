@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
+from typing import Literal
 
 import numpy as np
+from pydantic import Field
 
 from auvmpc.controllers.base import (
     Observation,
@@ -30,7 +32,13 @@ from auvmpc.controllers.base import (
     align_heading,
     tracked_reference,
 )
-from auvmpc.controllers.config import ControllerConfig
+from auvmpc.controllers.config import (
+    ControllerType,
+    OptimisingControllerConfig,
+    Relinearisation,
+    TightenedConstraints,
+    type_field,
+)
 from auvmpc.controllers.incremental import IncrementalMpc, Tightened
 from auvmpc.controllers.shell import BACKOFF_KEYS
 from auvmpc.errors import ConfigError
@@ -42,7 +50,7 @@ from auvmpc.models.vehicle import VehicleParams, body_from_world, steady_speed
 from auvmpc.ocp.tightening import GAIN_SPEED_STEP, Tightening, tightened_box, tube_gain
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
-__all__ = ["AffinePrediction", "LinearMpc", "PaperMpc"]
+__all__ = ["AffinePrediction", "LinearMpc", "PaperMpc", "PaperMpcConfig"]
 
 NX = HORIZONTAL.size
 # Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
@@ -56,10 +64,24 @@ _OBSTACLE_RANGE_M = 5.0
 _MAX_NORMAL_ANGLE_FROM_SIDE = math.radians(60.0)
 
 
+class PaperMpcConfig(TightenedConstraints, Relinearisation, OptimisingControllerConfig):
+    """``mpc``: the optimising controllers' knobs, the tightening and the rollout check."""
+
+    type: Literal[ControllerType.MPC] = type_field(ControllerType.MPC)
+    rollout_check: bool = Field(
+        default=True,
+        description="mpc: after the QP, roll the plan's thrusts through the nonlinear model; "
+        "where that rollout enters an obstacle's keep-out disc, solve the same QP once more "
+        "with those steps' half-planes moved out by the frozen prediction's error there "
+        "(docs/paper-reproduction.md#obstacles-and-the-frozen-model); false: the paper's "
+        "frozen prediction alone",
+    )
+
+
 class LinearMpc(IncrementalMpc):
     """Horizontal condensed MPC; subclasses provide :meth:`prediction_model`."""
 
-    def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+    def __init__(self, model: VehicleParams, config: OptimisingControllerConfig) -> None:
         config = config.for_vehicle(model)
         self.model = model
         self.take_config(config)
@@ -201,7 +223,7 @@ class LinearMpc(IncrementalMpc):
         return normals, offsets
 
 
-def robust_tightening(model: VehicleParams, config: ControllerConfig) -> Tightening | None:
+def robust_tightening(model: VehicleParams, config: TightenedConstraints) -> Tightening | None:
     """The back-offs for ``config.disturbance_bound``, or None for a zero bound (the nominal
     controller). The ancillary gains: LQR gains of the model linearised in straight motion
     at heading 0, from its top reverse to its top forward speed (ocp/tightening.py)."""
@@ -256,7 +278,7 @@ def _clamp_towards(vectors: np.ndarray, side: np.ndarray, max_angle: float) -> n
 class PaperMpc(LinearMpc):
     """The paper's controller: SDC matrices refreshed at the current state every sample."""
 
-    def __init__(self, model: VehicleParams, config: ControllerConfig) -> None:
+    def __init__(self, model: VehicleParams, config: PaperMpcConfig) -> None:
         model.require_full_actuation(
             "mpc",
             "its model frozen at the current heading cannot move the vehicle sideways by "

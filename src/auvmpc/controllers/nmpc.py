@@ -59,8 +59,10 @@ model uses.
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
+from pydantic import Field
 
 from auvmpc.controllers.base import (
     Controller,
@@ -70,7 +72,15 @@ from auvmpc.controllers.base import (
     nlp_memory_need,
     tracked_reference,
 )
-from auvmpc.controllers.config import ControllerConfig, NmpcMode, QpStructure
+from auvmpc.controllers.config import (
+    ControllerType,
+    NmpcMode,
+    OptimisingControllerConfig,
+    PlanLinearisation,
+    QpStructure,
+    Relinearisation,
+    type_field,
+)
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.estimation import DisturbanceObserver
 from auvmpc.models.layout import HORIZONTAL
@@ -90,6 +100,7 @@ __all__ = [
     "MAX_OBSTACLES",
     "Iterate",
     "MultipleShootingProgram",
+    "NmpcConfig",
     "NonlinearMpc",
     "Sample",
     "rescue_solver",
@@ -103,11 +114,18 @@ _COLD_START_ITERATIONS = 10
 RESCUE_IPOPT_ITERATIONS = 150
 
 
+class NmpcConfig(PlanLinearisation, Relinearisation, OptimisingControllerConfig):
+    """``nmpc``: the optimising controllers' knobs, the SQP's and how it solves."""
+
+    type: Literal[ControllerType.NMPC] = type_field(ControllerType.NMPC)
+    nmpc_mode: NmpcMode = Field(default=NmpcMode.REAL_TIME, description="nmpc solution mode")
+
+
 class NonlinearMpc(ShelledController):
     """Nonlinear multiple-shooting MPC (``nmpc``): full IPOPT solve or real-time iterations."""
 
     def __init__(
-        self, model: VehicleParams, config: ControllerConfig, obstacle_slots: int = MAX_OBSTACLES
+        self, model: VehicleParams, config: NmpcConfig, obstacle_slots: int = MAX_OBSTACLES
     ) -> None:
         config = config.for_vehicle(model)
         self.model = model
@@ -247,7 +265,7 @@ class NonlinearMpc(ShelledController):
             self._observer.predict(command, self.effectiveness)
 
 
-def rescue_solver(program: MultipleShootingProgram, config: ControllerConfig) -> IpoptSolver:
+def rescue_solver(program: MultipleShootingProgram, config: NmpcConfig) -> IpoptSolver:
     """The real-time mode's last resort: IPOPT on the same program, at most
     RESCUE_IPOPT_ITERATIONS iterations (an iteration limit, not a wall-clock one, so that runs
     repeat to the bit)."""

@@ -19,18 +19,27 @@ import csv
 import io
 import time
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
+from pydantic import Field, model_validator
 
 from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, Observation
-from auvmpc.controllers.config import DepthControllerConfig
+from auvmpc.controllers.config import (
+    ControllerType,
+    DepthControllerConfig,
+    HorizontalControllerConfig,
+    PlaybackConfig,
+    check_playback,
+    type_field,
+)
 from auvmpc.errors import ConfigError
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import read_text_file
 
-__all__ = ["ThrustPlayback", "read_thrust_table", "write_thrust_table"]
+__all__ = ["ThrustPlayback", "ThrustPlaybackConfig", "read_thrust_table", "write_thrust_table"]
 
 # How far a table's times may sit from the sample grid k Te (s): written to 1 us.
 _TIME_TOLERANCE_S = 1e-5
@@ -75,6 +84,22 @@ def read_thrust_table(path: str | Path, sample_time: float, inputs: tuple[str, .
             _FIELD, str(path), f"t must be 0, {sample_time:g}, ... (the controller's sample time)"
         )
     return table[:, 1:]
+
+
+class ThrustPlaybackConfig(HorizontalControllerConfig):
+    """``thrust-playback`` in a horizontal scenario: its table (a depth scenario's is in
+    its depth controller's configuration)."""
+
+    type: Literal[ControllerType.THRUST_PLAYBACK] = type_field(ControllerType.THRUST_PLAYBACK)
+    playback: PlaybackConfig | None = Field(
+        default=None,
+        description="the thrust table thrust-playback plays (required); `auvmpc excite` writes one",
+    )
+
+    @model_validator(mode="after")
+    def _playback_table(self) -> ThrustPlaybackConfig:
+        check_playback(self.type, self.playback)
+        return self
 
 
 class ThrustPlayback(Controller):

@@ -1,35 +1,85 @@
-"""Which class implements each controller type. A built-in controller is its module plus a
-line here (and its name in ``ControllerType``); a controller of your own is one file and one
-:func:`register_controller` call, after which scenarios name it as ``controller.type``
-(docs/extending.md)."""
+"""Which configuration and which class each controller type has. A built-in controller is its
+module (its configuration class next to it) plus a line here; a controller of your own is
+one file and one :func:`register_controller` call, after which scenarios name it as
+``controller.type`` and give it the knobs of its own configuration class
+(docs/extending.md).
+
+A scenario's ``controller`` mapping is validated as :data:`ControllerChoice`: pydantic's
+discriminated union on ``type`` over the built-in configurations, plus one member for the
+registered ones (whose classes are only known at run time)."""
 
 from __future__ import annotations
 
-import importlib
 import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Annotated, Any, Union
 
+from pydantic import (
+    BeforeValidator,
+    Discriminator,
+    SerializeAsAny,
+    Tag,
+    ValidationError,
+    ValidationInfo,
+    WithJsonSchema,
+    WrapValidator,
+)
+from pydantic.json_schema import GetJsonSchemaHandler, JsonSchemaValue
+from pydantic_core import CoreSchema
+
+from auvmpc.config import StrictModel
 from auvmpc.controllers.base import Controller
+from auvmpc.controllers.baseline import BaselineController, BaselineControllerConfig
 from auvmpc.controllers.config import (
     DEPTH_MPC,
-    ControllerConfig,
+    SAVED_RUN,
     ControllerType,
     DepthControllerConfig,
+    HorizontalControllerConfig,
 )
+from auvmpc.controllers.depth_mpc import DepthMpc
+from auvmpc.controllers.dompc import DoMpcConfig, DoMpcController
+from auvmpc.controllers.ltv import LtvMpc, LtvMpcConfig
+from auvmpc.controllers.mpc import PaperMpc, PaperMpcConfig
+from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
+from auvmpc.controllers.playback import ThrustPlayback, ThrustPlaybackConfig
 from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
+from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["REGISTRY", "build_controller", "class_of", "register_controller"]
+__all__ = [
+    "REGISTRY",
+    "ControllerChoice",
+    "ControllerEntry",
+    "build_controller",
+    "class_of",
+    "controller_config",
+    "knob_owners",
+    "register_controller",
+    "retyped",
+]
 
-# Imported only when used: do-mpc is an optional extra, and CasADi set-up is not free.
-REGISTRY: dict[str, tuple[str, str] | type] = {
-    ControllerType.BASELINE: ("auvmpc.controllers.baseline", "BaselineController"),
-    ControllerType.MPC: ("auvmpc.controllers.mpc", "PaperMpc"),
-    ControllerType.LTV_MPC: ("auvmpc.controllers.ltv", "LtvMpc"),
-    ControllerType.NMPC: ("auvmpc.controllers.nmpc", "NonlinearMpc"),
-    ControllerType.DO_MPC: ("auvmpc.controllers.dompc", "DoMpcController"),
-    ControllerType.THRUST_PLAYBACK: ("auvmpc.controllers.playback", "ThrustPlayback"),
-    DEPTH_MPC: ("auvmpc.controllers.depth_mpc", "DepthMpc"),  # kind: depth, 6-DOF's depth
+
+@dataclass(frozen=True)
+class ControllerEntry:
+    """A controller type: the configuration its ``controller`` mapping validates as, and the
+    class built from it."""
+
+    config: type[StrictModel]
+    controller: type[Controller]
+
+
+# do-mpc itself is imported only when its controller is built (an optional extra).
+REGISTRY: dict[str, ControllerEntry] = {
+    ControllerType.BASELINE: ControllerEntry(BaselineControllerConfig, BaselineController),
+    ControllerType.MPC: ControllerEntry(PaperMpcConfig, PaperMpc),
+    ControllerType.LTV_MPC: ControllerEntry(LtvMpcConfig, LtvMpc),
+    ControllerType.NMPC: ControllerEntry(NmpcConfig, NonlinearMpc),
+    ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController),
+    ControllerType.THRUST_PLAYBACK: ControllerEntry(ThrustPlaybackConfig, ThrustPlayback),
+    DEPTH_MPC: ControllerEntry(DepthControllerConfig, DepthMpc),  # kind: depth, 6-DOF's depth
 }
 
 # The optimising horizontal controllers, whose shell recovers with the stabilising feedback
@@ -42,44 +92,177 @@ RECOVERED_TYPES = {
 }
 # A registered name: lower-case words joined by hyphens, as the built-in ones.
 _NAME = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
+# The horizontal type a ``controller`` mapping without ``type`` has.
+DEFAULT_TYPE = ControllerType.NMPC
+# The union member of the controllers registered at run time.
+_REGISTERED = "registered"
+_BUILT_IN = {name: entry.config for name, entry in REGISTRY.items() if name != DEPTH_MPC}
 
 
-def register_controller(name: str, controller: type, *, recovered: bool = False) -> None:
+def register_controller(
+    name: str,
+    controller: type,
+    *,
+    config: type[HorizontalControllerConfig] = HorizontalControllerConfig,
+    recovered: bool = False,
+) -> None:
     """Make ``controller`` the class of ``controller.type: name`` in every scenario loaded
     afterwards in this process.
 
     ``controller`` is a ``controllers.base.Controller`` subclass built by
     ``controller.from_config(model, config, obstacle_count=..., **surroundings)`` if it has
     that class method, else by ``controller(model, config)``: ``model`` the nominal vehicle,
-    ``config`` the scenario's ``ControllerConfig`` filled in for it (``sample_time``,
-    ``prediction_horizon`` ... are yours to read). ``recovered``: a ``ShelledController``
-    whose shell steers by the stabilising feedback after a failed solve, as the built-in
-    MPCs' does. A name already taken raises ValueError.
+    ``config`` the scenario's ``controller`` mapping validated as ``config`` (a subclass of
+    ``controllers.config.HorizontalControllerConfig``: ``type``, ``sample_time``,
+    ``vehicle_radius``, ``obstacle_margin`` and the knobs you add, e.g. the blocks of
+    controllers/config.py) and filled in for the vehicle. ``recovered``: a
+    ``ShelledController`` whose shell steers by the stabilising feedback after a failed
+    solve, as the built-in MPCs' does. A name already taken raises ValueError.
     """
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise ValueError(f"controller name {name!r}: lower-case words joined by hyphens")
-    if name in REGISTRY:
+    if name in REGISTRY or name == _REGISTERED:
         raise ValueError(f"controller name {name!r} is taken (taken: {', '.join(REGISTRY)})")
     if not isinstance(controller, type) or not issubclass(controller, Controller):
         raise ValueError(f"{controller!r} is not a controllers.base.Controller subclass")
+    if not isinstance(config, type) or not issubclass(config, HorizontalControllerConfig):
+        raise ValueError(f"{config!r} is not a controllers.config.HorizontalControllerConfig")
     if recovered and not issubclass(controller, ShelledController):
         raise ValueError(f"{controller.__name__}: only a ShelledController has a shell to recover")
-    REGISTRY[name] = controller
+    REGISTRY[name] = ControllerEntry(config, controller)
     if recovered:
         RECOVERED_TYPES.add(name)
 
 
 def class_of(controller_type: str) -> type[Controller]:
-    """The class of a controller type (a built-in one's module imported now)."""
-    entry = REGISTRY[controller_type]
-    if isinstance(entry, type):  # registered by register_controller
-        return entry
-    module, name = entry
-    return getattr(importlib.import_module(module), name)
+    """The class of a controller type."""
+    return REGISTRY[controller_type].controller
+
+
+def knob_owners(knob: str) -> list[str]:
+    """The horizontal controller types whose configuration has ``knob``."""
+    return [
+        str(name)
+        for name, entry in REGISTRY.items()
+        if name != DEPTH_MPC and knob in entry.config.model_fields
+    ]
+
+
+def horizontal_types() -> list[str]:
+    """The names a horizontal scenario's ``controller.type`` may take now."""
+    return [str(name) for name in REGISTRY if name != DEPTH_MPC]
+
+
+def _type_tag(value: Any) -> str:
+    """The union member a ``controller`` value is validated as: its built-in type, or the
+    member of the registered ones."""
+    if isinstance(value, Mapping):
+        given = value.get("type", DEFAULT_TYPE)
+    else:  # a configuration, or what is none (the registered member's validation says so)
+        given = getattr(value, "type", None)
+    return str(given) if isinstance(given, str) and given in _BUILT_IN else _REGISTERED
+
+
+def _registered_config(value: Any, info: ValidationInfo) -> Any:
+    """A registered type's mapping as its own configuration class; read back from a saved
+    run (context ``saved_run``), a type not registered in this process as the common part
+    (the figures of a run need no controller)."""
+    if not isinstance(value, Mapping):
+        return value
+    entry = REGISTRY.get(value["type"])
+    config = entry.config if entry is not None else HorizontalControllerConfig
+    return config.model_validate(value, context=info.context)
+
+
+def _checked_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
+    """The type named first (a known one, or any name in a saved run), then the mapping
+    validated as that type's configuration; an error names the field without the union
+    member pydantic puts in its location."""
+    if isinstance(value, Mapping):
+        given = value.get("type", DEFAULT_TYPE)
+        saved = (info.context or {}).get(SAVED_RUN)
+        if given == DEPTH_MPC:
+            where = "kind: depth scenarios, six-dof depth_controller"
+            raise FieldError("type", given, f"the depth controller ({where})")
+        if not (isinstance(given, str) and (given in REGISTRY or saved)):
+            known = ", ".join(repr(name) for name in horizontal_types())
+            raise FieldError("type", given, f"input should be one of {known}")
+    try:
+        return handler(value)
+    except ValidationError as error:
+        problem = format_validation_error(error)
+        field = problem.field.partition(".")[2]  # without the member's tag
+        raise FieldError(field, problem.value, problem.reason) from None
+
+
+class _FileSchema:
+    """The union's JSON Schema as a scenario file may be written now: ``anyOf`` the built-in
+    types (a mapping without ``type`` is nmpc's, and fits the others' schemas too, which
+    ``oneOf`` would refuse) and the types registered when it is written."""
+
+    def __get_pydantic_json_schema__(
+        self, core_schema: CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        schema = handler(core_schema)
+        members = [m for m in schema.pop("oneOf") if m.get("title") != _REGISTERED_TITLE]
+        registered = [str(name) for name in horizontal_types() if name not in _BUILT_IN]
+        if registered:
+            members.append({
+                "type": "object",
+                "title": _REGISTERED_TITLE,
+                "description": "a controller given to controllers.registry.register_controller "
+                "(docs/extending.md): its own knobs",
+                "properties": {"type": {"enum": registered}},
+                "required": ["type"],
+            })  # fmt: skip
+        return {**schema, "anyOf": members}
+
+
+_REGISTERED_TITLE = "RegisteredControllerConfig"
+
+ControllerChoice = Annotated[
+    Union[  # noqa: UP007 (a tuple of members built from the registry)
+        tuple(Annotated[config, Tag(str(name))] for name, config in _BUILT_IN.items())
+        + (
+            Annotated[
+                SerializeAsAny[HorizontalControllerConfig],
+                BeforeValidator(_registered_config),
+                WithJsonSchema({"title": _REGISTERED_TITLE}),  # _FileSchema writes it
+                Tag(_REGISTERED),
+            ],
+        )
+    ],
+    Discriminator(_type_tag),
+    WrapValidator(_checked_type),
+    _FileSchema(),
+]
+"""A horizontal scenario's ``controller``: the configuration of the type it names."""
+
+
+def controller_config(knobs: Mapping[str, Any], context: dict | None = None) -> Any:
+    """``knobs`` (a ``controller`` mapping) validated as its type's configuration."""
+    from pydantic import TypeAdapter
+
+    try:
+        return TypeAdapter(ControllerChoice).validate_python(dict(knobs), context=context)
+    except ValidationError as error:
+        raise format_validation_error(error, "controller") from None
+
+
+def retyped(config: HorizontalControllerConfig, new_type: str, **update: Any) -> Any:
+    """The configuration of ``new_type`` with the knobs ``config`` was given that it has,
+    and ``update`` (what ``model_copy(update={"type": ...})`` did with one flat class)."""
+    target = REGISTRY[new_type].config
+    given = {
+        name: getattr(config, name)
+        for name in config.model_fields_set
+        if name in target.model_fields and name != "type"
+    }
+    return target.model_validate({**given, **update, "type": new_type})
 
 
 def build_controller(
-    config: ControllerConfig | DepthControllerConfig,
+    config: HorizontalControllerConfig | DepthControllerConfig,
     model: VehicleParams,
     obstacle_count: int = 0,
     **surroundings: float,

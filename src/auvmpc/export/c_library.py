@@ -34,7 +34,15 @@ from pydantic import ValidationError
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.controllers.c_sources import write_sources
 from auvmpc.controllers.compiled_nmpc import C_STATUS
-from auvmpc.controllers.config import ControllerConfig, ControllerType, NmpcMode, QpStructure
+from auvmpc.controllers.config import (
+    SAVED_RUN,
+    ControllerType,
+    HorizontalControllerConfig,
+    NmpcMode,
+    QpStructure,
+    TightenedConstraints,
+)
+from auvmpc.controllers.nmpc import NmpcConfig
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
@@ -83,16 +91,18 @@ _RECORD = "export.json"
 _NX = HORIZONTAL.size
 
 
-def exported_config(config: ControllerConfig) -> ControllerConfig:
+def exported_config(config: HorizontalControllerConfig) -> NmpcConfig:
     """The controller a run must use to be reproduced by the export: ``nmpc`` real-time with
-    every move free (control_horizon = prediction_horizon)."""
-    return config.model_copy(
-        update={
-            "type": ControllerType.NMPC,
-            "nmpc_mode": NmpcMode.REAL_TIME,
-            "control_horizon": None,
-            "move_steps": None,
-        }
+    every move free (control_horizon = prediction_horizon), with the settings ``config``
+    gives that nmpc has."""
+    from auvmpc.controllers.registry import retyped
+
+    return retyped(
+        config,
+        ControllerType.NMPC,
+        nmpc_mode=NmpcMode.REAL_TIME,
+        control_horizon=None,
+        move_steps=None,
     )
 
 
@@ -113,7 +123,7 @@ def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
     return 8 * doubles
 
 
-def _check_supported(resolved) -> tuple[ControllerConfig, int]:
+def _check_supported(resolved) -> tuple[NmpcConfig, int]:
     scenario = resolved.scenario
     if getattr(scenario, "kind", None) != "horizontal":
         raise ConfigError("SCENARIO", scenario.name, "export-c takes horizontal scenarios only")
@@ -122,13 +132,14 @@ def _check_supported(resolved) -> tuple[ControllerConfig, int]:
         raise ConfigError(
             "vehicle", model.name, "underactuated: export-c supports fully actuated vehicles only"
         )
-    config = exported_config(scenario.controller)
-    if not config.disturbance_bound.is_zero:
+    given = scenario.controller
+    if isinstance(given, TightenedConstraints) and not given.disturbance_bound.is_zero:
         raise ConfigError(
-            "controller.disturbance_bound", config.disturbance_bound.model_dump(),
+            "controller.disturbance_bound", given.disturbance_bound.model_dump(),
             "export-c exports the nominal nmpc; the robust tightening is not exported "
             "(leave the bound zero)",
         )  # fmt: skip
+    config = exported_config(given)
     if config.solver_time_limit_ms is not None:
         raise ConfigError(
             "controller.solver_time_limit_ms", config.solver_time_limit_ms,
@@ -154,7 +165,7 @@ def _check_supported(resolved) -> tuple[ControllerConfig, int]:
 _ARENA_PIECES, _ARENA_ALIGN = 40, 64
 
 
-def _arena_bytes(qp, program: MultipleShootingProgram, config: ControllerConfig) -> int | None:
+def _arena_bytes(qp, program: MultipleShootingProgram, config: NmpcConfig) -> int | None:
     """The static arena for the HPIPM driver, measured on the Python controller's compiled
     step for the same QP; None where that cannot be built (then the export allocates at
     init)."""
@@ -282,7 +293,7 @@ class _ExportRecord:
 
     model: VehicleParams
     model_data: dict  # as written: a run's run.json ``model`` is compared with it
-    controller: ControllerConfig
+    controller: NmpcConfig
     blasfeo: str | None
     blasfeo_features: tuple[str, ...]
 
@@ -313,7 +324,7 @@ def _export_record(export: Path) -> _ExportRecord:
         raise ConfigError("DIR", str(file), "export.json's blasfeo is not a folder's name")
     try:
         model = VehicleParams.model_validate(record["model"])
-        controller = ControllerConfig.model_validate(record["controller"])
+        controller = NmpcConfig.model_validate(record["controller"], context={SAVED_RUN: True})
     except ValidationError as error:
         raise format_validation_error(error, "export.json", str(file)) from None
     return _ExportRecord(model, record["model"], controller, blasfeo, tuple(features))
@@ -332,10 +343,10 @@ def _check_run(record: _ExportRecord, run: RunFolder) -> None:
     model, exported = record.model, record.controller
     ran = json.loads(exported_config(controller).for_vehicle(model).model_dump_json())
     if (
-        controller.control_horizon not in (None, controller.prediction_horizon)
-        or ran != json.loads(exported.for_vehicle(model).model_dump_json())
-        or controller.type is not ControllerType.NMPC
+        controller.type is not ControllerType.NMPC
         or controller.nmpc_mode is not NmpcMode.REAL_TIME
+        or controller.control_horizon not in (None, controller.prediction_horizon)
+        or ran != json.loads(exported.for_vehicle(model).model_dump_json())
     ):
         raise ConfigError(
             "RUN_DIR", str(run.path),

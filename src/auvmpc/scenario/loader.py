@@ -23,6 +23,7 @@ from auvmpc.scenario.resolved import (
 
 __all__ = [
     "apply_override",
+    "apply_overrides",
     "builtin_scenarios",
     "load_scenario",
     "planar_twin",
@@ -86,9 +87,7 @@ def load_scenario(
             )
         text, base_dir = read_text_file(path, "scenario", "scenario file"), path.resolve().parent
     data = read_yaml_mapping(text, "scenario", text_source, "scenario fields")
-    for override in overrides:
-        apply_override(data, override)
-    return resolve_document(data, base_dir)
+    return resolve_document(data, base_dir, apply_overrides(data, overrides))
 
 
 # A scenario document's ``kind``: its schema and what it resolves to for its vehicle.
@@ -100,12 +99,13 @@ SCENARIO_KINDS = {
 
 
 def resolve_document(
-    data: dict[str, Any], base_dir: Path
+    data: dict[str, Any], base_dir: Path, notes: Sequence[str] = ()
 ) -> ResolvedScenario | ResolvedDepthScenario:
     """A scenario document (a mapping as read from YAML) validated by the schema its
     ``kind`` names and resolved for its vehicle; a bad field is one line naming it. A
     document without a known ``kind`` is a horizontal one (which refuses a ``kind`` it is
-    not: "kind: input should be 'horizontal'")."""
+    not: "kind: input should be 'horizontal'"). ``notes``: what the overrides decided that
+    the user should hear of (run.json ``warnings``)."""
     kind = data.get("kind")
     schema, resolved = SCENARIO_KINDS[
         kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
@@ -114,7 +114,9 @@ def resolve_document(
         document = schema.model_validate(data)
     except ValidationError as error:
         raise format_validation_error(error) from None
-    return resolved(document, base_dir)
+    scenario = resolved(document, base_dir)
+    scenario.notes = [*notes, *scenario.notes]
+    return scenario
 
 
 def validate_scenario(data: dict[str, Any]) -> Scenario:
@@ -124,8 +126,13 @@ def validate_scenario(data: dict[str, Any]) -> Scenario:
         raise format_validation_error(error) from None
 
 
-def apply_override(data: dict[str, Any], override: str) -> None:
-    """Set ``a.b.0.c=value`` in a nested mapping; the value is read as YAML."""
+def apply_override(data: dict[str, Any], override: str) -> list[str]:
+    """Set ``a.b.0.c=value`` in a nested mapping; the value is read as YAML.
+
+    Returns what the user should hear of: a ``controller.type`` changed to another
+    horizontal controller drops the knobs given so far that the new type has not (the
+    previous type's, e.g. a file's nmpc_mode under ``--controller ltv-mpc``), saying which;
+    a knob set after the change is checked against the new type."""
     path, separator, raw_value = override.partition("=")
     if not separator or not path:
         raise ConfigError("--set", override, "expected field=value")
@@ -150,6 +157,8 @@ def apply_override(data: dict[str, Any], override: str) -> None:
         else:
             raise ConfigError(".".join(keys[:depth]), node, "is not a mapping or list")
         if last:
+            retyping = keys == ["controller", "type"]
+            old_type = _controller_type(data)
             node[index] = value
         else:
             if isinstance(node, dict) and (index not in node or node[index] is None):
@@ -162,6 +171,50 @@ def apply_override(data: dict[str, Any], override: str) -> None:
                     )
                 node[index] = {}
             node = node[index]
+    return _drop_foreign_knobs(data, old_type) if retyping else []
+
+
+def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> list[str]:
+    """:func:`apply_override` each of ``overrides`` in order (``--controller`` and ``--set``);
+    where they change the controller's type, also the knobs they set that the new type has
+    not are dropped (``--set controller.R=[1] --controller baseline``: the R was for the
+    file's type). Returns what the user should hear of."""
+    old_type = _controller_type(data)
+    notes = [note for override in overrides for note in apply_override(data, override)]
+    return notes + _drop_foreign_knobs(data, old_type)
+
+
+def _controller_type(data: dict[str, Any]) -> Any:
+    from auvmpc.controllers.registry import DEFAULT_TYPE
+
+    controller = data.get("controller")  # omitted: the default type's defaults
+    return controller.get("type", DEFAULT_TYPE) if isinstance(controller, dict) else DEFAULT_TYPE
+
+
+def _drop_foreign_knobs(data: dict[str, Any], old_type: Any) -> list[str]:
+    """When a horizontal or 6-DOF scenario ``data``'s ``controller.type`` is no longer
+    ``old_type``: drop the knobs its ``controller`` mapping holds that the new type's
+    configuration has not, and say so (a knob of the type it names is kept, and checked)."""
+    from auvmpc.controllers.registry import REGISTRY, horizontal_types
+
+    new_type = _controller_type(data)
+    if (
+        data.get("kind") == "depth"  # one configuration for both depth controllers
+        or new_type == old_type
+        or new_type not in horizontal_types()
+    ):
+        return []
+    controller = data["controller"]
+    knobs = REGISTRY[new_type].config.model_fields
+    dropped = [key for key in controller if key not in knobs]
+    for key in dropped:
+        del controller[key]
+    if not dropped:
+        return []
+    return [
+        f"controller.type: {old_type} changed to {new_type} by an override; dropped what "
+        f"{new_type} has no knob for: {', '.join(map(str, dropped))}"
+    ]
 
 
 def scenario_to_dict(scenario: Scenario | DepthScenario) -> dict[str, Any]:

@@ -16,7 +16,9 @@ from auvmpc.config import (
     NonNegative,
     StrictModel,
 )
-from auvmpc.controllers.config import DEPTH_MPC, ControllerConfig, DepthControllerConfig
+from auvmpc.controllers.config import DEPTH_MPC, DepthControllerConfig
+from auvmpc.controllers.nmpc import NmpcConfig
+from auvmpc.controllers.registry import ControllerChoice
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
@@ -94,7 +96,10 @@ class Scenario(StrictModel):
         description="how the controller perceives the obstacles (range sensor and a "
         "constant-velocity tracker each); omitted: it knows their position and velocity",
     )
-    controller: ControllerConfig = Field(default_factory=ControllerConfig)
+    controller: ControllerChoice = Field(
+        default_factory=NmpcConfig,
+        description="controller choice and tuning: the knobs of the controller type it names",
+    )
     seed: Annotated[int, Field(ge=0)] = Field(default=0, description="master random seed")
     transient_s: NonNegative = Field(
         default=20.0, description="start of the window for the steady-state metrics (s)"

@@ -67,7 +67,7 @@ class ResolvedScenario:
         check_plant_scale(scenario.plant.scale)
         self.plant: VehicleParams = scaled(_plant_vehicle(self.model, scenario, base_dir),
                                            scenario.plant.scale)  # fmt: skip
-        weights = scenario.controller.R
+        weights = getattr(scenario.controller, "R", None)  # the optimising controllers'
         if weights is not None and len(weights) not in (1, n):
             raise ConfigError(
                 "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
@@ -228,7 +228,7 @@ def _plant_vehicle(model: VehicleParams, scenario: Scenario, base_dir: Path) -> 
 def with_table_found(controller, base_dir: Path):
     """A thrust-playback ``controller``'s config with its table's path relative to the
     scenario's folder, as a vehicle file's (any other config as it is)."""
-    if controller.playback is None:
+    if getattr(controller, "playback", None) is None:  # only thrust-playback has a table
         return controller
     table = relative_to(controller.playback.path, base_dir)
     return controller.model_copy(
