@@ -1,6 +1,7 @@
 """C compiled with the system compiler into shared libraries, cached on disk, called by ctypes.
 
-Two users: the real-time nmpc's QP step (solvers/compiled_qp_step.py, CasADi-generated stage
+Three users: the real-time nmpc's C controller (controllers/compiled_nmpc.py, the step export-c
+ships), the real-time iteration's QP step (solvers/compiled_qp_step.py, CasADi-generated stage
 data and an HPIPM driver) and :func:`native_function`, a CasADi function generated to C and
 called without CasADi's Python layer. Calling a CasADi ``Function`` from Python costs about
 35 us whatever it computes (argument conversion to and from DM); the RK4 step of the 3-DOF
