@@ -27,6 +27,7 @@ import subprocess
 import tempfile
 import threading
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as ca
@@ -38,6 +39,7 @@ __all__ = ["NativeFunction", "cache_folder", "compiler", "native_function", "sha
 # machines of different CPUs); -Bsymbolic keeps each library's own generated functions when
 # several with the same names are loaded in one process.
 FLAGS = ("-O2", "-fPIC", "-shared", "-Wl,-Bsymbolic")
+_COMPILE_FLAGS, _LINK_FLAGS = FLAGS[:2], FLAGS[2:]
 # Libraries of one kind kept in the cache folder, the least recently used dropped beyond it:
 # one is 0.1-0.2 MB and a sweep over random vehicles builds one per vehicle.
 _CACHE_LIMIT = 256
@@ -92,7 +94,6 @@ def shared_library(
     name = f"{kind}-{digest.hexdigest()[:_HASH_DIGITS]}.so"
     with tempfile.TemporaryDirectory(prefix=f"auvmpc-{kind}-") as scratch:
         built = Path(scratch) / name
-        command = [cc, *FLAGS, *map(str, sources), *options, "-lm", "-o", str(built)]
         for folder in (cache_folder(), Path(tempfile.gettempdir()) / f"auvmpc-{os.getuid()}"):
             target = folder / name
             try:
@@ -101,7 +102,7 @@ def shared_library(
                     continue  # a library there could be anybody's code
                 if not target.exists():
                     if not built.exists():
-                        subprocess.run(command, check=True, capture_output=True, timeout=300)
+                        _build(cc, sources, options, built)
                     # Atomic: another process may be building the same library.
                     partial = target.with_suffix(f".{os.getpid()}.part")
                     shutil.copyfile(built, partial)
@@ -114,6 +115,23 @@ def shared_library(
             except OSError:
                 continue  # an unwritable cache folder: try the next one
     return None
+
+
+def _build(cc: str, sources: Sequence[Path], options: Sequence[str], built: Path) -> None:
+    """Each source compiled to an object, side by side (a generated file takes seconds and
+    there is a core for each of the largest two on the machines this runs on), then linked
+    into ``built``; a SubprocessError if the compiler refuses."""
+    objects = [built.with_name(f"{i}-{Path(s).stem}.o") for i, s in enumerate(sources)]
+
+    def compile_one(source_and_object: tuple[Path, Path]) -> None:
+        source, target = source_and_object
+        command = [cc, *_COMPILE_FLAGS, "-c", str(source), *options, "-o", str(target)]
+        subprocess.run(command, check=True, capture_output=True, timeout=300)
+
+    with ThreadPoolExecutor(max_workers=max(1, min(len(sources), os.cpu_count() or 1))) as pool:
+        list(pool.map(compile_one, zip(sources, objects, strict=True)))
+    link = [cc, *_LINK_FLAGS, *map(str, objects), *options, "-lm", "-o", str(built)]
+    subprocess.run(link, check=True, capture_output=True, timeout=300)
 
 
 class NativeFunction:

@@ -4,8 +4,8 @@ compiled ``nmpc`` builds and runs (controllers/compiled_nmpc.py), so that the tw
 The C (``solvers/auvmpc_controller.c``, its header, and auvmpc's HPIPM driver
 ``solvers/hpipm_ocp_step.c``) is fixed; per configuration come CasADi's C code of the
 functions the Python controller evaluates (``rti_qp_data.c``: the stage QP, the terminal
-cost, the RK4 step, the shell's stabilising feedback and, offset-free, the EKF's update and
-propagation) and the sizes and settings (``auvmpc_config.h``).
+cost, the RK4 step, the shell's stabilising feedback; ``ekf_data.c``, offset-free: the EKF's
+update and propagation) and the sizes and settings (``auvmpc_config.h``).
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ FIXED_SOURCES = tuple(
     _SOLVERS / name for name in ("auvmpc_controller.c", "auvmpc_controller.h", "hpipm_ocp_step.c")
 )
 GENERATED_SOURCE = "rti_qp_data.c"  # and its header, rti_qp_data.h
+_OBSERVER_SOURCE = "ekf_data.c"  # the estimator's functions, with offset_free
 _CONFIG_HEADER = "auvmpc_config.h"
 _NX = HORIZONTAL.size
 
@@ -56,23 +57,27 @@ def write_sources(
 ) -> list[Path]:
     """The controller's C for ``program`` (built from the resolved ``config``) written into
     ``folder``; returns the C files to compile (the headers are beside them)."""
-    generator = ca.CodeGenerator(GENERATED_SOURCE, {"with_header": True})
-    generator.add(qp.stage)
-    generator.add(qp.terminal)
-    generator.add(program.step)  # rk4_step: the cold-start rollout and the shift
-    generator.add(_recovery_law(program))  # the shell's stabilising feedback
+    functions = {
+        # the stage QP, the RK4 step (the cold-start rollout and the shift), the shell's
+        # stabilising feedback
+        GENERATED_SOURCE: [qp.stage, qp.terminal, program.step, _recovery_law(program)],
+    }
     if config.offset_free:  # the EKF's update and propagation (estimation/ekf.py)
         ekf = _observer(program.model, config).filter
-        generator.add(ekf.update)
-        generator.add(ekf.propagation)
-    generator.generate(str(folder) + "/")
-    generated = folder / GENERATED_SOURCE
-    generated.write_text(_warning_clean(generated.read_text()))
+        # Its own file: the largest generated code, compiled beside the other in parallel.
+        functions[_OBSERVER_SOURCE] = [ekf.update, ekf.propagation]
+    for name, members in functions.items():
+        generator = ca.CodeGenerator(name, {"with_header": True})
+        for function in members:
+            generator.add(function)
+        generator.generate(str(folder) + "/")
+        generated = folder / name
+        generated.write_text(_warning_clean(generated.read_text()))
     (folder / _CONFIG_HEADER).write_text(_config_header(program, qp, config))
     for source in FIXED_SOURCES:
         shutil.copyfile(source, folder / source.name)
-    compiled = [source.name for source in FIXED_SOURCES if source.suffix == ".c"]
-    return [folder / GENERATED_SOURCE, *(folder / name for name in compiled)]
+    fixed = [source.name for source in FIXED_SOURCES if source.suffix == ".c"]
+    return [folder / name for name in (*functions, *fixed)]
 
 
 _DEFINITION = re.compile(

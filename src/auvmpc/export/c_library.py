@@ -3,9 +3,11 @@
 What is written (docs/onboard.md): the controller's sources, exactly those the Python ``nmpc``
 builds and runs where it is compiled (controllers/c_sources.py: the controller and its safety
 shell ``auvmpc_controller.c`` with its header, auvmpc's HPIPM driver ``hpipm_ocp_step.c``,
-CasADi's C code of the functions the Python evaluates ``rti_qp_data.c`` and the scenario's
-sizes and settings ``auvmpc_config.h``), a replay harness (``replay.c``) with the scenario's
-reference preview and obstacles per sample (``replay_data.txt``), a Makefile and a README. HPIPM and BLASFEO are linked from the casadi wheel; nothing of theirs is copied.
+CasADi's C code of the functions the Python evaluates, ``rti_qp_data.c`` and ``ekf_data.c``,
+and the scenario's sizes and settings, ``auvmpc_config.h``), a replay harness (``replay.c``)
+with the scenario's reference preview and obstacles per sample (``replay_data.txt``), a
+Makefile and a README. HPIPM and BLASFEO are linked from the casadi wheel; nothing of theirs
+is copied.
 
 :func:`verify_c` builds the export in a temporary folder, replays a run folder's states
 through it and compares its commands with the run's (``auvmpc verify-c``).

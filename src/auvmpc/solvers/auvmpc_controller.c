@@ -3,8 +3,8 @@
  * shell (controllers/shell.py), step for step, so that it reproduces the Python commands.
  *
  * Generated per scenario: rti_qp_data.c (CasADi's code of the stage QP, the terminal cost,
- * the RK4 step, the estimator's update and propagation and the shell's stabilising feedback,
- * the functions the Python evaluates) and auvmpc_config.h (sizes, weights, limits,
+ * the RK4 step and the shell's stabilising feedback) and, with the estimator, ekf_data.c (its
+ * update and propagation): the functions the Python evaluates and auvmpc_config.h (sizes, weights, limits,
  * settings). hpipm_ocp_step.c is auvmpc's HPIPM driver, the same file the
  * Python controller compiles, built here with a static arena for HPIPM's workspace (the
  * Makefile's ARENA). Static memory only (README.md).
@@ -17,6 +17,9 @@
 #include <string.h>
 
 #include "rti_qp_data.h"
+#if AUVMPC_OFFSET_FREE
+#include "ekf_data.h"
+#endif
 
 #define NX AUVMPC_NX
 #define ND AUVMPC_ND /* the disturbance [X, Y, N] */
