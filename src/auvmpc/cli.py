@@ -659,8 +659,9 @@ def excite(
         str,
         typer.Option(
             "--dof",
-            help="horizontal (surge, sway, yaw: the 3-DOF model) or heave (the vertical "
-            "thrusters: the depth model, a depth scenario)",
+            help="horizontal (surge, sway, yaw: the 3-DOF model), heave (the vertical "
+            "thrusters: the depth model, a depth scenario) or six-dof (all six axes on every "
+            "thruster: a 6-DOF scenario, for every model)",
         ),
     ] = "horizontal",
     overwrite: Overwrite = False,
@@ -765,7 +766,8 @@ def identify(
         typer.Option(
             "--dof",
             help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
-            "with Fz1..), six-dof (roll and pitch, from 6-DOF run folders), or auto: heave "
+            "with Fz1..), six-dof (the 3-DOF, heave and roll and pitch models, from 6-DOF "
+            "run folders), or auto: heave "
             "if the first log is a depth run's, six-dof if a 6-DOF run's",
         ),
     ] = "auto",
@@ -806,8 +808,9 @@ def identify(
     overwrite: Overwrite = False,
 ) -> None:
     """Identify the 3-DOF model (masses, added inertia, damping; optionally a current and a
-    thrust gain) or the heave model (heave mass, damping, net buoyancy) from logs; write the
-    vehicle file, identification.json, identification.md and a fit figure beside it."""
+    thrust gain), the heave model (heave mass, damping, net buoyancy) or, from 6-DOF logs,
+    both and roll and pitch from logs; write the vehicle file, identification.json,
+    identification.md and a fit figure beside it."""
     from auvmpc.identification import LogOptions, write_identification
     from auvmpc.identification.excitation import Dof
     from auvmpc.identification.heave import is_heave_log

@@ -18,7 +18,7 @@ from auvmpc.identification.estimation import CURRENT, GAIN, Identification, Para
 from auvmpc.identification.excitation import Dof
 from auvmpc.identification.logs import LogOptions
 from auvmpc.identification.roll_pitch import PARAMETERS as SIX_DOF_PARAMETERS
-from auvmpc.identification.roll_pitch import six_dof_fields
+from auvmpc.identification.roll_pitch import SIX_DOF_FIELDS, put_identified
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
 
@@ -40,16 +40,6 @@ def _labels(found: Identification) -> list[str]:
     return [f"{name} ({unit})" for name, unit in zip(found.outputs, found.units, strict=True)]
 
 
-def _put(data: dict[str, Any], name: str, value: float) -> None:
-    """Set a vehicle file's field ``name`` (``m11``, or in a section: ``heave.Zw``) in
-    ``data``, copying the sections it changes (the start file's mapping stays as it was)."""
-    *sections, key = name.split(".")
-    for section in sections:
-        data[section] = dict(data[section])
-        data = data[section]
-    data[key] = value
-
-
 # The thrust gain goes into the vehicle file as these fields times the gain.
 GAIN_SCALED = ("thrust_limits", "thrust_rate_limit")
 
@@ -62,16 +52,12 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     ``thrust_rate_limit``): the file then says what the thrusters deliver in the water, in
     the scale of the masses and dampings (docs/identification.md). A current is not a
     vehicle's: it is only in the header."""
-    data = dict(start)
     identified = [p for p in found.parameters if p.excited]
-    six_dof = {p.name: _number(p.value) for p in identified if p.name in SIX_DOF_PARAMETERS}
-    for estimate in identified:
-        if estimate.name not in six_dof:
-            _put(data, estimate.name, _number(estimate.value))
-    if six_dof:  # roll and pitch: the six_dof section's lists and centre of buoyancy
-        fields = six_dof_fields(load_vehicle(start, "--vehicle"), six_dof)
-        data["six_dof"] = dict(data["six_dof"]) | {
-            name: [_number(v) for v in value] for name, value in fields.items()
+    data = put_identified(start, {p.name: _number(p.value) for p in identified})
+    if any(p.name in SIX_DOF_PARAMETERS for p in identified):  # the six_dof lists, rounded
+        data["six_dof"] = {
+            name: [_number(v) for v in value] if name in SIX_DOF_FIELDS[:4] else value
+            for name, value in data["six_dof"].items()
         }
     gain = found.extra(GAIN)
     scaled = gain is not None and gain.excited
@@ -273,11 +259,8 @@ def write_identification(
     from auvmpc.identification.estimation import HorizontalGreyBox, identify
     from auvmpc.identification.heave import HeaveGreyBox, is_heave_log, read_heave_log
     from auvmpc.identification.logs import read_log
-    from auvmpc.identification.roll_pitch import (
-        RollPitchGreyBox,
-        is_six_dof_log,
-        read_roll_pitch_log,
-    )
+    from auvmpc.identification.roll_pitch import is_six_dof_log
+    from auvmpc.identification.six_dof_log import identify_six_dof, read_six_dof_samples
 
     out = Path(out)
     if out.suffix not in (".yaml", ".yml"):
@@ -300,9 +283,9 @@ def write_identification(
             f"the {dof} model has no current or thrust gain: only the horizontal (3-DOF) "
             "identification estimates them",
         )  # fmt: skip
-    if dof is Dof.SIX_DOF:
-        greybox = RollPitchGreyBox(start)  # one line if the start vehicle has no six_dof
-        logs = [read_roll_pitch_log(path, start) for path in log_paths]
+    if dof is Dof.SIX_DOF:  # every model in turn (one line if the start has no six_dof)
+        samples = [read_six_dof_samples(path, start) for path in log_paths]
+        found = identify_six_dof(samples, start, holdout, fixed)
     elif dof is Dof.HEAVE:
         heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section
         logs = [read_heave_log(path, heave.thrusters) for path in log_paths]
@@ -315,7 +298,8 @@ def write_identification(
     else:
         logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
         greybox = HorizontalGreyBox(start, current, thrust_gain)
-    found = identify(logs, start, holdout, greybox, fixed)
+    if dof is not Dof.SIX_DOF:
+        found = identify(logs, start, holdout, greybox, fixed)
     text = vehicle_file_text(start_data, found, vehicle)
     load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
     folder.mkdir(parents=True, exist_ok=True)

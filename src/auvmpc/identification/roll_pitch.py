@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -49,14 +50,15 @@ from auvmpc.models.six_dof import (
     restoring_forces,
 )
 from auvmpc.models.six_dof_params import SixDofParams
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
 
 __all__ = [
     "OUTPUTS",
     "is_six_dof_log",
-    "read_roll_pitch_log",
     "PARAMETERS",
+    "SIX_DOF_FIELDS",
     "RollPitchGreyBox",
+    "put_identified",
     "six_dof_fields",
 ]
 
@@ -103,10 +105,41 @@ def righting_moment(vehicle: VehicleParams) -> float:
     )
 
 
+# The 3-DOF and heave parameters' entries in the six_dof section (six_dof_params'
+# horizontal_equivalent read backwards: m11 = m - X_udot, Iz_added = -N_rdot, m_heave =
+# m - Z_wdot), each as (field, index, value -> entry given the rigid-body mass).
+_TRANSLATIONAL = {
+    "m11": ("added_mass", WRENCH.index("X"), lambda value, mass: mass - value),
+    "m22": ("added_mass", WRENCH.index("Y"), lambda value, mass: mass - value),
+    "heave.m_heave": ("added_mass", WRENCH.index("Z"), lambda value, mass: mass - value),
+    "Iz_added": ("added_mass", WRENCH.index("N"), lambda value, mass: -value),
+    "Xu": ("linear_damping", WRENCH.index("X"), None),
+    "Xuu": ("quadratic_damping", WRENCH.index("X"), None),
+    "Yv": ("linear_damping", WRENCH.index("Y"), None),
+    "Yvv": ("quadratic_damping", WRENCH.index("Y"), None),
+    "heave.Zw": ("linear_damping", WRENCH.index("Z"), None),
+    "heave.Zww": ("quadratic_damping", WRENCH.index("Z"), None),
+    "Nr": ("linear_damping", WRENCH.index("N"), None),
+    "Nrr": ("quadratic_damping", WRENCH.index("N"), None),
+}
+NET_BUOYANCY = "heave.net_buoyancy_N"
+# What six_dof_fields may write: four lists, then a number.
+SIX_DOF_FIELDS = (
+    "added_mass",
+    "linear_damping",
+    "quadratic_damping",
+    "center_of_buoyancy",
+    "displaced_volume",
+)
+
+
 def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str, object]:
     """The six_dof section's fields (added_mass, linear_damping, quadratic_damping,
-    center_of_buoyancy) of ``vehicle`` with the identified ``values`` (by :data:`PARAMETERS`
-    name) put in: the righting moment R as z_b = (z_g W - R) / B."""
+    center_of_buoyancy, displaced_volume) of ``vehicle`` with the identified ``values`` (by
+    identification.json's names) put in: roll and pitch's (:data:`PARAMETERS`) and, for a
+    6-DOF log's identification, the 3-DOF and heave model's entries (:data:`_TRANSLATIONAL`);
+    the net buoyancy B - W as the displaced volume, the righting moment R as
+    z_b = (z_g W - R) / B (with the new B; without an identified R, the start's R kept)."""
     six = _section(vehicle)
     fields: dict[str, object] = {
         name: list(getattr(six, name))
@@ -117,12 +150,48 @@ def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str
         if short in FIELD_OF:
             field, index = FIELD_OF[short]
             fields[field][index] = float(value)  # type: ignore[index]
+        elif name in _TRANSLATIONAL:
+            field, index, entry = _TRANSLATIONAL[name]
+            value = value if entry is None else entry(value, vehicle.mass)
+            fields[field][index] = float(value)  # type: ignore[index]
+    weight, buoyancy = six.weight(vehicle.mass), six.buoyancy
+    if NET_BUOYANCY in values:
+        buoyancy = weight + values[NET_BUOYANCY]
+        fields["displaced_volume"] = float(buoyancy / (six.water_density * six.gravity))
+    righting = values.get(PARAMETERS[-1], righting_moment(vehicle))
     centre = list(six.center_of_buoyancy)
-    if f"{SECTION}.{NAMES[-1]}" in values:
-        z_g, weight = six.center_of_gravity[2], six.weight(vehicle.mass)
-        centre[2] = float((z_g * weight - values[f"{SECTION}.{NAMES[-1]}"]) / six.buoyancy)
-    fields["center_of_buoyancy"] = centre
+    centre[2] = float((six.center_of_gravity[2] * weight - righting) / buoyancy)
+    if PARAMETERS[-1] in values or NET_BUOYANCY in values:
+        fields["center_of_buoyancy"] = centre
     return fields
+
+
+def put_identified(
+    data: dict[str, Any], values: dict[str, float], six_dof: bool = False
+) -> dict[str, Any]:
+    """A vehicle file's mapping ``data`` with the identified ``values`` put in (a copy; the
+    sections it changes copied too): a 3-DOF name (``m11``) as its field, a heave one
+    (``heave.Zw``) in its section; with ``six_dof`` (a 6-DOF log's identification), or where
+    roll and pitch are among them, every value also in the six_dof section
+    (:func:`six_dof_fields`)."""
+    data = dict(data)
+    for name, value in values.items():
+        if name not in PARAMETERS:
+            _put(data, name, value)
+    if six_dof or any(name in PARAMETERS for name in values):
+        start = load_vehicle(data, "--vehicle")
+        data[SECTION] = dict(data[SECTION]) | six_dof_fields(start, values)
+    return data
+
+
+def _put(data: dict[str, Any], name: str, value: float) -> None:
+    """Set a vehicle file's field ``name`` (``m11``, or in a section: ``heave.Zw``) in
+    ``data``, copying the sections it changes."""
+    *sections, key = name.split(".")
+    for section in sections:
+        data[section] = dict(data[section])
+        data = data[section]
+    data[key] = float(value)
 
 
 def _coupling_function(vehicle: VehicleParams) -> ca.Function:
@@ -341,14 +410,6 @@ def read_six_dof_state(path: str | Path, n_thrusters: int) -> tuple[np.ndarray, 
     log = log_from_table(*run_table(path), path, SIX_DOF.names, "F", n_thrusters,
                          outputs=SIX_DOF.names)  # fmt: skip
     return log.velocity, log.thrust, log.sample_time
-
-
-def read_roll_pitch_log(path: str | Path, vehicle: VehicleParams) -> VelocityLog:
-    """The roll and pitch model's log (:func:`roll_pitch_log`) of a 6-DOF run folder, with
-    ``vehicle``'s translational values in the coupling. Like every run folder's log.csv it
-    holds the simulator's true state (a real vehicle's log: its AHRS and DVL)."""
-    state, thrust, sample_time = read_six_dof_state(path, _section(vehicle).n_thrusters)
-    return roll_pitch_log(str(path), sample_time, state, thrust, vehicle)
 
 
 # A log.csv header is one line of column names: far below this.
