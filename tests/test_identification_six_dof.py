@@ -13,10 +13,21 @@ import yaml
 
 from auvmpc.controllers.playback import read_thrust_table
 from auvmpc.errors import ConfigError
-from auvmpc.identification.estimation import identify
+from auvmpc.identification.estimation import (
+    Identification,
+    ParameterEstimate,
+    _sandwich,
+    correlated_lags,
+    identify,
+)
 from auvmpc.identification.excitation import MAX_TILT_RAD
-from auvmpc.identification.report import vehicle_file_text
+from auvmpc.identification.report import (
+    identification_json,
+    markdown_report,
+    vehicle_file_text,
+)
 from auvmpc.identification.roll_pitch import (
+    OUTPUTS,
     PARAMETERS,
     RollPitchGreyBox,
     put_identified,
@@ -79,7 +90,9 @@ def test_roll_pitch_rows_are_the_six_dof_model():
     )
     greybox = RollPitchGreyBox(truth)
     x = state[[SIX_DOF.index(name) for name in ("phi", "theta", "p", "q")]]
-    derivative = np.asarray(greybox.rhs()(x, log.force[0], greybox.start())).ravel()
+    derivative = np.asarray(
+        greybox.rhs()(x, log.force[0, : 2 + greybox.linear_inputs], greybox.start())
+    ).ravel()
     rows = [SIX_DOF.index(name) for name in ("phi", "theta", "p", "q")]
     np.testing.assert_allclose(derivative, expected[rows], rtol=ROUND_OFF_TOL, atol=ROUND_OFF_TOL)
 
@@ -148,3 +161,47 @@ def test_excite_run_identify_every_model_from_one_six_dof_log(tmp_path, monkeypa
     assert RollPitchGreyBox(written).start() == pytest.approx(
         [true_values[name] for name in PARAMETERS], rel=WITHIN, abs=0.02
     )
+
+
+def test_the_sandwich_widens_intervals_only_where_residuals_are_correlated():
+    """A straight-line fit: with white residuals the sandwich variance is the Fisher one
+    (to its sampling error); with residuals correlated over ~10 samples (a model error
+    slower than the sampling) it is several times larger, as the true variance is."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    x = np.sin(np.linspace(0.0, 60.0, n))[:, None]  # the regressor, slowly varying
+    inverse = np.linalg.inv(x.T @ x)
+    white = rng.normal(0.0, 1.0, n)
+    correlated = np.convolve(rng.normal(0.0, 1.0, n + 9), np.ones(10) / np.sqrt(10), "valid")
+    ratios = []
+    for residual in (white, correlated):
+        fisher = residual @ residual / (n - 1) * inverse[0, 0]
+        # rows as output_error stacks a segment: its samples 1..n-1, then its first
+        rows = np.r_[1:n, 0]
+        sandwich = _sandwich(x[rows], residual[rows], inverse, [n - 1], 1)[0, 0]
+        ratios.append(sandwich / fisher)
+    assert 0.7 < ratios[0] < 1.4
+    assert ratios[1] > 4.0
+    assert correlated_lags([white[:, None]]) < 9 <= correlated_lags([correlated[:, None]])
+
+
+def test_a_model_error_warning_is_named_in_every_output():
+    """A parameter identify flags (excited, the log's halves disagree) is named in
+    identification.json, the report and the vehicle file's header."""
+    flagged = ParameterEstimate("six_dof.K_pdot", -0.02, -0.1, -0.14, (-0.17, -0.11), True,
+                                model_error=True)  # fmt: skip
+    fine = ParameterEstimate("six_dof.M_qdot", -0.86, -0.8, -0.85, (-0.87, -0.83), True)
+    found = Identification(
+        parameters=[flagged, fine], logs=["x"], sample_time=0.1, fit_samples=320,
+        validation_samples=80, noise_std=np.full(4, 0.005), equation_error_used=True,
+        validation_rms=np.full(4, 0.006), validation_rms_start=np.full(4, 0.1), iterations=9,
+        solver_status="Solve_Succeeded", substeps=2, outputs=OUTPUTS,
+        units=RollPitchGreyBox.units, model=RollPitchGreyBox.title,
+    )  # fmt: skip
+    data = identification_json(found)
+    assert data["model_error"] == ["six_dof.K_pdot"]
+    assert data["parameters"]["six_dof.K_pdot"]["model_error"] is True
+    assert data["parameters"]["six_dof.M_qdot"]["model_error"] is False
+    assert "**Model error** dominates" in markdown_report(found, "start", None)
+    text = vehicle_file_text(load_vehicle(VEHICLE).model_dump(mode="json"), found, "start")
+    assert "six_dof.K_pdot: -0.14 [-0.17, -0.11]  MODEL ERROR" in text

@@ -848,7 +848,8 @@ def identify(
     for p in found.parameters + found.extras:
         table.add_row(
             p.name, f"{p.start:.4g}", f"{p.value:.4g}", f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]",
-            "fixed" if p.fixed else ("yes" if p.excited else "NO"),
+            "fixed" if p.fixed else ("NO" if not p.excited else
+                                     "model error" if p.model_error else "yes"),
         )  # fmt: skip
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)
@@ -859,6 +860,9 @@ def identify(
     )
     if found.unexcited:
         _warn([f"not excited by the logs, start value kept: {', '.join(found.unexcited)}"])
+    if found.model_error:
+        _warn([f"excited, but model error dominates the fit (the log's halves disagree beyond "
+               f"the interval): {', '.join(found.model_error)}"])  # fmt: skip
     console.print(f"wrote {out} and identification.json, .md, -fit.png beside it")
     if then_run is not None:
         from auvmpc.identification.flight import fly_identified

@@ -108,6 +108,8 @@ def _estimate_line(estimate: ParameterEstimate) -> str:
         kept = "  held at the start value (--fix)"
     elif not estimate.excited:
         kept = "  NOT EXCITED: start value kept"
+    elif estimate.model_error:
+        kept = "  MODEL ERROR: the log's halves disagree beyond the interval"
     return f"{estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}"
 
 
@@ -119,6 +121,7 @@ def _entry(p: ParameterEstimate) -> dict[str, Any]:
         "start": p.start,
         "equation_error": p.equation_error,
         "fixed": p.fixed,
+        "model_error": p.model_error,
     }
 
 
@@ -158,6 +161,7 @@ def identification_json(found: Identification) -> dict[str, Any]:
         "iterations": found.iterations,
         "started_from_equation_error": found.equation_error_used,
         "not_excited": found.unexcited,
+        "model_error": found.model_error,
         "fixed": found.fixed,
     }
 
@@ -177,6 +181,7 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
     ]
     for p in found.parameters + found.extras:
         excited = "fixed" if p.fixed else ("yes" if p.excited else "**no**")
+        excited += ", **model error**" if p.model_error else ""
         lines.append(
             f"| {p.name} | {p.start:.4g} | {p.equation_error:.4g} | {p.value:.4g} | "
             f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] | {excited} |"
@@ -207,6 +212,13 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
         lines += [
             "",
             f"**Not excited** by these logs (start value kept): {', '.join(found.unexcited)}.",
+        ]
+    if found.model_error:
+        lines += [
+            "",
+            f"**Model error** dominates (excited, but the two halves of the logs give values "
+            f"further apart than their intervals allow; value and interval not to be trusted "
+            f"as they stand): {', '.join(found.model_error)}.",
         ]
     if figure:
         lines += ["", f"![held-out fit]({figure})"]

@@ -152,13 +152,17 @@ def heave_log(
     return VelocityLog(name, sample_time, w_up, None, force, outputs=RATE_ONLY)
 
 
-def model_of(which: str, vehicle: VehicleParams) -> GreyBox:
-    """The grey box of ``which`` (:data:`MODELS`) fitted to a 6-DOF log."""
+def model_of(which: str, vehicle: VehicleParams, first: bool = True, last: bool = True) -> GreyBox:
+    """The grey box of ``which`` (:data:`MODELS`) fitted to a 6-DOF log; ``first``: its first
+    round, whose vehicle is the start file (the log's sampling is checked against it);
+    ``last``: its last round, the one reported (the halves are checked in it alone)."""
     if which == "horizontal":
         return HorizontalGreyBox(vehicle)
     if which == "heave":
         return HeaveGreyBox(vehicle, RATE_ONLY)
-    return RollPitchGreyBox(vehicle)
+    greybox = RollPitchGreyBox(vehicle, period_check=first)
+    greybox.split_check = last
+    return greybox
 
 
 # How each model's log is made of the 6-DOF samples.
@@ -196,8 +200,9 @@ def identify_six_dof(
     order = [*MODELS] * ROUNDS
     found: dict[str, Identification] = {}
     current = start
-    for which in order:
-        greybox = model_of(which, current)
+    for round_index, which in enumerate(order):
+        last = round_index >= len(order) - len(MODELS)
+        greybox = model_of(which, current, first=which not in found, last=last)
         logs = [
             LOG_OF[which](name, te, state, thrust, current) for name, te, state, thrust in samples
         ]
