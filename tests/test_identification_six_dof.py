@@ -1,30 +1,54 @@
-"""6-DOF identification's roll and pitch model (issue 27, "6-DOF where the log has attitude
-and rates"): its equations against the 6-DOF model's own, then the 6-DOF excite manoeuvre
-simulated on the BlueROV2 Heavy with noisy attitude and rates, identified from a start 30 %
-off in every roll and pitch parameter."""
+"""6-DOF identification (issue 27, "6-DOF where the log has attitude and rates"): the roll
+and pitch model's equations against the 6-DOF model's own, then the 6-DOF excite manoeuvre
+simulated on the BlueROV2 Heavy with noisy attitude, rates and velocities, every model
+identified from the one log from a start 30 % off in every parameter."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import yaml
 
+from auvmpc.controllers.playback import read_thrust_table
 from auvmpc.errors import ConfigError
-from auvmpc.identification.estimation import identify
-from auvmpc.identification.excitation import MAX_TILT_RAD, Dof, design_excitation
+from auvmpc.identification.estimation import (
+    Identification,
+    ParameterEstimate,
+    _sandwich,
+    correlated_lags,
+    identify,
+)
+from auvmpc.identification.excitation import MAX_TILT_RAD
+from auvmpc.identification.report import (
+    identification_json,
+    markdown_report,
+    vehicle_file_text,
+)
 from auvmpc.identification.roll_pitch import (
+    OUTPUTS,
     PARAMETERS,
     RollPitchGreyBox,
+    put_identified,
     roll_pitch_log,
-    six_dof_fields,
 )
-from auvmpc.models.six_dof import SIX_DOF, integrate, plant_step_length, six_dof_model
+from auvmpc.identification.six_dof_log import (
+    MODELS,
+    identify_six_dof,
+    model_of,
+    read_six_dof_samples,
+)
+from auvmpc.models.six_dof import SIX_DOF, six_dof_model
+from auvmpc.models.six_dof_params import horizontal_equivalent
 from auvmpc.models.vehicle import load_vehicle
-from auvmpc.sim.plant import substeps_for
+from auvmpc.sim.log import read_log_table
 from tests.conftest import ROUND_OFF_TOL
+from tests.test_cli import run_cli
 
 VEHICLE = "bluerov2-heavy"
 # Short: the test's time, not the method's limit (40 s, of which 10 s fade in and out).
-DURATION_S = 40.0
+DURATION_S = 25.0
 SAMPLE_TIME_S = 0.1
 START_ERROR = 0.3
 WITHIN = 0.1
@@ -33,14 +57,23 @@ ATTITUDE_NOISE_RAD = 0.002
 RATE_NOISE = 0.005
 
 
+def _truths(vehicle) -> dict[str, float]:
+    """Every model's parameters (identification.json's names) at ``vehicle``'s values."""
+    values = {}
+    for which in MODELS:
+        greybox = model_of(which, vehicle)
+        values |= dict(zip(greybox.parameters, greybox.start(), strict=True))
+    return values
+
+
 def _start(truth):
-    """The truth with each roll and pitch parameter START_ERROR off, alternately up and down."""
-    values = RollPitchGreyBox(truth).start()
+    """The truth with each parameter of every model START_ERROR off, alternately up and down,
+    in the 3-DOF fields, the heave section and the six_dof section alike."""
+    values = _truths(truth)
     signs = np.where(np.arange(len(values)) % 2 == 0, 1.0, -1.0)
-    data = truth.model_dump(mode="json")
-    wrong = dict(zip(PARAMETERS, values * (1 + START_ERROR * signs), strict=True))
-    data["six_dof"] |= six_dof_fields(truth, wrong)
-    return load_vehicle(data)
+    wrong = {name: value * (1 + START_ERROR * sign)
+             for (name, value), sign in zip(values.items(), signs, strict=True)}  # fmt: skip
+    return load_vehicle(put_identified(truth.model_dump(mode="json"), wrong, six_dof=True))
 
 
 def test_roll_pitch_rows_are_the_six_dof_model():
@@ -57,41 +90,11 @@ def test_roll_pitch_rows_are_the_six_dof_model():
     )
     greybox = RollPitchGreyBox(truth)
     x = state[[SIX_DOF.index(name) for name in ("phi", "theta", "p", "q")]]
-    derivative = np.asarray(greybox.rhs()(x, log.force[0], greybox.start())).ravel()
+    derivative = np.asarray(
+        greybox.rhs()(x, log.force[0, : 2 + greybox.linear_inputs], greybox.start())
+    ).ravel()
     rows = [SIX_DOF.index(name) for name in ("phi", "theta", "p", "q")]
     np.testing.assert_allclose(derivative, expected[rows], rtol=ROUND_OFF_TOL, atol=ROUND_OFF_TOL)
-
-
-def test_six_dof_excite_identifies_roll_and_pitch():
-    truth = load_vehicle(VEHICLE)
-    excitation = design_excitation(truth, DURATION_S, SAMPLE_TIME_S, seed=0, box_m=5.0,
-                                   dof=Dof.SIX_DOF)  # fmt: skip
-    assert excitation.thrust.shape[1] == truth.six_dof.n_thrusters
-    model = six_dof_model(truth)
-    substeps = substeps_for(SAMPLE_TIME_S, plant_step_length(truth, SAMPLE_TIME_S))
-    states = np.zeros((len(excitation.thrust) + 1, SIX_DOF.size))
-    states[0, SIX_DOF.index("z")] = 5.0
-    for k, row in enumerate(excitation.thrust):
-        states[k + 1] = integrate(model, states[k], row, SAMPLE_TIME_S, substeps)
-    tilt = np.abs(states[:, [SIX_DOF.index("phi"), SIX_DOF.index("theta")]])
-    assert 0.1 < tilt.max() <= MAX_TILT_RAD  # roll and pitch moved, within the design's limit
-    rng = np.random.default_rng(0)
-    measured = states.copy()
-    angles = [SIX_DOF.index(name) for name in ("phi", "theta")]
-    rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
-    measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 2))
-    measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
-    start = _start(truth)
-    log = roll_pitch_log("sim", SAMPLE_TIME_S, measured, excitation.thrust, start)
-    found = identify([log], start, greybox=RollPitchGreyBox(start))
-    true_values = dict(zip(PARAMETERS, RollPitchGreyBox(truth).start(), strict=True))
-    assert [p.name for p in found.parameters] == list(PARAMETERS)
-    for estimate in found.parameters:
-        value, (low, high) = true_values[estimate.name], estimate.ci95
-        assert estimate.excited, estimate.name
-        close = abs(estimate.value - value) <= WITHIN * abs(value)
-        assert close or low <= value <= high, (estimate, value)
-    assert np.all(found.validation_rms < 0.5 * found.validation_rms_start)
 
 
 def test_a_log_too_slow_for_roll_and_pitch_is_refused():
@@ -102,3 +105,103 @@ def test_a_log_too_slow_for_roll_and_pitch_is_refused():
     log = roll_pitch_log("slow", 0.5, state, thrust, truth)
     with pytest.raises(ConfigError, match=r"sampled every 0.5 s: roll and pitch oscillate"):
         identify([log], truth, greybox=RollPitchGreyBox(truth))
+
+
+def test_excite_run_identify_every_model_from_one_six_dof_log(tmp_path, monkeypatch, capsys):
+    """``excite --dof six-dof`` writes a 6-DOF scenario and the table of every six_dof
+    thruster; ``run`` plays that table as it is (no depth channel splitting a heave force),
+    so roll and pitch move; from that run's states with an AHRS's, gyro's and DVL's noise
+    and a start 30 % off in all 20 parameters, the 3-DOF, heave and roll and pitch models
+    come out of the one log, into one vehicle file whose six_dof section agrees."""
+    truth = load_vehicle(VEHICLE)
+    scenario = tmp_path / "excite.yaml"
+    code, _, err = run_cli(monkeypatch, capsys, "excite", VEHICLE, "--dof", "six-dof",
+                           "--out", str(scenario), "--duration", str(DURATION_S),
+                           "--box", "5")  # fmt: skip
+    assert code == 0, err
+    assert yaml.safe_load(scenario.read_text())["kind"] == "six-dof"
+    names = truth.six_dof_actuators.layout.names
+    table = read_thrust_table(tmp_path / "excite.csv", SAMPLE_TIME_S, names)
+    run = tmp_path / "run"
+    code, _, err = run_cli(monkeypatch, capsys, "run", str(scenario), "--out", str(run),
+                           "--no-figures")  # fmt: skip
+    assert code == 0, err
+    log = read_log_table(run / "log.csv", "RUN_DIR")
+    played = np.column_stack([log.numbers(name, slice(0, len(table))) for name in names])
+    np.testing.assert_array_equal(played, table)
+    metrics = json.loads((run / "run.json").read_text())["metrics"]
+    assert metrics["thrust_limit_violations"] == metrics["thrust_rate_violations"] == 0
+    assert 0.1 < max(metrics["max_abs_roll_rad"], metrics["max_abs_pitch_rad"]) <= MAX_TILT_RAD
+    name, sample_time, states, thrust = read_six_dof_samples(run, truth)
+    rng = np.random.default_rng(0)
+    measured = states.copy()
+    angles = [SIX_DOF.index(name) for name in ("phi", "theta", "psi")]
+    rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
+    measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 3))
+    measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
+    start = _start(truth)
+    found = identify_six_dof([(name, sample_time, measured, thrust)], start)
+    true_values = _truths(truth)
+    assert [p.name for p in found.parameters] == list(true_values)
+    for estimate in found.parameters:
+        value, (low, high) = true_values[estimate.name], estimate.ci95
+        assert estimate.excited, estimate.name
+        close = abs(estimate.value - value) <= WITHIN * abs(value)
+        assert close or low <= value <= high, (estimate, value)
+    assert found.outputs == ("u", "v", "r", "w", "phi", "theta", "p", "q")
+    assert np.all(found.validation_rms < 0.5 * found.validation_rms_start)
+    # One vehicle file: the 3-DOF fields, the heave section and the six_dof section agree.
+    start_data = start.model_dump(mode="json")
+    written = load_vehicle(yaml.safe_load(vehicle_file_text(start_data, found, "start")))
+    reduced = horizontal_equivalent(written.mass, written.six_dof)
+    for field in ("m11", "m22", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr"):
+        assert reduced[field] == pytest.approx(getattr(written, field), rel=1e-5, abs=1e-9)
+    for field in ("m_heave", "Zw", "Zww", "net_buoyancy_N"):
+        assert reduced[field] == pytest.approx(getattr(written.heave, field), rel=1e-4)
+    assert RollPitchGreyBox(written).start() == pytest.approx(
+        [true_values[name] for name in PARAMETERS], rel=WITHIN, abs=0.02
+    )
+
+
+def test_the_sandwich_widens_intervals_only_where_residuals_are_correlated():
+    """A straight-line fit: with white residuals the sandwich variance is the Fisher one
+    (to its sampling error); with residuals correlated over ~10 samples (a model error
+    slower than the sampling) it is several times larger, as the true variance is."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    x = np.sin(np.linspace(0.0, 60.0, n))[:, None]  # the regressor, slowly varying
+    inverse = np.linalg.inv(x.T @ x)
+    white = rng.normal(0.0, 1.0, n)
+    correlated = np.convolve(rng.normal(0.0, 1.0, n + 9), np.ones(10) / np.sqrt(10), "valid")
+    ratios = []
+    for residual in (white, correlated):
+        fisher = residual @ residual / (n - 1) * inverse[0, 0]
+        # rows as output_error stacks a segment: its samples 1..n-1, then its first
+        rows = np.r_[1:n, 0]
+        sandwich = _sandwich(x[rows], residual[rows], inverse, [n - 1], 1)[0, 0]
+        ratios.append(sandwich / fisher)
+    assert 0.7 < ratios[0] < 1.4
+    assert ratios[1] > 4.0
+    assert correlated_lags([white[:, None]]) < 9 <= correlated_lags([correlated[:, None]])
+
+
+def test_a_model_error_warning_is_named_in_every_output():
+    """A parameter identify flags (excited, the log's halves disagree) is named in
+    identification.json, the report and the vehicle file's header."""
+    flagged = ParameterEstimate("six_dof.K_pdot", -0.02, -0.1, -0.14, (-0.17, -0.11), True,
+                                model_error=True)  # fmt: skip
+    fine = ParameterEstimate("six_dof.M_qdot", -0.86, -0.8, -0.85, (-0.87, -0.83), True)
+    found = Identification(
+        parameters=[flagged, fine], logs=["x"], sample_time=0.1, fit_samples=320,
+        validation_samples=80, noise_std=np.full(4, 0.005), equation_error_used=True,
+        validation_rms=np.full(4, 0.006), validation_rms_start=np.full(4, 0.1), iterations=9,
+        solver_status="Solve_Succeeded", substeps=2, outputs=OUTPUTS,
+        units=RollPitchGreyBox.units, model=RollPitchGreyBox.title,
+    )  # fmt: skip
+    data = identification_json(found)
+    assert data["model_error"] == ["six_dof.K_pdot"]
+    assert data["parameters"]["six_dof.K_pdot"]["model_error"] is True
+    assert data["parameters"]["six_dof.M_qdot"]["model_error"] is False
+    assert "**Model error** dominates" in markdown_report(found, "start", None)
+    text = vehicle_file_text(load_vehicle(VEHICLE).model_dump(mode="json"), found, "start")
+    assert "six_dof.K_pdot: -0.14 [-0.17, -0.11]  MODEL ERROR" in text

@@ -659,8 +659,9 @@ def excite(
         str,
         typer.Option(
             "--dof",
-            help="horizontal (surge, sway, yaw: the 3-DOF model) or heave (the vertical "
-            "thrusters: the depth model, a depth scenario)",
+            help="horizontal (surge, sway, yaw: the 3-DOF model), heave (the vertical "
+            "thrusters: the depth model, a depth scenario) or six-dof (all six axes on every "
+            "thruster: a 6-DOF scenario, for every model)",
         ),
     ] = "horizontal",
     overwrite: Overwrite = False,
@@ -765,7 +766,8 @@ def identify(
         typer.Option(
             "--dof",
             help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
-            "with Fz1..), six-dof (roll and pitch, from 6-DOF run folders), or auto: heave "
+            "with Fz1..), six-dof (the 3-DOF, heave and roll and pitch models, from 6-DOF "
+            "run folders), or auto: heave "
             "if the first log is a depth run's, six-dof if a 6-DOF run's",
         ),
     ] = "auto",
@@ -806,8 +808,9 @@ def identify(
     overwrite: Overwrite = False,
 ) -> None:
     """Identify the 3-DOF model (masses, added inertia, damping; optionally a current and a
-    thrust gain) or the heave model (heave mass, damping, net buoyancy) from logs; write the
-    vehicle file, identification.json, identification.md and a fit figure beside it."""
+    thrust gain), the heave model (heave mass, damping, net buoyancy) or, from 6-DOF logs,
+    both and roll and pitch from logs; write the vehicle file, identification.json,
+    identification.md and a fit figure beside it."""
     from auvmpc.identification import LogOptions, write_identification
     from auvmpc.identification.excitation import Dof
     from auvmpc.identification.heave import is_heave_log
@@ -845,7 +848,8 @@ def identify(
     for p in found.parameters + found.extras:
         table.add_row(
             p.name, f"{p.start:.4g}", f"{p.value:.4g}", f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]",
-            "fixed" if p.fixed else ("yes" if p.excited else "NO"),
+            "fixed" if p.fixed else ("NO" if not p.excited else
+                                     "model error" if p.model_error else "yes"),
         )  # fmt: skip
     console.print(table)
     rms = ", ".join(f"{x:.3g}" for x in found.validation_rms)
@@ -856,6 +860,9 @@ def identify(
     )
     if found.unexcited:
         _warn([f"not excited by the logs, start value kept: {', '.join(found.unexcited)}"])
+    if found.model_error:
+        _warn([f"excited, but model error dominates the fit (the log's halves disagree beyond "
+               f"the interval): {', '.join(found.model_error)}"])  # fmt: skip
     console.print(f"wrote {out} and identification.json, .md, -fit.png beside it")
     if then_run is not None:
         from auvmpc.identification.flight import fly_identified

@@ -13,6 +13,10 @@ Conventions: the plant, the log and the 3-D reference use NED (z down, the depth
 surface); the depth controller works in z up (negative below the surface), as in the tank
 experiment. The conversion happens here and nowhere else: z_up = -z, z_up' = -z'.
 
+A controller that commands every thruster itself (a thrust table played open loop, the
+6-DOF identification manoeuvre of ``auvmpc excite --dof six-dof``) takes the pair's place
+as :class:`EveryThruster`: no depth channel, no mapping.
+
 Thrusters: the first ``n`` entries of ``six_dof.thrusters`` are the horizontal ones, in the
 order of the 3-DOF ``thrusters`` (the horizontal controller's), with that vehicle's thrust and
 rate limits; the rest are the vertical set, with the ``heave`` section's limits. The depth
@@ -32,7 +36,13 @@ from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, SIX_DOF_MEASUREMENT, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["ChannelResult", "HorizontalAndDepth", "ThrustMapping", "ReferenceWithDepth"]
+__all__ = [
+    "ChannelResult",
+    "EveryThruster",
+    "HorizontalAndDepth",
+    "ThrustMapping",
+    "ReferenceWithDepth",
+]
 
 # Slack in a saturation check: far below any physical force.
 CLIP_TOLERANCE_N = 1e-9
@@ -189,4 +199,27 @@ class HorizontalAndDepth(Controller):
             thrust, result.status, result.solve_time_s, info=result.info,
             horizontal_solve_ms=horizontal_ms, depth_solve_ms=depth_ms,
             depth_status=str(depth_result.status), saturated=saturated,
+        )  # fmt: skip
+
+
+class EveryThruster(Controller):
+    """A controller of every ``six_dof`` thruster at once (``thrust-playback`` of a 6-DOF
+    table: roll and pitch moments the depth channel's equal split cannot make), as the 6-DOF
+    loop sees the pair: a :class:`ChannelResult` with the depth channel idle. It sees the
+    6-DOF observation as it is; its command goes to the thrusters unmapped (it keeps its own
+    limits)."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+        self.sample_time = controller.sample_time
+        self.preview_steps = controller.preview_steps
+
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self.controller.reset(horizontal_state(initial_state), initial_thrust)
+
+    def compute(self, observation: Observation) -> ChannelResult:
+        result = self.controller.compute(observation)
+        return ChannelResult(
+            result.thrust, result.status, result.solve_time_s, info=result.info,
+            horizontal_solve_ms=1000.0 * result.solve_time_s,
         )  # fmt: skip

@@ -4,7 +4,9 @@ The controller of an identification manoeuvre (``auvmpc excite``): it ignores th
 state and the reference, and applies row k of its table over [t_k, t_k+1), clipped into the
 thrust and rate limits (a table written by ``excite`` is already inside them). In a
 horizontal scenario it plays the horizontal thrusters ``F1..Fn``; as a depth scenario's
-controller the vertical ones ``Fz1..Fzn`` of the vehicle's heave section. After the
+controller the vertical ones ``Fz1..Fzn`` of the vehicle's heave section; in a 6-DOF
+scenario every ``six_dof`` thruster ``F1..Fn`` (controllers/channels.py's
+:class:`~auvmpc.controllers.channels.EveryThruster`). After the
 last row the thrust ramps to zero within the rate limit. The vehicle stays in a box of
 water because the table's forces are bounded and zero-mean, not by feedback
 (docs/identification.md).
@@ -130,9 +132,14 @@ class ThrustPlayback(Controller):
         cls, model, config, obstacle_count: int = 0, **surroundings: float
     ) -> ThrustPlayback:
         """A depth scenario's (a :class:`DepthControllerConfig`) plays the heave section's
-        vertical thrusters, a horizontal one's the horizontal thrusters."""
+        vertical thrusters, a horizontal one's the horizontal thrusters (a 6-DOF one's every
+        thruster: :meth:`playing` them, experiments/kinds.py)."""
         depth = isinstance(config, DepthControllerConfig)
-        actuators = model.heave.actuators if depth else model.actuators
+        return cls.playing(model, config, model.heave.actuators if depth else model.actuators)
+
+    @classmethod
+    def playing(cls, model, config, actuators: ActuatorSet) -> ThrustPlayback:
+        """The table of ``config`` (columns ``actuators``' names) on those thrusters."""
         table = read_thrust_table(config.playback.path, config.sample_time, actuators.layout.names)
         return cls(model, config.sample_time, table, actuators)
 

@@ -22,7 +22,9 @@ import numpy as np
 
 from auvmpc import __version__
 from auvmpc.controllers.base import Controller
-from auvmpc.controllers.channels import HorizontalAndDepth, ReferenceWithDepth
+from auvmpc.controllers.channels import EveryThruster, HorizontalAndDepth, ReferenceWithDepth
+from auvmpc.controllers.config import ControllerType
+from auvmpc.controllers.playback import ThrustPlayback
 from auvmpc.controllers.registry import build_controller, class_of
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.depth_sensor import PressureSensor
@@ -322,14 +324,27 @@ class SixDofKind(HorizontalKind):
         current, sensor, depth, obstacles = np.random.SeedSequence(scenario.seed).spawn(4)
         return {"current": current, "sensor": sensor, "depth": depth, "obstacles": obstacles}
 
+    def controller(self, scenario, model: VehicleParams) -> Controller:
+        """The horizontal controller, or a thrust table of every thruster (a 6-DOF excite
+        manoeuvre: :class:`EveryThruster`, no depth channel)."""
+        config = scenario.controller
+        if config.type == ControllerType.THRUST_PLAYBACK:
+            filled = config.for_vehicle(model)
+            return EveryThruster(ThrustPlayback.playing(model, filled, model.six_dof_actuators))
+        return super().controller(scenario, model)
+
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario, model = resolved.scenario, resolved.model
-        depth = build_controller(
-            scenario.depth_controller, model, water_depth_m=scenario.water_depth_m
-        )
+        if not isinstance(controller, EveryThruster):  # paired with the depth MPC
+            depth = build_controller(
+                scenario.depth_controller, model, water_depth_m=scenario.water_depth_m
+            )
+            controller = HorizontalAndDepth(
+                controller, depth, model, scenario.depth_controller.preview
+            )
         x, y, psi, u, v, r = scenario.initial_state
         return SessionStart(
-            HorizontalAndDepth(controller, depth, model, scenario.depth_controller.preview),
+            controller,
             ReferenceWithDepth(resolved.reference),
             SimLog.allocate(
                 _steps(scenario), model.six_dof_actuators.layout.names, _sample_time(scenario),

@@ -1,14 +1,17 @@
-"""Identification of a vehicle's 3-DOF and heave models from logs (docs/identification.md).
+"""Identification of a vehicle's 3-DOF, heave and roll and pitch models from logs
+(docs/identification.md).
 
-- :mod:`~auvmpc.identification.excitation`: the manoeuvre (``auvmpc excite``), horizontal
-  or heave
+- :mod:`~auvmpc.identification.excitation`: the manoeuvre (``auvmpc excite``), horizontal,
+  heave or 6-DOF
 - :mod:`~auvmpc.identification.logs`: what a log gives (velocities, thrusts or body force),
   run folders, resampling; :mod:`~auvmpc.identification.rosbag` (ROS 2 bags),
   :mod:`~auvmpc.identification.dataflash` (ArduSub DataFlash logs),
   :mod:`~auvmpc.identification.thruster_curve` (PWM to force)
 - :mod:`~auvmpc.identification.estimation`: equation error, output error, intervals, over
   a grey-box model (the 3-DOF one with a current and a thrust gain as optional unknowns);
-  :mod:`~auvmpc.identification.heave`: the heave model's, its logs
+  :mod:`~auvmpc.identification.heave`: the heave model's, its logs;
+  :mod:`~auvmpc.identification.roll_pitch`: roll and pitch's;
+  :mod:`~auvmpc.identification.six_dof_log`: all three from one 6-DOF log
 - :mod:`~auvmpc.identification.report`: vehicle file, identification.json, report, figure
 """
 

@@ -48,7 +48,13 @@ also:
 3. Intervals (Fisher information). At the optimum the Gauss-Newton Hessian J'J of the
    weighted residuals, scaled by the residual variance, gives the covariance
    ``s^2 (J'J)^-1`` (the segments' initial velocities included as nuisance parameters);
-   95 % intervals are +-1.96 standard deviations (Klein and Morelli 2006, sec. 6.2).
+   95 % intervals are +-1.96 standard deviations (Klein and Morelli 2006, sec. 6.2). That
+   holds for white residuals; model error (an input noisier than assumed, a term left out)
+   correlates them in time and the Fisher variance is then too small. So each variance is
+   the larger of it and the sandwich ``(J'J)^-1 S (J'J)^-1``, S the long-run covariance of
+   the per-sample scores ``J_t' r_t`` within each segment with Bartlett weights out to the
+   last lag the residuals are correlated at (Newey and West 1987; for output error, Morelli
+   and Klein 1997: :func:`_sandwich`).
 4. Excitation. A parameter is *excited* if its interval is narrower than its value
    (half-width <= 0.5 |value|) or if its interval moves its equation's force by less than
    :data:`SENSITIVITY_SHARE` of that force's RMS (a parameter that is small but well
@@ -60,6 +66,10 @@ also:
 5. Validation: the held-out end of each log is simulated from its first measured
    velocity with the identified and with the start parameters (the start without a current
    and with gain 1); RMS of the differences.
+6. Model error (``GreyBox.split_check``: the roll and pitch model). The final fit is
+   repeated on each half of the fitted logs; an excited parameter whose two values are
+   further apart than their intervals allow together is named (``model_error``): the
+   intervals do not hold what dominates its fit.
 
 The steps are written once over a :class:`GreyBox`: the model's parameters and bounds, its
 state and what the log measures of it, its equations as a CasADi function of the
@@ -84,7 +94,7 @@ from scipy.signal import savgol_filter
 
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import MIN_SAMPLES, VELOCITY_NAMES, VelocityLog
-from auvmpc.models.integrators import rk4_step
+from auvmpc.models.integrators import rk4_step, rk4_step_time_varying
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
@@ -240,6 +250,15 @@ class GreyBox(ABC):
     state_size: int
     title: str  # for the vehicle file's header and the report
     extras: tuple[str, ...] = ()  # of ``parameters``: not the vehicle's, in the maps only
+    # The last ``linear_inputs`` entries of the model's input are measured signals that
+    # change within a sample (a roll model's yaw rate): :meth:`applied` gives them at the
+    # sample's start and, as further columns, at its end, then their rates times the sample
+    # time at both; the model goes between them by the cubic through those (the rest is
+    # held, as a thrust is).
+    linear_inputs: int = 0
+    # Whether identify checks the fit on each half of the logs (step 6): a model whose
+    # intervals are known to miss some of what it leaves out (roll and pitch).
+    split_check: bool = False
 
     @property
     @abstractmethod
@@ -492,22 +511,42 @@ def equation_error(
 @dataclass
 class _Model:
     """The simulated model (a :meth:`GreyBox.rhs`) for one sample time: one RK4-integrated
-    sample."""
+    sample, its input held over it but for the last ``linear`` entries, which follow the
+    cubic Hermite curve through their values and rates at the sample's start and end
+    (:attr:`GreyBox.linear_inputs`)."""
 
     sample_time: float
     substeps: int
     rhs: ca.Function  # (x, input, theta) -> x'
+    linear: int = 0
 
     def __post_init__(self) -> None:
-        nu, tau = ca.SX.sym("x", self.rhs.size1_in(0)), ca.SX.sym("input", self.rhs.size1_in(1))
+        size = self.rhs.size1_in(1)
+        nu, tau = ca.SX.sym("x", self.rhs.size1_in(0)), ca.SX.sym("input", size + 3 * self.linear)
         theta = ca.SX.sym("theta", self.rhs.size1_in(2))
+        h = self.sample_time / self.substeps
 
         def f(x, u):
             return self.rhs(x, u, theta)
 
         x = nu
-        for _ in range(self.substeps):
-            x = rk4_step(f, x, tau, self.sample_time / self.substeps)
+        if self.linear == 0:
+            for _ in range(self.substeps):
+                x = rk4_step(f, x, tau, h)
+        else:
+            m = self.linear
+            start, end = tau[size - m : size], tau[size : size + m]
+            slope_a, slope_b = tau[size + m : size + 2 * m], tau[size + 2 * m :]
+
+            def varying(t, x):  # t: s into the sample; cubic Hermite between its ends
+                s = t / self.sample_time
+                h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+                h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+                moving = h00 * start + h10 * slope_a + h01 * end + h11 * slope_b
+                return self.rhs(x, ca.vertcat(tau[: size - m], moving), theta)
+
+            for i in range(self.substeps):
+                x = rk4_step_time_varying(varying, i * h, x, h)
         self.step = ca.Function("step", [nu, tau, theta], [x])
         self._rollouts: dict[int, ca.Function] = {}
 
@@ -570,7 +609,12 @@ def output_error(
     (the current's body components at the logged headings) is added to what it predicts."""
     greybox = greybox or HorizontalGreyBox(vehicle)
     sample_time = logs[0].sample_time
-    model = model or _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
+    model = model or _Model(
+        sample_time,
+        model_substeps(sample_time, greybox, logs),
+        greybox.rhs(),
+        greybox.linear_inputs,
+    )
     start = greybox.start()
     scale = _scales(start, candidates[0], greybox)
     weight = 1.0 / noise_levels(logs) if weight is None else np.asarray(weight, dtype=float)
@@ -578,7 +622,7 @@ def output_error(
     z = ca.MX.sym("z", n_parameters)
     theta = z * scale
     length = max(MIN_SAMPLES // 4, round(SEGMENT_S / sample_time))
-    initial, starts, residuals = [], [], []
+    initial, starts, residuals, lengths = [], [], [], []
     for log in logs:
         tau = greybox.applied(log)
         for a, b in _segments(log, length):
@@ -586,6 +630,7 @@ def output_error(
             initial.append(x0)
             starts.append((log, a))
             steps = b - a
+            lengths.append(steps)
             inputs = greybox.input(tau[a:b].T, theta)
             predicted = model.rollout(steps)(x0, inputs, ca.repmat(theta, 1, steps))
             measured = log.velocity[a + 1 : b + 1].T
@@ -645,13 +690,18 @@ def output_error(
     variance = float(r_value @ r_value) / dof
     information = J.T @ J
     half_width = np.zeros(n_parameters)
+    outputs = len(greybox.measured)
     try:
-        covariance = variance * np.linalg.inv(information)
-        std = np.sqrt(np.clip(np.diag(covariance)[: int((~is_fixed).sum())], 0.0, None))
+        inverse = np.linalg.inv(information)
+        fisher = variance * np.diag(inverse)
+        # Colored residuals (model error) make the Fisher variance too small: the larger of
+        # it and the sandwich's (step 3).
+        sandwich = np.diag(_sandwich(J, r_value, inverse, lengths, outputs))
+        variances = np.maximum(fisher, sandwich)[: int((~is_fixed).sum())]
+        std = np.sqrt(np.clip(variances, 0.0, None))
     except np.linalg.LinAlgError:
         std = np.full(int((~is_fixed).sum()), np.inf)
     half_width[~is_fixed] = Z95 * std * scale[~is_fixed]
-    outputs = len(greybox.measured)
     residual_rms = np.sqrt(np.mean(r_value.reshape(-1, outputs) ** 2, axis=0)) / weight
     return _Fit(
         theta=optimum[:n_parameters] * scale,
@@ -661,6 +711,61 @@ def output_error(
         iterations=int(stats.get("iter_count", -1)),
         status=str(stats.get("return_status", "")),
     )
+
+
+def _sandwich(
+    J: np.ndarray, r: np.ndarray, inverse: np.ndarray, lengths: list[int], outputs: int
+) -> np.ndarray:
+    """The covariance of the output-error estimate with serially correlated residuals
+    (step 3): ``H^-1 S H^-1`` with ``H = J'J`` (``inverse``: H^-1) and ``S`` the long-run
+    covariance of the per-sample scores ``g_t = J_t' r_t`` within each segment, Bartlett
+    weights out to :func:`correlated_lags` (Newey and West 1987; for output error, Morelli
+    and Klein 1997). ``J``, ``r``: rows as output_error stacks them, per segment its
+    ``steps`` samples (``lengths``) of ``outputs`` rows each, then its first sample."""
+    scores, series, at = [], [], 0
+    for steps in lengths:
+        rows = (steps + 1) * outputs
+        block_r, block_j = r[at : at + rows], J[at : at + rows]
+        at += rows
+        # in time order: the first sample's rows come last in the block
+        order = np.r_[steps * outputs : rows, 0 : steps * outputs]
+        block_r = block_r[order].reshape(steps + 1, outputs)
+        block_j = block_j[order].reshape(steps + 1, outputs, -1)
+        scores.append(np.einsum("tij,ti->tj", block_j, block_r))
+        series.append(block_r)
+    lags = correlated_lags(series)
+    meat = np.zeros((J.shape[1], J.shape[1]))
+    for g in scores:
+        meat += g.T @ g
+        for k in range(1, min(lags, len(g) - 1) + 1):
+            cross = g[:-k].T @ g[k:]
+            meat += (1.0 - k / (lags + 1)) * (cross + cross.T)
+    return inverse @ meat @ inverse
+
+
+def correlated_lags(series: list[np.ndarray]) -> int:
+    """How many lags the residuals ``series`` (per segment, (n, outputs)) stay correlated:
+    the last lag at which an output's autocorrelation, pooled over the segments, is outside
+    the band white noise stays in (2 / sqrt(samples)), before :data:`QUIET_LAGS` lags in a
+    row inside it; at most a quarter of the shortest segment. The last, not the first: a
+    model error at the roll period swings its autocorrelation through zero within a quarter
+    period and back."""
+    samples = sum(len(x) for x in series)
+    band = 2.0 / math.sqrt(samples)
+    power = np.maximum(sum(np.sum(x**2, axis=0) for x in series), 1e-300)
+    longest = max(1, min(len(x) for x in series) // 4)
+    lags = 0
+    for k in range(1, longest + 1):
+        pooled = sum(np.sum(x[:-k] * x[k:], axis=0) for x in series) / power
+        if np.any(np.abs(pooled) > band):
+            lags = k
+        elif k - lags >= QUIET_LAGS:
+            break
+    return lags
+
+
+# Lags in a row inside the white-noise band that end the residuals' correlation.
+QUIET_LAGS = 5
 
 
 def _bounds(greybox: GreyBox) -> tuple[np.ndarray, np.ndarray]:
@@ -686,6 +791,9 @@ class ParameterEstimate:
     ci95: tuple[float, float]
     excited: bool
     fixed: bool = False  # held at the start value as asked (``--fix``): not estimated
+    # Excited, but the log's two halves give values further apart than their intervals
+    # allow: something the model and its intervals do not hold dominates the fit (step 6).
+    model_error: bool = False
 
 
 @dataclass
@@ -715,6 +823,11 @@ class Identification:
     @property
     def unexcited(self) -> list[str]:
         return [p.name for p in self.parameters + self.extras if not (p.excited or p.fixed)]
+
+    @property
+    def model_error(self) -> list[str]:
+        """The excited parameters the halves of the logs disagree on (step 6)."""
+        return [p.name for p in self.parameters + self.extras if p.model_error]
 
     @property
     def fixed(self) -> list[str]:
@@ -793,7 +906,12 @@ def identify(
     # noise's: the fit starts from the start file's value there.
     lower, upper = greybox.lower, greybox.upper
     initial = np.where((first >= lower) & (first <= upper), first, start)
-    model = _Model(sample_time, model_substeps(sample_time, greybox, logs), greybox.rhs())
+    model = _Model(
+        sample_time,
+        model_substeps(sample_time, greybox, logs),
+        greybox.rhs(),
+        greybox.linear_inputs,
+    )
     # Weighted first by the filter's noise estimate, then again by the residuals' (the
     # filter also removes fast dynamics it cannot follow), all parameters free but the held
     # ones; those the second fit finds unexcited are then fixed at their start values for a
@@ -807,9 +925,10 @@ def identify(
     )
     terms = np.array([name not in greybox.extras for name in greybox.parameters])
     excited = _excited(fit.theta, fit.half_width, A, b, terms) & estimated
-    final = fit
+    final, fixed_now = fit, fixed
     if not excited[estimated].all():
         held = tuple(name for name, ok in zip(greybox.parameters, excited, strict=True) if not ok)
+        fixed_now = held
         final = output_error(
             fit_logs,
             vehicle,
@@ -818,6 +937,11 @@ def identify(
             weight=weight,
             model=model,
             greybox=greybox,
+        )
+    inconsistent = np.zeros(len(greybox.parameters), dtype=bool)
+    if greybox.split_check:
+        inconsistent = (
+            _halves_disagree(fit_logs, vehicle, final, fixed_now, weight, model, greybox) & excited
         )
     # An excited parameter's interval is the final fit's; an unexcited one's the fit that
     # judged it (the final one holds it fixed); a held one's is its value.
@@ -832,6 +956,7 @@ def identify(
             ci95=(float(center[i] - half_width[i]), float(center[i] + half_width[i])),
             excited=bool(excited[i]),
             fixed=name in fixed,
+            model_error=bool(inconsistent[i]),
         )
         for i, name in enumerate(greybox.parameters)
     ]
@@ -870,6 +995,37 @@ def identify(
         model=greybox.title,
         extras=[p for p in estimates if p.name in greybox.extras],
     )
+
+
+def _halves_disagree(
+    logs: list[VelocityLog],
+    vehicle: VehicleParams,
+    final: _Fit,
+    fixed: tuple[str, ...],
+    weight: np.ndarray,
+    model: _Model,
+    greybox: GreyBox,
+) -> np.ndarray:
+    """Step 6: the final fit repeated on each half of the fitted logs (from its values, the
+    same parameters held); (p,) whether the halves' values are further apart than their
+    95 % intervals allow together (|a - b| > sqrt(h_a^2 + h_b^2)). With a model that holds
+    and intervals that carry its errors, that happens to 1 parameter in 20; model error
+    (something the model leaves out or gets wrong, or an input noisier than the intervals
+    assume) moves the halves apart."""
+    halves = []
+    for part in (0, 1):
+        pieces = []
+        for log in logs:
+            cut = log.steps // 2
+            pieces.append(log.part(0, cut) if part == 0 else log.part(cut, log.steps))
+        halves.append(
+            output_error(
+                pieces, vehicle, [final.theta], fixed, weight=weight, model=model, greybox=greybox
+            )  # fmt: skip
+        )
+    a, b = halves
+    together = np.hypot(a.half_width, b.half_width)
+    return np.abs(a.theta - b.theta) > together
 
 
 def _held_out(

@@ -339,12 +339,16 @@ def excitation_scenario(
 
     A heave manoeuvre is a depth scenario (``kind: depth``): the vehicle starts at rest
     :data:`DEPTH_MARGIN_M` below the box of depth, in water as deep again below it, the
-    pressure sensor sampling every row; the reference holds the start depth."""
+    pressure sensor sampling every row; the reference holds the start depth. A 6-DOF one is
+    a 6-DOF scenario (``kind: six-dof``) whose thrust-playback drives every ``six_dof``
+    thruster (no depth channel: controllers/channels.py's ``EveryThruster``), from rest as
+    deep below the surface; its reference marks the start and holds the start depth."""
     steps = len(excitation.thrust)
     te = excitation.sample_time
     heave = excitation.dof is Dof.HEAVE
+    kind = {Dof.HEAVE: {"kind": "depth"}, Dof.SIX_DOF: {"kind": "six-dof"}}
     scenario = {
-        **({"kind": "depth"} if heave else {}),
+        **kind.get(excitation.dof, {}),
         "name": name,
         "description": (
             f"identification manoeuvre (auvmpc excite): orthogonal multisine forces, "
@@ -366,6 +370,13 @@ def excitation_scenario(
         scenario |= {
             "reference": {"type": "waypoints", "points": [[0.0, 0.0], [0.1, 0.0]], "speed": 0.1},
             "initial_state": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }
+    if excitation.dof is Dof.SIX_DOF:
+        start_depth = box_m + DEPTH_MARGIN_M
+        scenario["reference"] = scenario["reference"] | {"depth": {"start_m": start_depth}}
+        scenario |= {
+            "initial_depth_m": start_depth,
+            "water_depth_m": round(2.0 * start_depth, 9),
         }
     controller = {"type": "thrust-playback", "sample_time": te, "playback": {"path": table}}
     return scenario | {"controller": controller, "seed": 0}
@@ -400,12 +411,6 @@ def write_excitation(
         raise ConfigError(
             "--duration", duration, f"too short: at least {MIN_DURATION_FACTOR * FADE_S:g} s"
         )
-    if Dof(dof) is Dof.SIX_DOF:
-        raise ConfigError(
-            "--dof", str(dof), "a 6-DOF scenario cannot play the manoeuvre yet (its depth "
-            "channel splits one heave force equally over the vertical thrusters, so no roll "
-            "or pitch moment): design_excitation(..., dof=Dof.SIX_DOF) gives the table",
-        )  # fmt: skip
     params = load_vehicle(vehicle, "VEHICLE")
     excitation = design_excitation(params, duration, sample_time, seed, box_m, dof=dof)
     named = vehicle

@@ -14,7 +14,10 @@ What a log gives (:func:`read_heave_log`, a run folder's log.csv):
 - the depth alone (a pressure sensor): the state ``[z, w]`` is fitted to the measured z;
   the equation-error start takes w and w' as the first and second Savitzky-Golay
   derivatives of z;
-- the depth and the heave rate (a DVL's w, or an estimator's): both are fitted.
+- the depth and the heave rate (a DVL's w, or an estimator's): both are fitted;
+- the heave rate alone (``RATE_ONLY``: a 6-DOF log's body heave velocity, whose depth also
+  moves with the tilt, identification/six_dof_log.py): the state is ``[w]``, its equation
+  the heave model's second row (the depth has no part in it).
 
 A depth run's log.csv (``kind: depth``) holds the simulator's true ``z, w`` and the pressure
 sensor's ``z_measured``: identification reads ``z_measured`` alone, what the vehicle
@@ -54,16 +57,17 @@ THRUST_PREFIX = "Fz"
 # What the log's columns are called, by the outputs they give.
 DEPTH_ONLY = ("z",)
 DEPTH_AND_RATE = ("z", "w")
+RATE_ONLY = ("w",)
 
 
 class HeaveGreyBox(GreyBox):
     """The heave model (module docstring) of ``vehicle``'s heave section, fitted to the
-    logged ``outputs``: the depth z alone, or z and the heave rate w."""
+    logged ``outputs``: the depth z alone, z and the heave rate w, or w alone (then the state
+    is [w])."""
 
     parameters = PARAMETERS
     lower = np.array([1e-9, -np.inf, -np.inf, -np.inf])  # a mass > 0, damping <= 0
     upper = np.array([np.inf, 0.0, 0.0, np.inf])  # the net buoyancy either way
-    state_size = DEPTH.size
     title = "grey-box heave model"
 
     def __init__(self, vehicle: VehicleParams, outputs: tuple[str, ...] = DEPTH_ONLY) -> None:
@@ -72,12 +76,16 @@ class HeaveGreyBox(GreyBox):
                 "--vehicle", vehicle.name, "has no heave section: heave identification starts "
                 "from one (the vertical thrusters, a first guess of each parameter)",
             )  # fmt: skip
-        if outputs not in (DEPTH_ONLY, DEPTH_AND_RATE):
-            raise ValueError(f"outputs must be {DEPTH_ONLY} or {DEPTH_AND_RATE}, got {outputs}")
+        if outputs not in (DEPTH_ONLY, DEPTH_AND_RATE, RATE_ONLY):
+            raise ValueError(
+                f"outputs must be {DEPTH_ONLY}, {DEPTH_AND_RATE} or {RATE_ONLY}, got {outputs}"
+            )
         self.vehicle, self.heave = vehicle, vehicle.heave
         self.outputs = outputs
-        self.units = ("m", "m/s")[: len(outputs)]
-        self.measured = tuple(DEPTH.index(name) for name in outputs)
+        self.units = tuple({"z": "m", "w": "m/s"}[name] for name in outputs)
+        self.states = RATE_ONLY if outputs == RATE_ONLY else DEPTH.names
+        self.state_size = len(self.states)
+        self.measured = tuple(self.states.index(name) for name in outputs)
 
     @property
     def thrusters(self) -> int:
@@ -87,11 +95,13 @@ class HeaveGreyBox(GreyBox):
         return np.array([float(getattr(self.heave, name)) for name in FIELDS])
 
     def rhs(self) -> ca.Function:
-        """[z', w'] by :func:`auvmpc.models.heave.heave_dynamics` itself, its parameters
-        symbols: the model written once."""
-        x, force, theta = ca.SX.sym("x", DEPTH.size), ca.SX.sym("Fz"), ca.SX.sym("theta", 4)
+        """[z', w'] (or [w']) by :func:`auvmpc.models.heave.heave_dynamics` itself, its
+        parameters symbols: the model written once."""
+        x, force, theta = ca.SX.sym("x", self.state_size), ca.SX.sym("Fz"), ca.SX.sym("theta", 4)
         coefficients = SimpleNamespace(**dict(zip(FIELDS, ca.vertsplit(theta), strict=True)))
-        return ca.Function("heave_rhs", [x, force, theta], [heave_dynamics(x, force, coefficients)])
+        state = x if self.state_size == DEPTH.size else ca.vertcat(0.0, x)
+        derivative = heave_dynamics(state, force, coefficients)[DEPTH.size - self.state_size :]
+        return ca.Function("heave_rhs", [x, force, theta], [derivative])
 
     def applied(self, log: VelocityLog) -> np.ndarray:
         """The vertical force of the commands (N, 1): the thrusts' sum (or the log's own)."""
@@ -101,9 +111,12 @@ class HeaveGreyBox(GreyBox):
         self, log: VelocityLog, theta: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """[z, w] and [w, w'] smoothed (N+1, 2) each: w and w' from the logged w, or the
-        first and second derivatives of z where the log has the depth alone (the output map
-        has no parameters: ``theta`` is not read)."""
+        first and second derivatives of z where the log has the depth alone; [w] and [w']
+        where it has the rate alone (the output map has no parameters: ``theta`` is not
+        read)."""
         signals, rates = smoothed(log)
+        if self.outputs == RATE_ONLY:
+            return signals, rates
         if self.outputs == DEPTH_AND_RATE:
             return signals, np.column_stack([signals[:, 1], rates[:, 1]])
         w = rates[:, 0]
@@ -115,7 +128,7 @@ class HeaveGreyBox(GreyBox):
 
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         """One block, heave: ``-m w' + Zw w + Zww |w| w + B = -F`` (A (1, N, 4), b (1, N))."""
-        w, w_dot = x[:, 1], x_dot[:, 1]
+        w, w_dot = x[:, -1], x_dot[:, -1]  # w is the state's last entry
         A = np.column_stack([-w_dot, w, np.abs(w) * w, np.ones_like(w)])[None]
         return A, -inputs[:, 0][None]
 
@@ -126,7 +139,7 @@ class HeaveGreyBox(GreyBox):
         return 0.01 * np.array([self.heave.m_heave] * 3 + [thrust])
 
     def damping_rate(self, logs: list[VelocityLog]) -> float:
-        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, 1])) for log in logs)
+        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, -1])) for log in logs)
         return abs(self.heave.Zw + 2.0 * self.heave.Zww * top) / self.heave.m_heave
 
 

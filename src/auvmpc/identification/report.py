@@ -18,7 +18,7 @@ from auvmpc.identification.estimation import CURRENT, GAIN, Identification, Para
 from auvmpc.identification.excitation import Dof
 from auvmpc.identification.logs import LogOptions
 from auvmpc.identification.roll_pitch import PARAMETERS as SIX_DOF_PARAMETERS
-from auvmpc.identification.roll_pitch import six_dof_fields
+from auvmpc.identification.roll_pitch import SIX_DOF_FIELDS, put_identified
 from auvmpc.models.vehicle import load_vehicle, validated_vehicle, vehicle_data
 from auvmpc.plots import save_figures
 
@@ -40,16 +40,6 @@ def _labels(found: Identification) -> list[str]:
     return [f"{name} ({unit})" for name, unit in zip(found.outputs, found.units, strict=True)]
 
 
-def _put(data: dict[str, Any], name: str, value: float) -> None:
-    """Set a vehicle file's field ``name`` (``m11``, or in a section: ``heave.Zw``) in
-    ``data``, copying the sections it changes (the start file's mapping stays as it was)."""
-    *sections, key = name.split(".")
-    for section in sections:
-        data[section] = dict(data[section])
-        data = data[section]
-    data[key] = value
-
-
 # The thrust gain goes into the vehicle file as these fields times the gain.
 GAIN_SCALED = ("thrust_limits", "thrust_rate_limit")
 
@@ -62,16 +52,12 @@ def vehicle_file_text(start: dict[str, Any], found: Identification, start_name: 
     ``thrust_rate_limit``): the file then says what the thrusters deliver in the water, in
     the scale of the masses and dampings (docs/identification.md). A current is not a
     vehicle's: it is only in the header."""
-    data = dict(start)
     identified = [p for p in found.parameters if p.excited]
-    six_dof = {p.name: _number(p.value) for p in identified if p.name in SIX_DOF_PARAMETERS}
-    for estimate in identified:
-        if estimate.name not in six_dof:
-            _put(data, estimate.name, _number(estimate.value))
-    if six_dof:  # roll and pitch: the six_dof section's lists and centre of buoyancy
-        fields = six_dof_fields(load_vehicle(start, "--vehicle"), six_dof)
-        data["six_dof"] = dict(data["six_dof"]) | {
-            name: [_number(v) for v in value] for name, value in fields.items()
+    data = put_identified(start, {p.name: _number(p.value) for p in identified})
+    if any(p.name in SIX_DOF_PARAMETERS for p in identified):  # the six_dof lists, rounded
+        data["six_dof"] = {
+            name: [_number(v) for v in value] if name in SIX_DOF_FIELDS[:4] else value
+            for name, value in data["six_dof"].items()
         }
     gain = found.extra(GAIN)
     scaled = gain is not None and gain.excited
@@ -122,6 +108,8 @@ def _estimate_line(estimate: ParameterEstimate) -> str:
         kept = "  held at the start value (--fix)"
     elif not estimate.excited:
         kept = "  NOT EXCITED: start value kept"
+    elif estimate.model_error:
+        kept = "  MODEL ERROR: the log's halves disagree beyond the interval"
     return f"{estimate.name}: {estimate.value:.6g} [{low:.6g}, {high:.6g}]{kept}"
 
 
@@ -133,6 +121,7 @@ def _entry(p: ParameterEstimate) -> dict[str, Any]:
         "start": p.start,
         "equation_error": p.equation_error,
         "fixed": p.fixed,
+        "model_error": p.model_error,
     }
 
 
@@ -172,6 +161,7 @@ def identification_json(found: Identification) -> dict[str, Any]:
         "iterations": found.iterations,
         "started_from_equation_error": found.equation_error_used,
         "not_excited": found.unexcited,
+        "model_error": found.model_error,
         "fixed": found.fixed,
     }
 
@@ -191,6 +181,7 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
     ]
     for p in found.parameters + found.extras:
         excited = "fixed" if p.fixed else ("yes" if p.excited else "**no**")
+        excited += ", **model error**" if p.model_error else ""
         lines.append(
             f"| {p.name} | {p.start:.4g} | {p.equation_error:.4g} | {p.value:.4g} | "
             f"[{p.ci95[0]:.4g}, {p.ci95[1]:.4g}] | {excited} |"
@@ -221,6 +212,13 @@ def markdown_report(found: Identification, start_name: str, figure: str | None) 
         lines += [
             "",
             f"**Not excited** by these logs (start value kept): {', '.join(found.unexcited)}.",
+        ]
+    if found.model_error:
+        lines += [
+            "",
+            f"**Model error** dominates (excited, but the two halves of the logs give values "
+            f"further apart than their intervals allow; value and interval not to be trusted "
+            f"as they stand): {', '.join(found.model_error)}.",
         ]
     if figure:
         lines += ["", f"![held-out fit]({figure})"]
@@ -273,11 +271,8 @@ def write_identification(
     from auvmpc.identification.estimation import HorizontalGreyBox, identify
     from auvmpc.identification.heave import HeaveGreyBox, is_heave_log, read_heave_log
     from auvmpc.identification.logs import read_log
-    from auvmpc.identification.roll_pitch import (
-        RollPitchGreyBox,
-        is_six_dof_log,
-        read_roll_pitch_log,
-    )
+    from auvmpc.identification.roll_pitch import is_six_dof_log
+    from auvmpc.identification.six_dof_log import identify_six_dof, read_six_dof_samples
 
     out = Path(out)
     if out.suffix not in (".yaml", ".yml"):
@@ -300,9 +295,9 @@ def write_identification(
             f"the {dof} model has no current or thrust gain: only the horizontal (3-DOF) "
             "identification estimates them",
         )  # fmt: skip
-    if dof is Dof.SIX_DOF:
-        greybox = RollPitchGreyBox(start)  # one line if the start vehicle has no six_dof
-        logs = [read_roll_pitch_log(path, start) for path in log_paths]
+    if dof is Dof.SIX_DOF:  # every model in turn (one line if the start has no six_dof)
+        samples = [read_six_dof_samples(path, start) for path in log_paths]
+        found = identify_six_dof(samples, start, holdout, fixed)
     elif dof is Dof.HEAVE:
         heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section
         logs = [read_heave_log(path, heave.thrusters) for path in log_paths]
@@ -315,7 +310,8 @@ def write_identification(
     else:
         logs = [read_log(path, start.n_thrusters, options) for path in log_paths]
         greybox = HorizontalGreyBox(start, current, thrust_gain)
-    found = identify(logs, start, holdout, greybox, fixed)
+    if dof is not Dof.SIX_DOF:
+        found = identify(logs, start, holdout, greybox, fixed)
     text = vehicle_file_text(start_data, found, vehicle)
     load_vehicle(yaml.safe_load(text), "identified vehicle")  # loads as-is, or a bug here
     folder.mkdir(parents=True, exist_ok=True)

@@ -19,19 +19,24 @@ gravity times the weight when W = B), which the vehicle file holds as the centre
 buoyancy's z (x_g, y_g, x_b, y_b kept from the start file).
 
 ``K`` and ``M`` are the moments the model does not estimate, known from the log (the
-model's input, held over each sample with the yaw rate ``r``): the thrusters' (``T F``, rows
+model's input, held over each sample): the thrusters' (``T F``, rows
 K and M) and the 6-DOF model's coupling terms, ``-[C_RB(nu) nu + C_A(nu) nu]`` and the
 off-diagonal mass terms ``-M_(K,M),j nu_j'``, from the logged (smoothed) velocities and the
 vehicle's translational and yaw values (:func:`coupling_moments`; the Munk moment
 ``(Z_wdot - X_udot) u w`` in pitch the largest of them). Assumed: no current (the log's
 velocities are through the water) and those translational values right: identify the
 3-DOF and heave models first (``auvmpc identify --dof six-dof`` does, on the same log).
+The logged ``u, v, w, r`` enter the coupling as measured at each sample's two ends and go
+linearly in between (:attr:`RollPitchGreyBox.linear_inputs`): held at their mean, they
+left a model error that biased K_pdot, M_qdot and the righting moment by 1 to 3 % while the
+vehicle turned at 2.5 rad/s, outside their intervals (docs/identification.md).
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -47,16 +52,18 @@ from auvmpc.models.six_dof import (
     coriolis_added_mass,
     coriolis_rigid_body,
     restoring_forces,
+    six_dof_model,
 )
 from auvmpc.models.six_dof_params import SixDofParams
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams, load_vehicle
 
 __all__ = [
     "OUTPUTS",
     "is_six_dof_log",
-    "read_roll_pitch_log",
     "PARAMETERS",
+    "SIX_DOF_FIELDS",
     "RollPitchGreyBox",
+    "put_identified",
     "six_dof_fields",
 ]
 
@@ -103,10 +110,41 @@ def righting_moment(vehicle: VehicleParams) -> float:
     )
 
 
+# The 3-DOF and heave parameters' entries in the six_dof section (six_dof_params'
+# horizontal_equivalent read backwards: m11 = m - X_udot, Iz_added = -N_rdot, m_heave =
+# m - Z_wdot), each as (field, index, value -> entry given the rigid-body mass).
+_TRANSLATIONAL = {
+    "m11": ("added_mass", WRENCH.index("X"), lambda value, mass: mass - value),
+    "m22": ("added_mass", WRENCH.index("Y"), lambda value, mass: mass - value),
+    "heave.m_heave": ("added_mass", WRENCH.index("Z"), lambda value, mass: mass - value),
+    "Iz_added": ("added_mass", WRENCH.index("N"), lambda value, mass: -value),
+    "Xu": ("linear_damping", WRENCH.index("X"), None),
+    "Xuu": ("quadratic_damping", WRENCH.index("X"), None),
+    "Yv": ("linear_damping", WRENCH.index("Y"), None),
+    "Yvv": ("quadratic_damping", WRENCH.index("Y"), None),
+    "heave.Zw": ("linear_damping", WRENCH.index("Z"), None),
+    "heave.Zww": ("quadratic_damping", WRENCH.index("Z"), None),
+    "Nr": ("linear_damping", WRENCH.index("N"), None),
+    "Nrr": ("quadratic_damping", WRENCH.index("N"), None),
+}
+NET_BUOYANCY = "heave.net_buoyancy_N"
+# What six_dof_fields may write: four lists, then a number.
+SIX_DOF_FIELDS = (
+    "added_mass",
+    "linear_damping",
+    "quadratic_damping",
+    "center_of_buoyancy",
+    "displaced_volume",
+)
+
+
 def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str, object]:
     """The six_dof section's fields (added_mass, linear_damping, quadratic_damping,
-    center_of_buoyancy) of ``vehicle`` with the identified ``values`` (by :data:`PARAMETERS`
-    name) put in: the righting moment R as z_b = (z_g W - R) / B."""
+    center_of_buoyancy, displaced_volume) of ``vehicle`` with the identified ``values`` (by
+    identification.json's names) put in: roll and pitch's (:data:`PARAMETERS`) and, for a
+    6-DOF log's identification, the 3-DOF and heave model's entries (:data:`_TRANSLATIONAL`);
+    the net buoyancy B - W as the displaced volume, the righting moment R as
+    z_b = (z_g W - R) / B (with the new B; without an identified R, the start's R kept)."""
     six = _section(vehicle)
     fields: dict[str, object] = {
         name: list(getattr(six, name))
@@ -117,12 +155,48 @@ def six_dof_fields(vehicle: VehicleParams, values: dict[str, float]) -> dict[str
         if short in FIELD_OF:
             field, index = FIELD_OF[short]
             fields[field][index] = float(value)  # type: ignore[index]
+        elif name in _TRANSLATIONAL:
+            field, index, entry = _TRANSLATIONAL[name]
+            value = value if entry is None else entry(value, vehicle.mass)
+            fields[field][index] = float(value)  # type: ignore[index]
+    weight, buoyancy = six.weight(vehicle.mass), six.buoyancy
+    if NET_BUOYANCY in values:
+        buoyancy = weight + values[NET_BUOYANCY]
+        fields["displaced_volume"] = float(buoyancy / (six.water_density * six.gravity))
+    righting = values.get(PARAMETERS[-1], righting_moment(vehicle))
     centre = list(six.center_of_buoyancy)
-    if f"{SECTION}.{NAMES[-1]}" in values:
-        z_g, weight = six.center_of_gravity[2], six.weight(vehicle.mass)
-        centre[2] = float((z_g * weight - values[f"{SECTION}.{NAMES[-1]}"]) / six.buoyancy)
-    fields["center_of_buoyancy"] = centre
+    centre[2] = float((six.center_of_gravity[2] * weight - righting) / buoyancy)
+    if PARAMETERS[-1] in values or NET_BUOYANCY in values:
+        fields["center_of_buoyancy"] = centre
     return fields
+
+
+def put_identified(
+    data: dict[str, Any], values: dict[str, float], six_dof: bool = False
+) -> dict[str, Any]:
+    """A vehicle file's mapping ``data`` with the identified ``values`` put in (a copy; the
+    sections it changes copied too): a 3-DOF name (``m11``) as its field, a heave one
+    (``heave.Zw``) in its section; with ``six_dof`` (a 6-DOF log's identification), or where
+    roll and pitch are among them, every value also in the six_dof section
+    (:func:`six_dof_fields`)."""
+    data = dict(data)
+    for name, value in values.items():
+        if name not in PARAMETERS:
+            _put(data, name, value)
+    if six_dof or any(name in PARAMETERS for name in values):
+        start = load_vehicle(data, "--vehicle")
+        data[SECTION] = dict(data[SECTION]) | six_dof_fields(start, values)
+    return data
+
+
+def _put(data: dict[str, Any], name: str, value: float) -> None:
+    """Set a vehicle file's field ``name`` (``m11``, or in a section: ``heave.Zw``) in
+    ``data``, copying the sections it changes."""
+    *sections, key = name.split(".")
+    for section in sections:
+        data[section] = dict(data[section])
+        data = data[section]
+    data[key] = float(value)
 
 
 def _coupling_function(vehicle: VehicleParams) -> ca.Function:
@@ -168,8 +242,9 @@ def roll_pitch_log(
     in :data:`~auvmpc.models.six_dof.SIX_DOF` order (what was measured: attitude and rates,
     velocities) and every ``six_dof`` thruster's force ``thrust`` (N, n) held over each
     sample: ``velocity`` holds [phi, theta, p, q]; ``force`` the model's input over each
-    sample, [K, M] (the thrusters' moments and the mass matrix's coupling) and the logged
-    u, v, w, r (the mean of the sample's two ends)."""
+    sample, [K, M] (the thrusters' moments and the mass matrix's coupling, held), the logged
+    u, v, w, r at the sample's start and then at its end (the model goes linearly between
+    them)."""
     six = _section(vehicle)
     if state.shape[1] != NX:
         raise ValueError(f"state must have {NX} columns, got {state.shape}")
@@ -179,9 +254,27 @@ def roll_pitch_log(
     coupled = _off_diagonal_moments(vehicle, nu_dot)
     moments = thrust @ np.asarray(six.T)[_ROLL : _PITCH + 1].T + 0.5 * (coupled[:-1] + coupled[1:])
     velocities = state[:, [SIX_DOF.index(n) for n in _INPUT_VELOCITIES]]
-    inputs = np.column_stack([moments, 0.5 * (velocities[:-1] + velocities[1:])])
+    # Their rates just after the sample's start and just before its end (per sample: times
+    # Te), by the 6-DOF model of ``vehicle`` under the sample's thrust: the thrust steps at
+    # the sample's edges, so the velocities have a kink there that differences across it
+    # would smooth away.
+    rates = [sample_time * rate for rate in _velocity_rates(vehicle, state, thrust)]
+    inputs = np.column_stack([moments, velocities[:-1], velocities[1:], *rates])
     measured = state[:, [SIX_DOF.index(n) for n in OUTPUTS]]
     return VelocityLog(name, sample_time, measured, None, inputs, outputs=OUTPUTS)
+
+
+def _velocity_rates(
+    vehicle: VehicleParams, state: np.ndarray, thrust: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rates of u, v, w, r (N, 4) at each sample's start and end under its thrust, by
+    the vehicle's 6-DOF model at the logged states (still water)."""
+    derivative = six_dof_model(vehicle).derivative.map(len(thrust))
+    columns = [SIX_DOF.index(n) for n in _INPUT_VELOCITIES]
+    still = np.zeros((3, len(thrust)))
+    at = [np.asarray(derivative(x.T, thrust.T, still, still)).T[:, columns]
+          for x in (state[:-1], state[1:])]  # fmt: skip
+    return at[0], at[1]
 
 
 class RollPitchGreyBox(GreyBox):
@@ -198,8 +291,14 @@ class RollPitchGreyBox(GreyBox):
     measured = (0, 1, 2, 3)
     state_size = 4
     title = "grey-box roll and pitch model"
+    linear_inputs = len(_INPUT_VELOCITIES)  # u, v, w, r: linear over each sample
+    split_check = True  # the logged inputs' noise is model error its intervals do not hold
 
-    def __init__(self, vehicle: VehicleParams) -> None:
+    def __init__(self, vehicle: VehicleParams, period_check: bool = True) -> None:
+        """``period_check``: refuse a log sampled too slowly for the start model's roll and
+        pitch (:meth:`check`); off where a log was checked against an earlier start (a later
+        round of identification/six_dof_log.py)."""
+        self.period_check = period_check
         self.six = _section(vehicle)
         self.vehicle = vehicle
         inertia = self.six.inertia_matrix
@@ -260,7 +359,8 @@ class RollPitchGreyBox(GreyBox):
         return ca.Function("roll_pitch_rhs", [x, inputs, theta], [derivative])
 
     def applied(self, log: VelocityLog) -> np.ndarray:
-        """[K, M, u, v, w, r] over each sample (:func:`roll_pitch_log`)."""
+        """[K, M, u, v, w, r] at each sample's start, then u, v, w, r at its end
+        (:func:`roll_pitch_log`)."""
         return log.force
 
     def filtered(
@@ -314,7 +414,7 @@ class RollPitchGreyBox(GreyBox):
         0.5 s on the BlueROV2 Heavy's 1.7 s roll period identified nothing true)."""
         super().check(logs, fixed)
         period = self.natural_period()
-        for log in logs:
+        for log in logs if self.period_check else ():
             if log.sample_time > period / SAMPLES_PER_PERIOD:
                 raise ConfigError(
                     "LOG", log.name, f"sampled every {log.sample_time:g} s: roll and pitch "
@@ -341,14 +441,6 @@ def read_six_dof_state(path: str | Path, n_thrusters: int) -> tuple[np.ndarray, 
     log = log_from_table(*run_table(path), path, SIX_DOF.names, "F", n_thrusters,
                          outputs=SIX_DOF.names)  # fmt: skip
     return log.velocity, log.thrust, log.sample_time
-
-
-def read_roll_pitch_log(path: str | Path, vehicle: VehicleParams) -> VelocityLog:
-    """The roll and pitch model's log (:func:`roll_pitch_log`) of a 6-DOF run folder, with
-    ``vehicle``'s translational values in the coupling. Like every run folder's log.csv it
-    holds the simulator's true state (a real vehicle's log: its AHRS and DVL)."""
-    state, thrust, sample_time = read_six_dof_state(path, _section(vehicle).n_thrusters)
-    return roll_pitch_log(str(path), sample_time, state, thrust, vehicle)
 
 
 # A log.csv header is one line of column names: far below this.
