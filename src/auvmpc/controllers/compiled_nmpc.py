@@ -115,6 +115,7 @@ class CompiledNmpc(Controller):
         self._predicted = np.zeros((N + 1, NX))
         self._report = _Report()
         self._observation: Observation | None = None  # the sample the rescue is asked for
+        self._rescue_error: Exception | None = None
         self._callback = _RESCUE(self._rescue_call)  # kept: the C holds its address
         library.auvmpc_controller_set_rescue(self._handle, self._callback, None)
         self.reset(np.zeros(NX), np.zeros(n))
@@ -155,6 +156,9 @@ class CompiledNmpc(Controller):
         )  # fmt: skip
         solve_time_s = time.perf_counter() - started
         self._observation = None
+        if self._rescue_error is not None:  # raised in the callback, where the C is
+            error, self._rescue_error = self._rescue_error, None
+            raise error
         report = self._report
         self._c.auvmpc_controller_last(
             self._handle, ctypes.byref(report), self._predicted.ctypes.data
@@ -180,7 +184,9 @@ class CompiledNmpc(Controller):
 
     def _rescue_call(self, _user, state, disturbance, previous, states, thrust, slack, iterations):
         """The C's last resort: IPOPT on the program from the vehicle at rest where it is
-        (NonlinearMpc.propose, step 3). An exception must not cross into the C: it fails."""
+        (NonlinearMpc.propose, step 3). An exception must not cross into the C: the rescue
+        fails there and :meth:`compute` raises it once the C has returned, as the Python
+        controller would."""
         try:
             return self._rescued(
                 np.ctypeslib.as_array(state, (NX,)).copy(),
@@ -190,7 +196,8 @@ class CompiledNmpc(Controller):
                 np.ctypeslib.as_array(thrust, (self.horizon, self.model.n_thrusters)),
                 slack, iterations,
             )  # fmt: skip
-        except Exception:  # noqa: BLE001 -- a failed rescue is a fallback, never a crash
+        except Exception as error:  # noqa: BLE001 -- re-raised by compute
+            self._rescue_error = error
             return _FAILED
 
     def _rescued(self, state, disturbance, previous, states, thrust, slack, iterations) -> int:

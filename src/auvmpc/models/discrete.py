@@ -65,16 +65,6 @@ class DiscreteModel:
         # itself (the stage QP) and composes it with a = e * F.
         self.acting_step = ca.Function("rk4_step_acting", [state, acting, force], [following])
         self.step = self._in_commands("rk4_step", [following])
-        # The step on NumPy values, for evaluations outside a solver (the shift of a warm
-        # start, once per sample): compiled and called through ctypes where jit allows, since
-        # a CasADi call from Python costs ~35 us (auvmpc.native).
-        native = native_function(self.step) if jit else None
-        self.numeric_step: Callable[..., np.ndarray] = (
-            native if native is not None else _flat(self.step)
-        )
-        jacobians = [ca.jacobian(following, state), ca.jacobian(following, acting)]
-        linearised = self._in_commands("rk4_step_linearised", [following, *jacobians], 2)
-        self.linearised_step = compiled(linearised) if jit else linearised
         self._jit = jit
         # The estimator's map of [x; d] (d a random walk) and its Jacobian.
         augmented = ca.vertcat(state, force)
@@ -102,6 +92,24 @@ class DiscreteModel:
             columns = values[thrust_jacobian]
             values[thrust_jacobian] = columns * ca.repmat(effectiveness.T, columns.size1(), 1)
         return ca.Function(name, [x, thrust, d, effectiveness], values)
+
+    # Compiled on first use (each is a run of the C compiler): a controller that evaluates
+    # none of them (the C controller, which has its own) compiles nothing here.
+    @functools.cached_property
+    def numeric_step(self) -> Callable[..., np.ndarray]:
+        """The step on NumPy values, for evaluations outside a solver (the shift of a warm
+        start, once per sample): compiled and called through ctypes where jit allows, since
+        a CasADi call from Python costs ~35 us (auvmpc.native)."""
+        native = native_function(self.step) if self._jit else None
+        return native if native is not None else _flat(self.step)
+
+    @functools.cached_property
+    def linearised_step(self) -> ca.Function:
+        """(x, F, d, e) -> (x_next, A, B): the step with its Jacobians in x and F."""
+        state, acting, _, following = self._acting
+        jacobians = [ca.jacobian(following, state), ca.jacobian(following, acting)]
+        linearised = self._in_commands("rk4_step_linearised", [following, *jacobians], 2)
+        return compiled(linearised) if self._jit else linearised
 
     @functools.cached_property
     def disturbed_linearised_step(self) -> ca.Function:

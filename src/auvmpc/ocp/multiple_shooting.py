@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -114,13 +115,21 @@ class MultipleShootingProgram:
         sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
         self.step = sampled.step
         self.acting_step = sampled.acting_step
-        self.numeric_step = sampled.numeric_step
+        self._sampled = sampled
         self.rollout = sampled.rollout(ny)
-        # The step with its Jacobians, evaluated at every shooting node in one call.
-        self.linearised_steps = sampled.linearised_nodes(ny)
 
         self.n_w = NX * (ny + 1) + n * self.n_moves + n_slots * ny
         self.n_gaps, self.n_changes = NX * ny, n * self.n_moves
+
+    @property
+    def numeric_step(self) -> Callable[..., np.ndarray]:
+        """The step on NumPy values (compiled on first use: DiscreteModel.numeric_step)."""
+        return self._sampled.numeric_step
+
+    @functools.cached_property
+    def linearised_steps(self) -> ca.Function:
+        """The step with its Jacobians, evaluated at every shooting node in one call."""
+        return self._sampled.linearised_nodes(self.horizon)
 
     @functools.cached_property
     def nlp(self) -> Nlp:
