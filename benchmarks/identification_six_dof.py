@@ -22,8 +22,11 @@ import time
 import numpy as np
 
 from auvmpc.identification.excitation import Dof, design_excitation
-from auvmpc.identification.roll_pitch import put_identified
-from auvmpc.identification.six_dof_log import MODELS, identify_six_dof, model_of
+from auvmpc.identification.six_dof_log import (
+    identify_six_dof,
+    offset_vehicle,
+    parameter_values,
+)
 from auvmpc.models.six_dof import SIX_DOF, integrate, plant_step_length, six_dof_model
 from auvmpc.models.vehicle import load_vehicle
 from auvmpc.sim.plant import substeps_for
@@ -33,23 +36,6 @@ ATTITUDE_NOISE_RAD = 0.002
 RATE_NOISE = 0.005  # rad/s and m/s
 ERROR = 0.3
 WITHIN = 0.1
-
-
-def truths(vehicle) -> dict[str, float]:
-    """Every model's parameters at ``vehicle``'s values, by identification.json's names."""
-    values = {}
-    for which in MODELS:
-        greybox = model_of(which, vehicle)
-        values |= dict(zip(greybox.parameters, greybox.start(), strict=True))
-    return values
-
-
-def wrong_start(truth):
-    values = truths(truth)
-    signs = np.where(np.arange(len(values)) % 2 == 0, 1.0, -1.0)
-    wrong = {name: value * (1 + ERROR * sign)
-             for (name, value), sign in zip(values.items(), signs, strict=True)}  # fmt: skip
-    return load_vehicle(put_identified(truth.model_dump(mode="json"), wrong, six_dof=True))
 
 
 def flown(truth, duration: float) -> tuple[np.ndarray, np.ndarray]:
@@ -88,7 +74,7 @@ def main() -> None:
     for name in args.vehicles:
         truth = load_vehicle(name)
         states, thrust = flown(truth, args.duration)
-        true_values, start = truths(truth), wrong_start(truth)
+        true_values, start = parameter_values(truth), offset_vehicle(truth, ERROR)
         for seed in args.seeds:
             started = time.perf_counter()
             found = identify_six_dof([(name, SAMPLE_TIME_S, noisy(states, seed), thrust)], start)

@@ -30,13 +30,12 @@ from auvmpc.identification.roll_pitch import (
     OUTPUTS,
     PARAMETERS,
     RollPitchGreyBox,
-    put_identified,
     roll_pitch_log,
 )
 from auvmpc.identification.six_dof_log import (
-    MODELS,
     identify_six_dof,
-    model_of,
+    offset_vehicle,
+    parameter_values,
     read_six_dof_samples,
 )
 from auvmpc.models.six_dof import SIX_DOF, six_dof_model
@@ -55,25 +54,6 @@ WITHIN = 0.1
 # An AHRS's attitude (rad) and a gyro's and DVL's rates (rad/s, m/s).
 ATTITUDE_NOISE_RAD = 0.002
 RATE_NOISE = 0.005
-
-
-def _truths(vehicle) -> dict[str, float]:
-    """Every model's parameters (identification.json's names) at ``vehicle``'s values."""
-    values = {}
-    for which in MODELS:
-        greybox = model_of(which, vehicle)
-        values |= dict(zip(greybox.parameters, greybox.start(), strict=True))
-    return values
-
-
-def _start(truth):
-    """The truth with each parameter of every model START_ERROR off, alternately up and down,
-    in the 3-DOF fields, the heave section and the six_dof section alike."""
-    values = _truths(truth)
-    signs = np.where(np.arange(len(values)) % 2 == 0, 1.0, -1.0)
-    wrong = {name: value * (1 + START_ERROR * sign)
-             for (name, value), sign in zip(values.items(), signs, strict=True)}  # fmt: skip
-    return load_vehicle(put_identified(truth.model_dump(mode="json"), wrong, six_dof=True))
 
 
 def test_roll_pitch_rows_are_the_six_dof_model():
@@ -139,9 +119,9 @@ def test_excite_run_identify_every_model_from_one_six_dof_log(tmp_path, monkeypa
     rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
     measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 3))
     measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
-    start = _start(truth)
+    start = offset_vehicle(truth, START_ERROR)
     found = identify_six_dof([(name, sample_time, measured, thrust)], start)
-    true_values = _truths(truth)
+    true_values = parameter_values(truth)
     assert [p.name for p in found.parameters] == list(true_values)
     for estimate in found.parameters:
         value, (low, high) = true_values[estimate.name], estimate.ci95

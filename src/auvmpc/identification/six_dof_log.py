@@ -66,6 +66,8 @@ from auvmpc.models.vehicle import VehicleParams, load_vehicle, velocity_derivati
 
 __all__ = [
     "MODELS",
+    "offset_vehicle",
+    "parameter_values",
     "ROUNDS",
     "heave_log",
     "horizontal_log",
@@ -167,6 +169,25 @@ def model_of(which: str, vehicle: VehicleParams, first: bool = True, last: bool 
 
 # How each model's log is made of the 6-DOF samples.
 LOG_OF = {"horizontal": horizontal_log, "heave": heave_log, "roll-pitch": roll_pitch_log}
+
+
+def parameter_values(vehicle: VehicleParams) -> dict[str, float]:
+    """Every model's parameters at ``vehicle``'s values, by identification.json's names."""
+    values = {}
+    for which in MODELS:
+        greybox = model_of(which, vehicle)
+        values |= dict(zip(greybox.parameters, greybox.start(), strict=True))
+    return values
+
+
+def offset_vehicle(vehicle: VehicleParams, fraction: float) -> VehicleParams:
+    """``vehicle`` with every model's parameter ``fraction`` off, alternately up and down, in
+    the 3-DOF fields, the heave section and the six_dof section alike: a wrong start file."""
+    values = parameter_values(vehicle)
+    signs = np.where(np.arange(len(values)) % 2 == 0, 1.0, -1.0)
+    wrong = {name: value * (1 + fraction * sign)
+             for (name, value), sign in zip(values.items(), signs, strict=True)}  # fmt: skip
+    return load_vehicle(put_identified(vehicle.model_dump(mode="json"), wrong, six_dof=True))
 
 
 def _checked(vehicle: VehicleParams) -> VehicleParams:
