@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
+from auvmpc.errors import ConfigError
 from auvmpc.experiments.campaign import run_campaign
 from auvmpc.references import MAX_TRACK_BYTES
 from tests.test_cli import run_cli
@@ -425,3 +426,14 @@ def test_a_criterion_report_is_written_next_to_the_campaigns_own(monkeypatch, ca
     summary = json.loads((out / extra[0]).read_text())
     assert summary["sessions"][0]["command"]  # provenance of the session that ran the rows
     assert math.isfinite(summary["sessions"][0]["wall_s"])
+
+
+def test_a_long_value_keeps_its_end_where_a_path_names_its_file():
+    """A refused value longer than the line allows keeps its start and its end: a path deep
+    in a user's folders still says which file it was (the test's own temporary folders are
+    long enough to have cut it, under a parallel runner)."""
+    path = "/home/user" + "/missions" * 20 + "/survey-2026.yaml"
+    line = str(ConfigError("scenario", path, "no such file"))
+    assert line.startswith("scenario: no such file (got '/home/user/")
+    assert line.endswith("/survey-2026.yaml')")
+    assert len(line) < 120  # one short line

@@ -55,8 +55,13 @@ def _short(value: object) -> str:
 
 
 def shortened(text: str, limit: int = 80) -> str:
-    """At most ``limit`` characters of ``text`` (a value quoted in a refusal)."""
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+    """At most ``limit`` characters of ``text`` (a value quoted in a refusal): its start and
+    its end with "..." between, since a long path's end is its file name, the part that
+    says which file was refused."""
+    if len(text) <= limit:
+        return text
+    head = (limit - 3) * 2 // 5
+    return text[:head] + "..." + text[len(text) - (limit - 3 - head) :]
 
 
 def unknown_key(key: object, known: Iterable[str]) -> str:
