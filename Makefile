@@ -22,8 +22,11 @@ $(STAMP): pyproject.toml
 reproduce: $(STAMP)
 	$(BIN)/auvmpc reproduce --out $(OUT) --overwrite
 
+# One pytest worker per core, at most four (each holds its own CasADi builds in memory).
+TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; print(min(4, os.cpu_count() or 1))")
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
 # The long fuzz profile (tests/fuzzing.py, docs/safety.md): >= 10,000 generated hostile
 # inputs through the command line, each answered cleanly within 10 s; about 17 min on two
