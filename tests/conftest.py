@@ -46,6 +46,39 @@ def run_and_export(base, overrides):
     return base
 
 
+def cli(*args: str) -> None:
+    """``auvmpc ARGS`` in-process, for fixtures wider than a test (run_cli needs a test's
+    own monkeypatch and capsys); a non-zero exit fails the fixture."""
+    import sys
+
+    from auvmpc.cli import main
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sys, "argv", ["auvmpc", *args])
+        try:
+            main()
+        except SystemExit as stop:
+            assert not stop.code, f"auvmpc {' '.join(args)} exited {stop.code}"
+
+
+# The 6-DOF identification manoeuvre every 6-DOF log-format test starts from: short, for the
+# tests' time (the method's default is 40 s, of which 10 s fade in and out).
+SIX_DOF_EXCITE_VEHICLE = "bluerov2-heavy"
+SIX_DOF_EXCITE_DURATION_S = 25.0
+
+
+@pytest.fixture(scope="session")
+def six_dof_excite_run(tmp_path_factory):
+    """``excite --dof six-dof`` (excite.yaml, excite.csv) and its ``run`` (run/), once per
+    test process (about 5 s)."""
+    folder = tmp_path_factory.mktemp("six-dof-excite")
+    cli("excite", SIX_DOF_EXCITE_VEHICLE, "--dof", "six-dof", "--out",
+        str(folder / "excite.yaml"), "--duration", str(SIX_DOF_EXCITE_DURATION_S),
+        "--box", "5")  # fmt: skip
+    cli("run", str(folder / "excite.yaml"), "--out", str(folder / "run"), "--no-figures")
+    return folder
+
+
 @pytest.fixture
 def installed_interrupts():
     """auvmpc's SIGINT/SIGTERM handlers installed for the test, as the CLI installs them,

@@ -14,11 +14,20 @@ import sys
 import numpy as np
 import pytest
 
+from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import identify
 from auvmpc.identification.excitation import design_excitation, simulate_open_loop
 from auvmpc.identification.logs import LogOptions, read_log
+from auvmpc.identification.six_dof_log import (
+    identify_six_dof,
+    offset_vehicle,
+    parameter_values,
+    read_six_dof_samples,
+)
 from auvmpc.identification.thruster_curve import STANDARD_GRAVITY, thruster_curve
-from auvmpc.models.six_dof import Rzyx
+from auvmpc.models.six_dof import SIX_DOF, Rzyx
+from auvmpc.models.vehicle import load_vehicle
+from tests.conftest import SIX_DOF_EXCITE_VEHICLE
 from tests.test_cli import run_cli
 
 DFReader = pytest.importorskip("pymavlink.DFReader")
@@ -193,3 +202,90 @@ def test_without_pymavlink_the_error_names_the_extra(flight, monkeypatch):
     monkeypatch.setitem(sys.modules, "pymavlink", None)
     with pytest.raises(Exception, match=r"needs pymavlink: pip install 'auvmpc\[ardupilot\]'"):
         read_log(flight[-1], 4)
+
+
+# The 6-DOF flight's sensors, as test_identification_six_dof.py's: an AHRS's attitude (rad)
+# and a gyro's and DVL's rates (rad/s, m/s).
+ATTITUDE_NOISE_RAD = 0.002
+RATE_NOISE = 0.005
+# XKF1's position is float32: 6e-8 relative of a few metres.
+POSITION_TOL = 1e-6
+# A parameter identified from a start 30 % off is within 10 % of the truth or its interval
+# covers it (issue 27's bar, as test_identification_six_dof.py).
+SIX_DOF_START_ERROR, SIX_DOF_WITHIN = 0.3, 0.1
+
+
+def _six_dof_dataflash(states: np.ndarray, pwm: np.ndarray, sample_time: float) -> bytes:
+    """An ArduSub log of a 6-DOF flight: ATT, XKF1 (position and NED velocity), IMU's body
+    rates and RCOU's PWM on channels 1..n, each row at a sample."""
+    index = {name: SIX_DOF.index(name) for name in SIX_DOF.names}
+    step_us = round(sample_time * 1e6)
+    blob = bytearray(_fmt_messages())
+    for k, state in enumerate(states):
+        time_us = 1_000_000 + k * step_us
+        phi, theta, psi = (state[index[n]] for n in ("phi", "theta", "psi"))
+        body = [state[index[n]] for n in ("u", "v", "w")]
+        ned = np.asarray(Rzyx(phi, theta, psi)).reshape(3, 3) @ body
+        blob += _packed("ATT", {"TimeUS": time_us, "Roll": math.degrees(phi),
+                                "Pitch": math.degrees(theta),
+                                "Yaw": math.degrees(psi) % 360.0})  # fmt: skip
+        blob += _packed("XKF1", {"TimeUS": time_us, "C": 0, "PN": state[index["x"]],
+                                 "PE": state[index["y"]], "PD": state[index["z"]],
+                                 "VN": ned[0], "VE": ned[1], "VD": ned[2]})  # fmt: skip
+        blob += _packed("IMU", {"TimeUS": time_us, "I": 0, "GyrX": state[index["p"]],
+                                "GyrY": state[index["q"]], "GyrZ": state[index["r"]]})  # fmt: skip
+        if k < len(pwm):
+            blob += _packed("RCOU", {"TimeUS": time_us,
+                                     **{f"C{i + 1}": p for i, p in enumerate(pwm[k])}})  # fmt: skip
+    return bytes(blob)
+
+
+def test_six_dof_identification_from_a_dataflash_log(six_dof_excite_run, tmp_path):
+    """The 6-DOF excite run flown as an ArduSub would log it (the AHRS's, gyro's and DVL's
+    noise; each of the 8 thrusters' force as the T200 PWM nearest to it) reads back as
+    written, up to the format's resolution; identify --dof six-dof recovers every model from
+    a start 30 % off; a log without IMU is refused in one line (no p, q)."""
+    truth = load_vehicle(SIX_DOF_EXCITE_VEHICLE)
+    _, sample_time, states, thrust = read_six_dof_samples(six_dof_excite_run / "run", truth)
+    rng = np.random.default_rng(0)
+    measured = states.copy()
+    angles = [SIX_DOF.index(name) for name in ("phi", "theta", "psi")]
+    rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
+    measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 3))
+    measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
+    pwm = _pwm_for(thrust)
+    path = tmp_path / "00000043.BIN"
+    path.write_bytes(_six_dof_dataflash(measured, pwm, sample_time))
+
+    name, read_time, read_states, read_thrust = read_six_dof_samples(path, truth)
+    assert read_time == pytest.approx(sample_time) and name == str(path)
+    np.testing.assert_array_equal(read_thrust, thruster_curve("t200-16v").force(pwm))
+    positions = [SIX_DOF.index(n) for n in ("x", "y", "z")]
+    np.testing.assert_allclose(read_states[:, positions], measured[:, positions], rtol=0,
+                               atol=POSITION_TOL)  # fmt: skip
+    turned = np.angle(np.exp(1j * (read_states[:, angles] - measured[:, angles])))
+    np.testing.assert_allclose(turned, 0.0, rtol=0, atol=HEADING_TOL)
+    velocities = [SIX_DOF.index(n) for n in ("u", "v", "w")]
+    np.testing.assert_allclose(read_states[:, velocities], measured[:, velocities], rtol=0,
+                               atol=VELOCITY_TOL)  # fmt: skip
+    body_rates = [SIX_DOF.index(n) for n in ("p", "q", "r")]
+    np.testing.assert_allclose(read_states[:, body_rates], measured[:, body_rates], rtol=0,
+                               atol=RATE_TOL)  # fmt: skip
+
+    found = identify_six_dof([(name, read_time, read_states, read_thrust)],
+                             offset_vehicle(truth, SIX_DOF_START_ERROR))  # fmt: skip
+    true_values = parameter_values(truth)
+    for estimate in found.parameters:
+        value, (low, high) = true_values[estimate.name], estimate.ci95
+        assert estimate.excited, estimate.name
+        close = abs(estimate.value - value) <= SIX_DOF_WITHIN * abs(value)
+        assert close or low <= value <= high, (estimate, value)
+
+    without_imu = tmp_path / "no-imu.bin"
+    reader = DFReader.DFReader_binary(str(path))
+    blob = bytearray(_fmt_messages())
+    while (m := reader.recv_match(type=["ATT", "XKF1", "RCOU"])) is not None:
+        blob += _packed(m.get_type(), m.to_dict())
+    without_imu.write_bytes(bytes(blob))
+    with pytest.raises(ConfigError, match="has no IMU messages: 6-DOF identification needs"):
+        read_six_dof_samples(without_imu, truth)

@@ -13,11 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from auvmpc.cli import main
 from auvmpc.identification.logs import MIN_SAMPLES, LogOptions, read_log, read_run_folder, resample
-from auvmpc.identification.rosbag import PLANAR_SIGNS, BodyFrame
+from auvmpc.identification.rosbag import MIRROR, BodyFrame
 from auvmpc.models.vehicle import load_vehicle
-from tests.conftest import ROUND_OFF_TOL
+from tests.conftest import ROUND_OFF_TOL, cli
 from tests.test_cli import run_cli
 
 rosbags = pytest.importorskip("rosbags")
@@ -29,22 +28,13 @@ VEHICLE = "jmse2210"
 BAG_VELOCITY_TOL = 1e-12
 
 
-def _cli(*args: str) -> None:
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(sys, "argv", ["auvmpc", *args])
-        try:
-            main()
-        except SystemExit as stop:
-            assert not stop.code, f"auvmpc {' '.join(args)} exited {stop.code}"
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     """excite (40 s) -> run -> export --format rosbag2, once for the module (~5 s)."""
     folder = tmp_path_factory.mktemp("bag")
-    _cli("excite", VEHICLE, "--out", str(folder / "excite.yaml"), "--duration", "40")
-    _cli("run", str(folder / "excite.yaml"), "--out", str(folder / "run"), "--no-figures")
-    _cli("export", str(folder / "run"), "--format", "rosbag2")
+    cli("excite", VEHICLE, "--out", str(folder / "excite.yaml"), "--duration", "40")
+    cli("run", str(folder / "excite.yaml"), "--out", str(folder / "run"), "--no-figures")
+    cli("export", str(folder / "run"), "--format", "rosbag2")
     return folder / "run"
 
 
@@ -56,7 +46,7 @@ def _rewrite_as_sqlite3_rep103(run: Path, out: Path) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    flip = PLANAR_SIGNS[BodyFrame.FLU]
+    flip = MIRROR[BodyFrame.FLU]
     odometry, wrenches = [], {}
     with AnyReader([run / "rosbag2"]) as reader:
         for connection, stamp, raw in reader.messages():

@@ -767,7 +767,7 @@ def identify(
             "--dof",
             help="the model: horizontal (3-DOF), heave (the depth model, from run folders "
             "with Fz1..), six-dof (the 3-DOF, heave and roll and pitch models, from 6-DOF "
-            "run folders), or auto: heave "
+            "run folders, ROS 2 bags or DataFlash logs), or auto: heave "
             "if the first log is a depth run's, six-dof if a 6-DOF run's",
         ),
     ] = "auto",

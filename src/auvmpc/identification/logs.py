@@ -21,6 +21,7 @@ short is one :class:`~auvmpc.errors.ConfigError` line naming it (exit 2 from the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,16 @@ from auvmpc.errors import ConfigError
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.sim.log import read_log_table
 
-__all__ = ["MIN_SAMPLES", "LogOptions", "VelocityLog", "read_log", "read_run_folder", "resample"]
+__all__ = [
+    "MIN_SAMPLES",
+    "LogKind",
+    "LogOptions",
+    "VelocityLog",
+    "log_kind",
+    "read_log",
+    "read_run_folder",
+    "resample",
+]
 
 # Fewer samples than this cannot hold a fit, a held-out part and a filter window.
 MIN_SAMPLES = 100
@@ -108,24 +118,27 @@ class LogOptions:
     reversed_channels: tuple[int, ...] = field(default_factory=tuple)
 
 
-def read_log(path: str | Path, n_thrusters: int, options: LogOptions | None = None) -> VelocityLog:
-    """The :class:`VelocityLog` in ``path``, read by the reader for what it is (module
-    docstring); ``n_thrusters`` is the start vehicle's."""
-    options = options or LogOptions()
+class LogKind(StrEnum):
+    """What a log path is, and so which reader reads it."""
+
+    RUN_FOLDER = "run folder"
+    ROSBAG = "ROS 2 bag"
+    DATAFLASH = "DataFlash log"
+
+
+def log_kind(path: str | Path) -> LogKind:
+    """Which reader reads ``path`` (module docstring): a missing file or one of no known
+    format is one ConfigError line; a folder that is not a bag is a run folder (its reader
+    says what is wrong with it)."""
     where = Path(path)
+    suffix = where.suffix.lower()
     if where.is_dir() and not (where / "log.csv").exists() and (where / "metadata.yaml").exists():
-        from auvmpc.identification.rosbag import read_rosbag
-
-        return read_rosbag(where, n_thrusters, options)
-    if where.is_file() and where.suffix.lower() in (".mcap", ".db3"):
-        from auvmpc.identification.rosbag import read_rosbag
-
-        return read_rosbag(where, n_thrusters, options)
-    if where.is_file() and where.suffix.lower() in (".bin", ".log"):
-        from auvmpc.identification.dataflash import read_dataflash
-
-        return read_dataflash(where, n_thrusters, options)
-    if not where.exists() and where.suffix.lower() in (".mcap", ".db3", ".bin", ".log"):
+        return LogKind.ROSBAG
+    if where.is_file() and suffix in (".mcap", ".db3"):
+        return LogKind.ROSBAG
+    if where.is_file() and suffix in (".bin", ".log"):
+        return LogKind.DATAFLASH
+    if not where.exists() and suffix in (".mcap", ".db3", ".bin", ".log"):
         raise ConfigError("LOG", str(path), "no such file")
     if where.is_file():
         raise ConfigError(
@@ -134,7 +147,23 @@ def read_log(path: str | Path, n_thrusters: int, options: LogOptions | None = No
             "is not a log identify reads: give an auvmpc run folder, a ROS 2 bag (folder, "
             ".mcap or .db3) or an ArduSub DataFlash log (.bin, .log)",
         )
-    return read_run_folder(where, n_thrusters)
+    return LogKind.RUN_FOLDER
+
+
+def read_log(path: str | Path, n_thrusters: int, options: LogOptions | None = None) -> VelocityLog:
+    """The :class:`VelocityLog` in ``path``, read by the reader for what it is (module
+    docstring); ``n_thrusters`` is the start vehicle's."""
+    options = options or LogOptions()
+    kind = log_kind(path)
+    if kind is LogKind.ROSBAG:
+        from auvmpc.identification.rosbag import read_rosbag
+
+        return read_rosbag(Path(path), n_thrusters, options)
+    if kind is LogKind.DATAFLASH:
+        from auvmpc.identification.dataflash import read_dataflash
+
+        return read_dataflash(Path(path), n_thrusters, options)
+    return read_run_folder(Path(path), n_thrusters)
 
 
 # A gap in a measured signal longer than this many samples is refused: interpolating over it
@@ -152,8 +181,10 @@ def resample(
     what: tuple[str, str],
     as_force: bool = False,
     heading: np.ndarray | None = None,
+    outputs: tuple[str, ...] = VELOCITY_NAMES,
 ) -> VelocityLog:
     """Measured velocities and commands, each at its own times, on one grid t_k = t0 + k Te.
+    ``velocity``'s columns are ``outputs`` (a 6-DOF log's: the whole state, angles unwrapped).
 
     How, and why:
 
@@ -224,6 +255,7 @@ def resample(
         )
     origin = grid[0]  # interpolate in ns from the grid's start: float64 keeps them exact
     measured = np.asarray(velocity, dtype=float)
+    width = measured.shape[1]
     if heading is not None:
         measured = np.column_stack([measured, np.unwrap(np.asarray(heading, dtype=float))])
     sampled = np.column_stack(
@@ -238,10 +270,10 @@ def resample(
     if np.ptp(held, axis=0).max() == 0.0:
         raise ConfigError(field_name, name, f"{command_what} never changes: nothing to identify")
     sample_s = step_ns / 1e9
-    velocities, psi = sampled[:, :3], (sampled[:, 3] if heading is not None else None)
+    velocities, psi = sampled[:, :width], (sampled[:, width] if heading is not None else None)
     if as_force:
-        return VelocityLog(name, sample_s, velocities, None, held, heading=psi)
-    return VelocityLog(name, sample_s, velocities, held, heading=psi)
+        return VelocityLog(name, sample_s, velocities, None, held, outputs, psi)
+    return VelocityLog(name, sample_s, velocities, held, None, outputs, psi)
 
 
 def read_run_folder(folder: str | Path, n_thrusters: int) -> VelocityLog:

@@ -296,7 +296,7 @@ def write_identification(
             "identification estimates them",
         )  # fmt: skip
     if dof is Dof.SIX_DOF:  # every model in turn (one line if the start has no six_dof)
-        samples = [read_six_dof_samples(path, start) for path in log_paths]
+        samples = [read_six_dof_samples(path, start, options) for path in log_paths]
         found = identify_six_dof(samples, start, holdout, fixed)
     elif dof is Dof.HEAVE:
         heave = HeaveGreyBox(start)  # one line if the start vehicle has no heave section

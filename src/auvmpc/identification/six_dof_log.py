@@ -26,7 +26,9 @@ values), heave, roll and pitch, and all three once more (:data:`ROUNDS`; on the 
 Heavy's 25 s test log from a start 30 % off, the 3-DOF and heave models alone repeated left
 7 of 20 intervals missing the truth, all three repeated 2). The start values reported are
 the start file's. Assumed: no current (the
-logged velocities are through the water).
+logged velocities are through the water). The log is a ``kind: six-dof`` run folder, a ROS 2
+bag (the odometry's whole pose and twist, every thruster's force) or an ArduSub DataFlash log
+(ATT, the EKF's position and velocity, IMU's rates, RCOU): :func:`read_six_dof_samples`.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from auvmpc.identification.estimation import (
     smoothed,
 )
 from auvmpc.identification.heave import RATE_ONLY, HeaveGreyBox
-from auvmpc.identification.logs import VelocityLog
+from auvmpc.identification.logs import LogKind, LogOptions, VelocityLog, log_kind
 from auvmpc.identification.roll_pitch import (
     RollPitchGreyBox,
     put_identified,
@@ -287,7 +289,22 @@ def merged(parts: list[Identification]) -> Identification:
     )
 
 
-def read_six_dof_samples(path: str | Path, vehicle: VehicleParams):
-    """(name, sample time, state, thrust) of a 6-DOF run folder (roll_pitch.py's reader)."""
-    state, thrust, sample_time = read_six_dof_state(path, _checked(vehicle).six_dof.n_thrusters)
+def read_six_dof_samples(
+    path: str | Path, vehicle: VehicleParams, options: LogOptions | None = None
+):
+    """(name, sample time, state (N+1, 12) in SIX_DOF order, thrust (N, n)) of a 6-DOF log:
+    a ``kind: six-dof`` run folder (roll_pitch.py's reader), a ROS 2 bag or an ArduSub
+    DataFlash log (their readers' ``six_dof`` functions), read by what ``path`` is."""
+    n_thrusters = _checked(vehicle).six_dof.n_thrusters
+    options = options or LogOptions()
+    kind = log_kind(path)
+    if kind is LogKind.ROSBAG:
+        from auvmpc.identification.rosbag import read_six_dof_rosbag
+
+        return read_six_dof_rosbag(path, n_thrusters, options)
+    if kind is LogKind.DATAFLASH:
+        from auvmpc.identification.dataflash import read_six_dof_dataflash
+
+        return read_six_dof_dataflash(path, n_thrusters, options)
+    state, thrust, sample_time = read_six_dof_state(path, n_thrusters)
     return str(path), sample_time, state, thrust
