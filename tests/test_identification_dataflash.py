@@ -27,7 +27,12 @@ from auvmpc.identification.six_dof_log import (
 from auvmpc.identification.thruster_curve import STANDARD_GRAVITY, thruster_curve
 from auvmpc.models.six_dof import SIX_DOF, Rzyx
 from auvmpc.models.vehicle import load_vehicle
-from tests.conftest import SIX_DOF_EXCITE_VEHICLE
+from tests.conftest import (
+    SIX_DOF_EXCITE_VEHICLE,
+    START_ERROR,
+    assert_recovered,
+    with_sensor_noise,
+)
 from tests.test_cli import run_cli
 
 DFReader = pytest.importorskip("pymavlink.DFReader")
@@ -204,15 +209,8 @@ def test_without_pymavlink_the_error_names_the_extra(flight, monkeypatch):
         read_log(flight[-1], 4)
 
 
-# The 6-DOF flight's sensors, as test_identification_six_dof.py's: an AHRS's attitude (rad)
-# and a gyro's and DVL's rates (rad/s, m/s).
-ATTITUDE_NOISE_RAD = 0.002
-RATE_NOISE = 0.005
 # XKF1's position is float32: 6e-8 relative of a few metres.
 POSITION_TOL = 1e-6
-# A parameter identified from a start 30 % off is within 10 % of the truth or its interval
-# covers it (issue 27's bar, as test_identification_six_dof.py).
-SIX_DOF_START_ERROR, SIX_DOF_WITHIN = 0.3, 0.1
 
 
 def _six_dof_dataflash(states: np.ndarray, pwm: np.ndarray, sample_time: float) -> bytes:
@@ -247,12 +245,8 @@ def test_six_dof_identification_from_a_dataflash_log(six_dof_excite_run, tmp_pat
     a start 30 % off; a log without IMU is refused in one line (no p, q)."""
     truth = load_vehicle(SIX_DOF_EXCITE_VEHICLE)
     _, sample_time, states, thrust = read_six_dof_samples(six_dof_excite_run / "run", truth)
-    rng = np.random.default_rng(0)
-    measured = states.copy()
+    measured = with_sensor_noise(states)
     angles = [SIX_DOF.index(name) for name in ("phi", "theta", "psi")]
-    rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
-    measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 3))
-    measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
     pwm = _pwm_for(thrust)
     path = tmp_path / "00000043.BIN"
     path.write_bytes(_six_dof_dataflash(measured, pwm, sample_time))
@@ -273,13 +267,8 @@ def test_six_dof_identification_from_a_dataflash_log(six_dof_excite_run, tmp_pat
                                atol=RATE_TOL)  # fmt: skip
 
     found = identify_six_dof([(name, read_time, read_states, read_thrust)],
-                             offset_vehicle(truth, SIX_DOF_START_ERROR))  # fmt: skip
-    true_values = parameter_values(truth)
-    for estimate in found.parameters:
-        value, (low, high) = true_values[estimate.name], estimate.ci95
-        assert estimate.excited, estimate.name
-        close = abs(estimate.value - value) <= SIX_DOF_WITHIN * abs(value)
-        assert close or low <= value <= high, (estimate, value)
+                             offset_vehicle(truth, START_ERROR))  # fmt: skip
+    assert_recovered(found, parameter_values(truth))
 
     without_imu = tmp_path / "no-imu.bin"
     reader = DFReader.DFReader_binary(str(path))

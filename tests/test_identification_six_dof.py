@@ -44,16 +44,18 @@ from auvmpc.models.six_dof import SIX_DOF, six_dof_model
 from auvmpc.models.six_dof_params import horizontal_equivalent
 from auvmpc.models.vehicle import load_vehicle
 from auvmpc.sim.log import read_log_table
-from tests.conftest import ROUND_OFF_TOL, SIX_DOF_EXCITE_VEHICLE
+from tests.conftest import (
+    ROUND_OFF_TOL,
+    SIX_DOF_EXCITE_VEHICLE,
+    START_ERROR,
+    WITHIN,
+    assert_recovered,
+    with_sensor_noise,
+)
 from tests.test_cli import run_cli
 
 VEHICLE = SIX_DOF_EXCITE_VEHICLE
 SAMPLE_TIME_S = 0.1
-START_ERROR = 0.3
-WITHIN = 0.1
-# An AHRS's attitude (rad) and a gyro's and DVL's rates (rad/s, m/s).
-ATTITUDE_NOISE_RAD = 0.002
-RATE_NOISE = 0.005
 
 
 def test_roll_pitch_rows_are_the_six_dof_model():
@@ -106,21 +108,12 @@ def test_excite_run_identify_every_model_from_one_six_dof_log(six_dof_excite_run
     assert metrics["thrust_limit_violations"] == metrics["thrust_rate_violations"] == 0
     assert 0.1 < max(metrics["max_abs_roll_rad"], metrics["max_abs_pitch_rad"]) <= MAX_TILT_RAD
     name, sample_time, states, thrust = read_six_dof_samples(run, truth)
-    rng = np.random.default_rng(0)
-    measured = states.copy()
-    angles = [SIX_DOF.index(name) for name in ("phi", "theta", "psi")]
-    rates = [SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r")]
-    measured[:, angles] += rng.normal(0, ATTITUDE_NOISE_RAD, (len(states), 3))
-    measured[:, rates] += rng.normal(0, RATE_NOISE, (len(states), 6))
+    measured = with_sensor_noise(states)
     start = offset_vehicle(truth, START_ERROR)
     found = identify_six_dof([(name, sample_time, measured, thrust)], start)
     true_values = parameter_values(truth)
     assert [p.name for p in found.parameters] == list(true_values)
-    for estimate in found.parameters:
-        value, (low, high) = true_values[estimate.name], estimate.ci95
-        assert estimate.excited, estimate.name
-        close = abs(estimate.value - value) <= WITHIN * abs(value)
-        assert close or low <= value <= high, (estimate, value)
+    assert_recovered(found, true_values)
     assert found.outputs == ("u", "v", "r", "w", "phi", "theta", "p", "q")
     assert np.all(found.validation_rms < 0.5 * found.validation_rms_start)
     # One vehicle file: the 3-DOF fields, the heave section and the six_dof section agree.
