@@ -36,7 +36,8 @@ import numpy as np
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import LogOptions, VelocityLog, resample
 from auvmpc.identification.thruster_curve import thruster_curve
-from auvmpc.models.six_dof import Rzyx
+from auvmpc.models.layout import WORLD_VECTOR
+from auvmpc.models.six_dof import BODY_VELOCITY, Rzyx
 
 __all__ = ["body_velocity", "read_dataflash"]
 
@@ -45,8 +46,10 @@ RCOU_CHANNELS = 14
 
 
 def body_velocity(roll, pitch, yaw, ned: np.ndarray) -> np.ndarray:
-    """R(phi, theta, psi)' v for each sample: (n,) angles (rad), ned (n, 3) -> (n, 3)."""
-    phi, theta, psi, v = ca.SX.sym("phi"), ca.SX.sym("theta"), ca.SX.sym("psi"), ca.SX.sym("v", 3)
+    """R(phi, theta, psi)' v for each sample: (n,) angles (rad), world velocities ``ned`` (n, 3)
+    -> body [u, v, w] (n, 3)."""
+    phi, theta, psi = ca.SX.sym("phi"), ca.SX.sym("theta"), ca.SX.sym("psi")
+    v = ca.SX.sym("v", WORLD_VECTOR.size)
     rotate = ca.Function("body", [phi, theta, psi, v], [Rzyx(phi, theta, psi).T @ v])
     n = len(ned)
     out = rotate.map(n)(np.asarray(roll)[None, :], np.asarray(pitch)[None, :],
@@ -127,16 +130,17 @@ def read_dataflash(path: str | Path, n_thrusters: int, options: LogOptions) -> V
     names = tuple(f"C{c}" for c in channels)
     rc_t, pwm = _columns("RCOU", found["RCOU"], names, path)
 
-    angles = np.radians(attitude)
-    angles[:, 2] = np.unwrap(angles[:, 2])
-    at_ekf = np.column_stack([np.interp(ekf_t, att_t, a) for a in angles.T])
-    uv = body_velocity(at_ekf[:, 0], at_ekf[:, 1], at_ekf[:, 2], ned)[:, :2]
+    roll, pitch, yaw = np.radians(attitude).T
+    yaw = np.unwrap(yaw)
+    # The attitude at the velocities' times.
+    roll_v, pitch_v, yaw_v = (np.interp(ekf_t, att_t, angle) for angle in (roll, pitch, yaw))
+    uv = body_velocity(roll_v, pitch_v, yaw_v, ned)[:, BODY_VELOCITY.span("u", "v")]
     imu = _first_instance(found["IMU"], "I")
     if imu:
         rate_t, gyro = _columns("IMU", imu, ("GyrZ",), path)
         rate = gyro[:, 0]
     else:
-        rate_t, rate = att_t, np.gradient(angles[:, 2], att_t / 1e9)
+        rate_t, rate = att_t, np.gradient(yaw, att_t / 1e9)
     r = np.interp(ekf_t, rate_t, rate)
 
     thrust = np.column_stack([curve.force(column) for column in pwm.T])
@@ -150,5 +154,5 @@ def read_dataflash(path: str | Path, n_thrusters: int, options: LogOptions) -> V
         rc_t,
         thrust,
         (f"{ekf} velocity", "RCOU"),
-        heading=at_ekf[:, 2],
+        heading=yaw_v,
     )

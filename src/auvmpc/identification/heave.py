@@ -97,7 +97,8 @@ class HeaveGreyBox(GreyBox):
     def rhs(self) -> ca.Function:
         """[z', w'] (or [w']) by :func:`auvmpc.models.heave.heave_dynamics` itself, its
         parameters symbols: the model written once."""
-        x, force, theta = ca.SX.sym("x", self.state_size), ca.SX.sym("Fz"), ca.SX.sym("theta", 4)
+        x, force = ca.SX.sym("x", self.state_size), ca.SX.sym("Fz")
+        theta = ca.SX.sym("theta", len(FIELDS))
         coefficients = SimpleNamespace(**dict(zip(FIELDS, ca.vertsplit(theta), strict=True)))
         state = x if self.state_size == DEPTH.size else ca.vertcat(0.0, x)
         derivative = heave_dynamics(state, force, coefficients)[DEPTH.size - self.state_size :]
@@ -118,13 +119,15 @@ class HeaveGreyBox(GreyBox):
         if self.outputs == RATE_ONLY:
             return signals, rates
         if self.outputs == DEPTH_AND_RATE:
-            return signals, np.column_stack([signals[:, 1], rates[:, 1]])
-        w = rates[:, 0]
+            w = DEPTH_AND_RATE.index("w")
+            return signals, np.column_stack([signals[:, w], rates[:, w]])
+        z = DEPTH_ONLY.index("z")
+        w = rates[:, z]
         w_dot = savgol_filter(
-            log.velocity[:, 0], filter_window(log.sample_time), FILTER_ORDER, deriv=2,
+            log.velocity[:, z], filter_window(log.sample_time), FILTER_ORDER, deriv=2,
             delta=log.sample_time,
         )  # fmt: skip
-        return np.column_stack([signals[:, 0], w]), np.column_stack([w, w_dot])
+        return np.column_stack([signals[:, z], w]), np.column_stack([w, w_dot])
 
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         """One block, heave: ``-m w' + Zw w + Zww |w| w + B = -F`` (A (1, N, 4), b (1, N))."""

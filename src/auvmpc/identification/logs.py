@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, HORIZONTAL_VELOCITY
 from auvmpc.sim.log import read_log_table
 
 __all__ = ["MIN_SAMPLES", "LogOptions", "VelocityLog", "read_log", "read_run_folder", "resample"]
@@ -35,7 +35,7 @@ __all__ = ["MIN_SAMPLES", "LogOptions", "VelocityLog", "read_log", "read_run_fol
 MIN_SAMPLES = 100
 # The sample times of a log may wander by this share of a sample (written to 1 us).
 _TIME_JITTER = 1e-3
-VELOCITY_NAMES = ("u", "v", "r")
+VELOCITY_NAMES = HORIZONTAL_VELOCITY.names
 HEADING = HORIZONTAL.names[HORIZONTAL.heading]  # the log's heading column, psi
 
 
@@ -238,7 +238,9 @@ def resample(
     if np.ptp(held, axis=0).max() == 0.0:
         raise ConfigError(field_name, name, f"{command_what} never changes: nothing to identify")
     sample_s = step_ns / 1e9
-    velocities, psi = sampled[:, :3], (sampled[:, 3] if heading is not None else None)
+    # The velocities [u, v, r], then the heading if it was given.
+    width = HORIZONTAL_VELOCITY.size
+    velocities, psi = sampled[:, :width], (sampled[:, width] if heading is not None else None)
     if as_force:
         return VelocityLog(name, sample_s, velocities, None, held, heading=psi)
     return VelocityLog(name, sample_s, velocities, held, heading=psi)

@@ -43,6 +43,7 @@ import numpy as np
 
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import LogOptions, VelocityLog, resample
+from auvmpc.models.layout import HORIZONTAL_VELOCITY, PLANAR_FORCE
 
 __all__ = ["PLANAR_SIGNS", "BodyFrame", "read_rosbag"]
 
@@ -162,9 +163,11 @@ def read_rosbag(path: str | Path, n_thrusters: int, options: LogOptions) -> Velo
     def column(topic: str, width: int) -> np.ndarray:
         return np.array(values[topic]).reshape(-1, width)
 
-    odometry = column(options.odometry_topic, 4)
-    velocity = odometry[:, :3] * signs
-    command = column(command_topic, 3 if options.wrench_topic else n_thrusters)
+    # An odometry row: the velocities [u, v, r], then the heading psi.
+    heading_column = HORIZONTAL_VELOCITY.size
+    odometry = column(options.odometry_topic, heading_column + 1)
+    velocity = odometry[:, :heading_column] * signs
+    command = column(command_topic, PLANAR_FORCE.size if options.wrench_topic else n_thrusters)
     if options.wrench_topic:
         command = command * signs
     return resample(
@@ -176,7 +179,8 @@ def read_rosbag(path: str | Path, n_thrusters: int, options: LogOptions) -> Velo
         command,
         (options.odometry_topic, command_topic),
         as_force=bool(options.wrench_topic),
-        heading=odometry[:, 3] * signs[2],  # the yaw turns as r does
+        # the yaw turns as r does
+        heading=odometry[:, heading_column] * signs[HORIZONTAL_VELOCITY.index("r")],
     )
 
 

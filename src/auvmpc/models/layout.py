@@ -12,7 +12,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DEPTH", "HORIZONTAL", "PLANAR_FORCE", "PLANAR_FORCE_XY", "PLANAR_MOMENT", "Layout"]
+__all__ = [
+    "DEPTH",
+    "HORIZONTAL",
+    "HORIZONTAL_COMPONENTS",
+    "HORIZONTAL_VELOCITY",
+    "OBSTACLE_TRACK",
+    "PLANAR_FORCE",
+    "PLANAR_FORCE_XY",
+    "PLANAR_MOMENT",
+    "WORLD_VECTOR",
+    "Layout",
+]
 
 
 @dataclass(frozen=True)
@@ -50,6 +61,12 @@ class Layout:
         """Surge and sway u, v (m/s)."""
         return self.span("u", "v")
 
+    @property
+    def nu(self) -> slice:
+        """Fossen's nu, the body velocities u .. r (m/s, rad/s): u, v, r in the horizontal
+        model, u, v, w, p, q, r in the 6-DOF one."""
+        return self.span("u", "r")
+
     def vector(self, values: Any) -> np.ndarray:
         """A per-state vector from a sequence in state order or a mapping by state name
         (names left out are 0)."""
@@ -67,6 +84,8 @@ class Layout:
 # The 3-DOF horizontal model (models/vehicle.py): world x, y (m), heading psi (rad), body surge
 # u, sway v (m/s), yaw rate r (rad/s).
 HORIZONTAL = Layout(names=("x", "y", "psi", "u", "v", "r"))
+# Its velocity part [u, v, r]: the state of identification's 3-DOF velocity model.
+HORIZONTAL_VELOCITY = Layout(names=HORIZONTAL.names[HORIZONTAL.nu])
 # The 1-DOF heave model (models/heave.py): depth z (m, up, negative below the surface), heave
 # rate w (m/s, up).
 DEPTH = Layout(names=("z", "w"))
@@ -75,3 +94,10 @@ DEPTH = Layout(names=("z", "w"))
 PLANAR_FORCE = Layout(names=("X", "Y", "N"))
 # Its force [X, Y] and its moment N.
 PLANAR_FORCE_XY, PLANAR_MOMENT = PLANAR_FORCE.span("X", "Y"), PLANAR_FORCE.index("N")
+# A vector in the world frame, NED (x north, y east, z down): a water velocity (m/s).
+WORLD_VECTOR = Layout(names=("x", "y", "z"))
+# Its horizontal components x, y: what the horizontal plane sees of it.
+HORIZONTAL_COMPONENTS = WORLD_VECTOR.span("x", "y")
+# A tracked obstacle's constant-velocity state (estimation/ekf.py, ConstantVelocityKalman):
+# world position x, y (m) and velocity vx, vy (m/s).
+OBSTACLE_TRACK = Layout(names=("x", "y", "vx", "vy"))
