@@ -40,8 +40,8 @@ ProfilePoint = tuple[float, Annotated[float, Field(ge=0)]]
 class WaterCurrentConfig(StrictModel):
     """A current as water velocity in the world frame (NED: x north, y east, z down)."""
 
-    velocity_m_per_s: tuple[float, float, float] = Field(
-        default=(0.0, 0.0, 0.0),
+    velocity_m_per_s: tuple[(float,) * WORLD_VECTOR.size] = Field(
+        default=(0.0,) * WORLD_VECTOR.size,
         description="mean water velocity (north, east, down) where the profile is 1 (m/s)",
     )
     variation: CurrentVariationConfig | None = Field(
@@ -116,7 +116,8 @@ class WaterCurrent:
         return float((factors[i + 1] - factors[i]) / (depths[i + 1] - depths[i]))
 
     def velocity_world(self, t: float, depth_m: float = 0.0) -> np.ndarray:
-        """Water velocity (3,) at time t within the current sample and a depth (m/s)."""
+        """Water velocity [x, y, z] (WORLD_VECTOR, m/s) at time t within the current sample
+        and a depth."""
         return self.profile(depth_m) * (self._mean + self._variation)
 
     def at(self, t: float, depth_m: float, depth_rate: float) -> tuple[np.ndarray, np.ndarray]:

@@ -77,22 +77,23 @@ STATE_PROCESS_STD = (1e-3, 1e-3, 1e-3, 2e-2, 2e-2, 2e-2)
 class ObserverConfig(StrictModel):
     """Noise levels the filter assumes (tuning knobs, not the simulated noise)."""
 
-    measurement_std: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = Field(
+    # One per horizontal state, one per entry of the world force and moment.
+    measurement_std: tuple[(Positive,) * HORIZONTAL.size] = Field(
         default=(0.01, 0.01, 0.005, 0.01, 0.01, 0.005),
         description="assumed sensor noise of [x, y, psi, u, v, r] (m, rad, m/s, rad/s)",
     )
-    state_process_std: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = Field(
+    state_process_std: tuple[(Positive,) * HORIZONTAL.size] = Field(
         default=STATE_PROCESS_STD,
         description="model error per sample on [x, y, psi, u, v, r]",
     )
-    disturbance_rate_std: tuple[Positive, Positive, Positive] | None = Field(
+    disturbance_rate_std: tuple[(Positive,) * PLANAR_FORCE.size] | None = Field(
         default=None,
         description="random-walk intensity of the world force X, Y (N/sqrt(s)) and moment "
         "N (N m/sqrt(s)): larger tracks faster, smaller is smoother; omitted: 2.5 % of the "
         "vehicle's planar thrust authority (0.4 % if it is underactuated) and 0.3 % of its yaw "
         "authority per sqrt(s), see docs/tuning.md",
     )
-    initial_disturbance_std: tuple[Positive, Positive, Positive] | None = Field(
+    initial_disturbance_std: tuple[(Positive,) * PLANAR_FORCE.size] | None = Field(
         default=None,
         description="prior uncertainty of X, Y (N) and N (N m); omitted: half the vehicle's "
         "planar thrust authority and a tenth of its yaw authority, see docs/tuning.md",
