@@ -185,13 +185,13 @@ def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float
 
     Parameters
     ----------
-    nu, nu_dot, tau : (N, 3) velocities [u, v, r], their derivatives and the applied force
-        [X, Y, N]
+    nu, nu_dot, tau : velocities [u, v, r] (N, HORIZONTAL_VELOCITY.size), their derivatives
+        and the applied force [X, Y, N] (N, PLANAR_FORCE.size)
     iz_rb : kg m2, the rigid-body yaw inertia (known)
 
     Returns
     -------
-    A : (3, N, 9), b : (3, N): block a is axis a (surge, sway, yaw).
+    A : (axes, N, len(PARAMETERS)), b : (axes, N): block a is axis a (surge, sway, yaw).
     """
     u, v, r = nu.T
     du, dv, dr = nu_dot.T
@@ -210,7 +210,7 @@ def filter_window(sample_time: float) -> int:
 
 
 def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
-    """Savitzky-Golay smoothed velocities and their derivatives, (N+1, 3) each."""
+    """Savitzky-Golay smoothed velocities and their derivatives, (N+1, log columns) each."""
     window = filter_window(log.sample_time)
     nu = savgol_filter(log.velocity, window, FILTER_ORDER, axis=0)
     nu_dot = savgol_filter(
@@ -220,14 +220,15 @@ def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
 
 
 def applied_force(log: VelocityLog, vehicle: VehicleParams) -> np.ndarray:
-    """The body force [X, Y, N] per command, (N, 3): the log's own, or tau = T F."""
+    """The body force [X, Y, N] per command, (N, PLANAR_FORCE.size): the log's own, or
+    tau = T F."""
     if log.force is not None:  # the log holds the body force itself: no allocation
         return log.force
     return log.thrust @ vehicle.T.T
 
 
 def noise_levels(logs: list[VelocityLog]) -> np.ndarray:
-    """Each velocity's noise standard deviation, from what the filter removes (3,), with a
+    """Each velocity's noise standard deviation, from what the filter removes (per column), with a
     floor of 1 % of its RMS (a noise-free log still needs finite weights)."""
     removed = np.vstack([log.velocity - smoothed(log)[0] for log in logs])
     window = filter_window(logs[0].sample_time)

@@ -377,7 +377,7 @@ def excitation_scenario(
     else:
         scenario |= {
             "reference": {"type": "waypoints", "points": [[0.0, 0.0], [0.1, 0.0]], "speed": 0.1},
-            "initial_state": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            "initial_state": [0.0] * HORIZONTAL.size,  # at rest at the origin
         }
     if excitation.dof is Dof.SIX_DOF:
         start_depth = box_m + DEPTH_MARGIN_M

@@ -131,7 +131,8 @@ class HeaveGreyBox(GreyBox):
 
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         """One block, heave: ``-m w' + Zw w + Zww |w| w + B = -F`` (A (1, N, 4), b (1, N))."""
-        w, w_dot = x[:, -1], x_dot[:, -1]  # w is the state's last entry
+        w_index = self.states.index("w")  # [z, w] or [w]
+        w, w_dot = x[:, w_index], x_dot[:, w_index]
         A = np.column_stack([-w_dot, w, np.abs(w) * w, np.ones_like(w)])[None]
         return A, -inputs[:, 0][None]
 
@@ -142,7 +143,8 @@ class HeaveGreyBox(GreyBox):
         return 0.01 * np.array([self.heave.m_heave] * 3 + [thrust])
 
     def damping_rate(self, logs: list[VelocityLog]) -> float:
-        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, -1])) for log in logs)
+        w_index = self.states.index("w")
+        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, w_index])) for log in logs)
         return abs(self.heave.Zw + 2.0 * self.heave.Zww * top) / self.heave.m_heave
 
 

@@ -53,9 +53,9 @@ class VelocityLog:
 
     name: str  # where it came from (a path), for the provenance
     sample_time: float  # s
-    velocity: np.ndarray  # (N+1, 3) u, v (m/s), r (rad/s) at t_k (heave: z, w)
+    velocity: np.ndarray  # (N+1, outputs) u, v (m/s), r (rad/s) at t_k (heave: z, w)
     thrust: np.ndarray | None  # (N, n) N, held over [t_k, t_k+1)
-    force: np.ndarray | None = None  # (N, 3) X, Y (N), N (N m), held over [t_k, t_k+1)
+    force: np.ndarray | None = None  # (N, ni) X, Y (N), N (N m), held over [t_k, t_k+1)
     outputs: tuple[str, ...] = VELOCITY_NAMES  # what ``velocity``'s columns are
     heading: np.ndarray | None = None  # (N+1,) psi (rad, unwrapped) at t_k, if logged
 

@@ -14,6 +14,7 @@ import numpy as np
 
 __all__ = [
     "DEPTH",
+    "DEPTH_PROFILE",
     "HORIZONTAL",
     "HORIZONTAL_COMPONENTS",
     "HORIZONTAL_VELOCITY",
@@ -89,6 +90,9 @@ HORIZONTAL_VELOCITY = Layout(names=HORIZONTAL.names[HORIZONTAL.nu])
 # The 1-DOF heave model (models/heave.py): depth z (m, up, negative below the surface), heave
 # rate w (m/s, up).
 DEPTH = Layout(names=("z", "w"))
+# A 3-D reference's depth profile (references.py, DepthProfile): depth below the surface (NED
+# z, down, m), its rate (m/s) and acceleration (m/s2).
+DEPTH_PROFILE = Layout(names=("z", "z_rate", "z_acceleration"))
 # A force and yaw moment in the horizontal plane [X, Y, N] (N, N, N m): a world-frame
 # disturbance, a body-frame generalised force, a vehicle's thrust authority.
 PLANAR_FORCE = Layout(names=("X", "Y", "N"))
