@@ -44,7 +44,7 @@ from scipy.interpolate import CubicSpline
 
 from auvmpc.config import NonNegative, StrictModel
 from auvmpc.errors import ConfigError, shortened
-from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.layout import DEPTH, DEPTH_PROFILE, HORIZONTAL
 from auvmpc.safe_yaml import read_text_file
 
 __all__ = [
@@ -443,7 +443,7 @@ class Reference(ABC):
 
         Returns
         -------
-        numpy.ndarray, shape (n, 3)
+        numpy.ndarray, shape (n, DEPTH_PROFILE.size)
             Rows ``[depth, depth rate, depth acceleration]``: depth below the surface (NED z,
             down positive) in m, m/s, m/s2.
         """
@@ -461,13 +461,13 @@ class Reference(ABC):
 
         Returns
         -------
-        numpy.ndarray, shape (n, 6)
+        numpy.ndarray, shape (n, HORIZONTAL.size)
             Rows ``[x, y, psi, u, v, r]``; psi is continuous in t and independent of the query.
         """
         return self._states(_as_times(t))
 
     def state(self, t: float) -> np.ndarray:
-        """Reference state ``[x, y, psi, u, v, r]`` at one time ``t`` (s), shape (6,)."""
+        """Reference state ``[x, y, psi, u, v, r]`` at one time ``t`` (s)."""
         return self.states(np.array([t], dtype=float))[0]
 
     def positions(self, t: ArrayLike) -> np.ndarray:
@@ -475,7 +475,8 @@ class Reference(ABC):
         return self.states(t)[:, HORIZONTAL.position]
 
     def preview(self, t0: float, dt: float, n: int) -> np.ndarray:
-        """States at ``t0 + i*dt`` for i = 0..n-1, shape (n, 6).
+        """States ``[x, y, psi, u, v, r]`` at ``t0 + i*dt`` for i = 0..n-1, shape (n,
+        HORIZONTAL.size).
 
         Times come from the integer i, never from accumulating dt, so sample i of a horizon is
         the same float whatever n is.
@@ -488,7 +489,7 @@ class Reference(ABC):
 
     @abstractmethod
     def _states(self, t: np.ndarray) -> np.ndarray:
-        """States for a validated 1-D float array of times, shape (n, 6)."""
+        """States for a validated 1-D float array of times, shape (n, HORIZONTAL.size)."""
 
 
 def _as_times(t: ArrayLike) -> np.ndarray:
@@ -755,12 +756,16 @@ class WaypointPath(Reference):
 # --------------------------------------------------------------------------------------------
 
 
+_Z, _Z_RATE, _Z_ACCELERATION = (DEPTH_PROFILE.index(name) for name in DEPTH_PROFILE.names)
+
+
 class DepthProfile(ABC):
     """Depth below the surface as a function of time, vectorised: rows [z, z', z'']."""
 
     @abstractmethod
     def evaluate(self, t: np.ndarray) -> np.ndarray:
-        """(n, 3) depth (m), rate (m/s) and acceleration (m/s2) at a 1-D array of times."""
+        """(n, DEPTH_PROFILE.size) depth (m), rate (m/s) and acceleration (m/s2) at a 1-D
+        array of times."""
 
 
 class LinearDepth(DepthProfile):
@@ -770,9 +775,9 @@ class LinearDepth(DepthProfile):
         self.start, self.rate = float(start), float(rate)
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
-        out = np.zeros((t.size, 3))
-        out[:, 0] = self.start + self.rate * t
-        out[:, 1] = self.rate
+        out = np.zeros((t.size, DEPTH_PROFILE.size))
+        out[:, _Z] = self.start + self.rate * t
+        out[:, _Z_RATE] = self.rate
         return out
 
 
@@ -798,16 +803,17 @@ class DepthSchedule(DepthProfile):
         return cls(config.start_m, [(c.time_s, c.duration_s, c.depth_m) for c in config.changes])
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
-        out = np.zeros((t.size, 3))
-        out[:, 0] = self.start
+        out = np.zeros((t.size, DEPTH_PROFILE.size))
+        out[:, _Z] = self.start
         level = self.start
         for t0, duration, depth in self.changes:
             step = depth - level
             tau = np.clip((t - t0) / duration, 0.0, 1.0)
             inside = (t > t0) & (t < t0 + duration)
-            out[:, 0] += step * tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
-            out[:, 1] += np.where(inside, step * 30.0 * tau**2 * (1.0 - tau) ** 2 / duration, 0.0)
-            out[:, 2] += np.where(
+            out[:, _Z] += step * tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+            rate = np.where(inside, step * 30.0 * tau**2 * (1.0 - tau) ** 2 / duration, 0.0)
+            out[:, _Z_RATE] += rate
+            out[:, _Z_ACCELERATION] += np.where(
                 inside,
                 step * 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) / (duration * duration),
                 0.0,
@@ -829,12 +835,13 @@ class DepthStep:
         self.preview = preview
 
     def states(self, t: ArrayLike) -> np.ndarray:
-        """(n, 2) rows ``[z_ref, 0]`` at the times ``t`` (s), the first first."""
+        """(n, DEPTH.size) rows ``[z_ref, 0]`` at the times ``t`` (s), the first first."""
         times = np.asarray(t, dtype=float)
         if not self.preview:
             times = np.full_like(times, times[0])
-        depth = self.config.depth(times)
-        return np.column_stack([depth, np.zeros_like(depth)])
+        rows = np.zeros((times.size, DEPTH.size))  # at rest
+        rows[:, DEPTH.index("z")] = self.config.depth(times)
+        return rows
 
 
 # --------------------------------------------------------------------------------------------

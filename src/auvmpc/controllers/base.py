@@ -41,7 +41,7 @@ class Observation:
 
     k: int
     t: float  # s
-    state: np.ndarray  # measured, possibly noisy: (6,) [x, y, psi, u, v, r]; depth: (1,) [z]
+    state: np.ndarray  # measured, possibly noisy: [x, y, psi, u, v, r] (HORIZONTAL); depth: [z]
     reference: np.ndarray  # (preview_steps + 1, nx): reference at t_k + i * Te, i = 0..
     obstacles: tuple[ObstacleState, ...] = ()
     # (n,) each input's actuator effectiveness as the controller should assume it, in input
@@ -67,7 +67,7 @@ class ControlResult:
     thrust: np.ndarray  # (n,) N, applied over [t_k, t_k+1)
     status: ControlStatus = ControlStatus.OK
     solve_time_s: float = 0.0  # the optimiser's own time (the loop also times the whole call)
-    predicted_states: np.ndarray | None = None  # (N + 1, 6) if the controller predicts
+    predicted_states: np.ndarray | None = None  # (N + 1, nx) if the controller predicts
     info: dict[str, float] = field(default_factory=dict)
 
 

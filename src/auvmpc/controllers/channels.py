@@ -32,7 +32,7 @@ import numpy as np
 
 from auvmpc.controllers.base import Controller, ControlResult, Observation, timed_command
 from auvmpc.models.actuators import WRENCH
-from auvmpc.models.layout import DEPTH, HORIZONTAL
+from auvmpc.models.layout import DEPTH_PROFILE, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF, SIX_DOF_MEASUREMENT, depth_rate, horizontal_state
 from auvmpc.models.vehicle import VehicleParams
 
@@ -123,7 +123,8 @@ class ReferenceWithDepth:
         self.reference = reference  # a references.Reference with a depth profile
 
     def states(self, t: np.ndarray) -> np.ndarray:
-        return np.hstack([self.reference.states(t), self.reference.depths(t)[:, : DEPTH.size]])
+        depth = self.reference.depths(t)[:, DEPTH_PROFILE.span("z", "z_rate")]
+        return np.hstack([self.reference.states(t), depth])
 
 
 class HorizontalAndDepth(Controller):
@@ -148,8 +149,8 @@ class HorizontalAndDepth(Controller):
         self._heave_count = depth.heave.thruster_count
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        """``initial_state``: the true 6-DOF start (12,); ``initial_thrust`` every thruster's
-        F(-1) (the depth channel's total heave starts from 0)."""
+        """``initial_state``: the true 6-DOF start (SIX_DOF order); ``initial_thrust`` every
+        thruster's F(-1) (the depth channel's total heave starts from 0)."""
         n = self.mapping.n_horizontal
         self._previous = np.asarray(initial_thrust, dtype=float).copy()
         self.horizontal.reset(horizontal_state(initial_state), self._previous[:n].copy())
@@ -182,7 +183,7 @@ class HorizontalAndDepth(Controller):
             k=observation.k,
             t=observation.t,
             state=np.array([-measured_depth, -measured_rate]),
-            reference=np.column_stack([-target[:, 0], -target[:, 1]]),
+            reference=-target,  # [z_ref, z_rate_ref] down -> DEPTH's [z, w] up
             effectiveness=None if told is None else told[n:],
         )
         depth_result, heave, depth_ms = timed_command(

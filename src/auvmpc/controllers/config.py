@@ -60,7 +60,8 @@ __all__ = [
     "velocity_change_time",
 ]
 
-Weights6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
+# One weight per horizontal state (tuple[NonNegative, ...] of HORIZONTAL.size entries).
+StateWeights = tuple[(NonNegative,) * HORIZONTAL.size]
 
 
 class ControllerType(StrEnum):
@@ -416,12 +417,12 @@ class Horizon(StrictModel):
 class TrackingWeights(StrictModel):
     """The tracking cost (paper-model.md section 4)."""
 
-    Q: Weights6 = Field(
+    Q: StateWeights = Field(
         default=(5, 5, 5, 1, 1, 1),
         description="stage weights on [x y psi u v r], as a list in that order or a mapping "
         "by state name (names left out weigh 0), e.g. {x: 5, y: 5, psi: 5}",
     )
-    S: Weights6 = Field(
+    S: StateWeights = Field(
         default=(10, 10, 10, 2, 2, 2), description="terminal weights, as Q (list or mapping)"
     )
 

@@ -36,7 +36,8 @@ __all__ = ["LtvMpc", "LtvMpcConfig", "linearised_rollout"]
 def linearised_rollout(
     model: VehicleParams, sample_time: float, substeps: int, horizon: int, jit: bool = False
 ) -> ca.Function:
-    """CasADi function (x0 (6), F (n, ny), d (3, ny)) -> (X (6, ny), A (6, 6 ny), B (6, n ny)).
+    """CasADi function (x0 (nx), F (n, ny), d (nd, ny)) -> (X (nx, ny), A (nx, nx ny), B (nx,
+    n ny)), nx = HORIZONTAL.size, nd = PLANAR_FORCE.size (the world force and moment).
 
     X[:, i] is the state after step i of the rollout; A_i, B_i are the Jacobians of the
     one-sample RK4 map at (X_{i-1}, F_i) (models/discrete.py builds them once per vehicle).
@@ -112,7 +113,7 @@ class LtvMpc(LinearMpc):
             successors, jac_x, jac_u, *jac_d = rollout(
                 state, nominal_input.T, forces, self.effectiveness
             )
-            successors = np.asarray(successors).T  # (ny, 6)
+            successors = np.asarray(successors).T  # (ny, NX)
             nodes = np.vstack([state, successors[:-1]])
         else:
             nodes = np.vstack([state, nodes[1:ny]])
@@ -127,7 +128,7 @@ class LtvMpc(LinearMpc):
             - np.einsum("nij,nj->ni", A, nodes)
             - np.einsum("nij,nj->ni", B, nominal_input)
         )
-        nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, 6)
+        nominal = np.vstack([nodes, successors[-1:]])  # (ny + 1, NX)
         G = None
         if jac_d:
             G = np.asarray(jac_d[0]).reshape(NX, ny, PLANAR_FORCE.size).transpose(1, 0, 2)

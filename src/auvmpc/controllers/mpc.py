@@ -55,7 +55,7 @@ __all__ = ["AffinePrediction", "LinearMpc", "PaperMpc", "PaperMpcConfig"]
 NX = HORIZONTAL.size
 # Relative trust-region weights on [x, y, psi, u, v, r] deviations from the nominal: the
 # heading and velocities carry the nonlinearity (rotation, Coriolis), positions follow them.
-_TRUST_REGION_SCALE = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0])
+_TRUST_REGION_SCALE = HORIZONTAL.vector({"psi": 1.0, "u": 1.0, "v": 1.0, "r": 1.0})
 # Obstacle rows are kept for predicted steps whose nominal position is within this distance
 # of the half-plane (m): 15 s at the vehicle's top speed is far more than one re-plan moves.
 _OBSTACLE_RANGE_M = 5.0
@@ -102,7 +102,8 @@ class LinearMpc(IncrementalMpc):
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
         """Affine model over the horizon around the thrusts ``nominal_input`` (ny, n), with
-        the estimated world-frame force and moment ``disturbance`` (3,) acting throughout."""
+        the estimated world-frame force and moment ``disturbance`` [X, Y, N] acting
+        throughout."""
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         super().reset(initial_state, initial_thrust)
@@ -239,7 +240,7 @@ def robust_tightening(model: VehicleParams, config: TightenedConstraints) -> Tig
         )
     sampled = horizontal_model(model, config.sample_time, config.model_substeps, config.jit)
     half_range = np.broadcast_to((model.thrust_max - model.thrust_min) / 2.0, model.n_thrusters)
-    surge = model.T[0]
+    surge = model.T[PLANAR_FORCE.index("X")]  # each thruster's surge force per newton
     forward = float(np.maximum(surge * model.thrust_max, surge * model.thrust_min).sum())
     reverse = float(-np.minimum(surge * model.thrust_max, surge * model.thrust_min).sum())
     top = [steady_speed(model.Xu, model.Xuu, force) for force in (reverse, forward)]
@@ -247,9 +248,10 @@ def robust_tightening(model: VehicleParams, config: TightenedConstraints) -> Tig
     allocation = np.linalg.pinv(model.T)
     gains = []
     for speed in speeds:
-        at = np.array([0.0, 0.0, 0.0, speed, 0.0, 0.0])
+        at = HORIZONTAL.vector({"u": speed})
         drag = -(model.Xu * speed + model.Xuu * speed * abs(speed))
-        holding = allocation @ np.array([drag, 0.0, 0.0])  # the thrust that keeps the speed
+        # the thrust that keeps the speed
+        holding = allocation @ PLANAR_FORCE.vector({"X": drag})
         # The tube's gains are the healthy vehicle's (built once, not per fault).
         healthy = np.ones(model.n_thrusters)
         _, A, B = sampled.linearised_step(at, holding, np.zeros(PLANAR_FORCE.size), healthy)

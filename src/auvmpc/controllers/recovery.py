@@ -27,7 +27,12 @@ import numpy as np
 
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.baseline import BaselineConfig
-from auvmpc.controllers.tracking_law import LAW_OUTPUTS, apply_law, tracking_law
+from auvmpc.controllers.tracking_law import (
+    LAW_OUTPUTS,
+    REFERENCE_ROWS,
+    apply_law,
+    tracking_law,
+)
 from auvmpc.models.heave import heave_damping_force
 from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
@@ -70,11 +75,11 @@ class StabilisingFeedback:
         applies the rate limit around ``previous``), allocated to the thrusters as the
         observation's effectiveness says they act."""
         state = np.asarray(observation.state, dtype=float)
-        target = observation.reference[:2]
+        target = observation.reference[:REFERENCE_ROWS]  # now and one sample ahead
         if self._blocked(state[_POSITION], target[0, _POSITION], observation):
             if self._hold is None:
                 self._hold = state[_POSITION].copy()
-            target = np.zeros((2, HORIZONTAL.size))
+            target = np.zeros((REFERENCE_ROWS, HORIZONTAL.size))
             target[:, _POSITION] = self._hold
             target[:, _HEADING] = observation.reference[0, _HEADING]
         else:

@@ -106,8 +106,8 @@ class Proposal:
     iterations: int = 0
     max_slack: float = 0.0
     predicted_states: np.ndarray | None = None
-    disturbance: np.ndarray | None = None  # the force estimate used, if any: (3,) horizontal
-    # world X, Y, N; (1,) the depth MPC's heave force
+    disturbance: np.ndarray | None = None  # the force estimate used, if any: horizontal
+    # world [X, Y, N] (PLANAR_FORCE); the depth MPC's heave force [Z]
     estimated_state: np.ndarray | None = None  # the state the back end estimated, if any
     limited: bool = False  # the back end itself cut its demand to fit the limits
     details: dict[str, float] = field(default_factory=dict)  # back-end-specific, in ``info``

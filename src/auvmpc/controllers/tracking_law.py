@@ -37,12 +37,14 @@ if TYPE_CHECKING:
     from auvmpc.controllers.baseline import BaselineConfig
 
 __all__ = [
-    "LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "apply_law", "effective_allocation",
-    "tracking_law",
+    "LAW_INPUTS", "LAW_OUTPUTS", "PATH_ERRORS", "REFERENCE_ROWS", "apply_law",
+    "effective_allocation", "tracking_law",
 ]  # fmt: skip
 
 LAW_INPUTS = ("state", "reference_now", "reference_ahead", "disturbance", "effectiveness")
 LAW_OUTPUTS = ("tau", "errors", "integrated", "thrust", "requested")
+# The reference rows the law reads: now and one sample ahead.
+REFERENCE_ROWS = 2
 # The damping of the faulted allocation's least squares, relative to the mean eigenvalue of
 # T T': small enough to be the pseudo-inverse's allocation to ~1e-9, large enough that a set
 # of effective thrusters that no longer spans the plane (or none at all) stays finite.

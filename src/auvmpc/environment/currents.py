@@ -22,6 +22,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
+from auvmpc.models.layout import HORIZONTAL_COMPONENTS, WORLD_VECTOR
 
 __all__ = ["CurrentVariationConfig", "WaterCurrent", "WaterCurrentConfig", "gauss_markov_step"]
 
@@ -39,8 +40,8 @@ ProfilePoint = tuple[float, Annotated[float, Field(ge=0)]]
 class WaterCurrentConfig(StrictModel):
     """A current as water velocity in the world frame (NED: x north, y east, z down)."""
 
-    velocity_m_per_s: tuple[float, float, float] = Field(
-        default=(0.0, 0.0, 0.0),
+    velocity_m_per_s: tuple[(float,) * WORLD_VECTOR.size] = Field(
+        default=(0.0,) * WORLD_VECTOR.size,
         description="mean water velocity (north, east, down) where the profile is 1 (m/s)",
     )
     variation: CurrentVariationConfig | None = Field(
@@ -80,11 +81,12 @@ class WaterCurrent:
         self.sample_time = sample_time
         self._rng = rng
         self._mean = np.array(config.velocity_m_per_s, dtype=float)
-        self._variation = np.zeros(3)
+        self._variation = np.zeros(WORLD_VECTOR.size)
         variation = config.variation
         if variation is not None and variation.std_m_per_s > 0:
             # Start from the stationary distribution so the statistics do not drift.
-            self._variation[:2] = rng.normal(0.0, variation.std_m_per_s, size=2)
+            horizontal = self._variation[HORIZONTAL_COMPONENTS]  # a view
+            horizontal[:] = rng.normal(0.0, variation.std_m_per_s, size=horizontal.shape)
         self._depths = np.array([depth for depth, _ in config.depth_profile], dtype=float)
         self._factors = np.array([factor for _, factor in config.depth_profile], dtype=float)
 
@@ -93,8 +95,9 @@ class WaterCurrent:
         variation = self.config.variation
         if variation is None or variation.std_m_per_s == 0:
             return
-        self._variation[:2] = gauss_markov_step(
-            self._variation[:2], variation.std_m_per_s, variation.time_constant_s,
+        horizontal = HORIZONTAL_COMPONENTS
+        self._variation[horizontal] = gauss_markov_step(
+            self._variation[horizontal], variation.std_m_per_s, variation.time_constant_s,
             self.sample_time, self._rng,
         )  # fmt: skip
 
@@ -113,7 +116,8 @@ class WaterCurrent:
         return float((factors[i + 1] - factors[i]) / (depths[i + 1] - depths[i]))
 
     def velocity_world(self, t: float, depth_m: float = 0.0) -> np.ndarray:
-        """Water velocity (3,) at time t within the current sample and a depth (m/s)."""
+        """Water velocity [x, y, z] (WORLD_VECTOR, m/s) at time t within the current sample
+        and a depth."""
         return self.profile(depth_m) * (self._mean + self._variation)
 
     def at(self, t: float, depth_m: float, depth_rate: float) -> tuple[np.ndarray, np.ndarray]:

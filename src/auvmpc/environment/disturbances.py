@@ -16,7 +16,13 @@ from pydantic import Field, field_validator
 
 from auvmpc.config import NonNegative, Positive, StrictModel
 from auvmpc.environment.currents import WaterCurrent, WaterCurrentConfig, gauss_markov_step
-from auvmpc.models.layout import PLANAR_FORCE
+from auvmpc.models.layout import (
+    HORIZONTAL,
+    HORIZONTAL_COMPONENTS,
+    PLANAR_FORCE,
+    PLANAR_FORCE_XY,
+    WORLD_VECTOR,
+)
 
 __all__ = [
     "DisturbanceConfig",
@@ -66,7 +72,7 @@ class DisturbanceConfig(StrictModel):
         # The horizontal plant has no depth to read a profile at, nor a vertical velocity.
         if current is not None and current.depth_profile:
             raise ValueError("a depth profile needs a depth; the horizontal plant has none")
-        if current is not None and current.velocity_m_per_s[2] != 0:
+        if current is not None and current.velocity_m_per_s[WORLD_VECTOR.index("z")] != 0:
             raise ValueError("the horizontal plant has no vertical velocity: give down = 0")
         return current
 
@@ -74,11 +80,10 @@ class DisturbanceConfig(StrictModel):
 class SensorNoiseConfig(StrictModel):
     """Zero-mean Gaussian noise on the state the controller sees (the log keeps the truth)."""
 
-    std: tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative] = (
-        Field(
-            default=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-            description="standard deviation of [x, y, psi, u, v, r] (m, m, rad, m/s, m/s, rad/s)",
-        )
+    # One per horizontal state: tuple[NonNegative, ...] with HORIZONTAL.size entries.
+    std: tuple[(NonNegative,) * HORIZONTAL.size] = Field(
+        default=(0.0,) * HORIZONTAL.size,
+        description="standard deviation of [x, y, psi, u, v, r] (m, m, rad, m/s, m/s, rad/s)",
     )
 
 
@@ -99,7 +104,8 @@ class WorldDisturbance:
         variation = config.current_variation
         if variation is not None and variation.std_N > 0:
             # Start from the stationary distribution so the statistics do not drift.
-            self._variation[:2] = rng.normal(0.0, variation.std_N, size=2)
+            planar = self._variation[PLANAR_FORCE_XY]  # a view
+            planar[:] = rng.normal(0.0, variation.std_N, size=planar.shape)
         self._wave_phase = 0.0
         if config.waves is not None:
             self._wave_phase = float(rng.uniform(0.0, 2.0 * math.pi))
@@ -128,8 +134,8 @@ class WorldDisturbance:
         variation = self.config.current_variation
         if variation is None or variation.std_N == 0:
             return
-        self._variation[:2] = gauss_markov_step(
-            self._variation[:2], variation.std_N, variation.time_constant_s,
+        self._variation[PLANAR_FORCE_XY] = gauss_markov_step(
+            self._variation[PLANAR_FORCE_XY], variation.std_N, variation.time_constant_s,
             self.sample_time, self._rng,
         )  # fmt: skip
 
@@ -137,14 +143,15 @@ class WorldDisturbance:
         """Horizontal water velocity ``[V_x, V_y]`` (m/s) at time t, or None without one."""
         if self._water is None:
             return None
-        return self._water.velocity_world(t)[:2]
+        return self._water.velocity_world(t)[HORIZONTAL_COMPONENTS]
 
     def force_world(self, t: float) -> np.ndarray:
         """World-frame ``[X, Y, N]`` at time t within the current sample."""
         return self.forces_world(np.array([t]))[0]
 
     def forces_world(self, times: np.ndarray) -> np.ndarray:
-        """(len(times), 3): :meth:`force_world` at each time within the current sample."""
+        """(len(times), PLANAR_FORCE.size): :meth:`force_world` at each time within the current
+        sample."""
         times = np.asarray(times, dtype=float)
         forces = np.tile(self._mean + self._variation, (times.size, 1))
         waves = self.config.waves

@@ -35,6 +35,7 @@ from pydantic import Field
 from auvmpc.config import NonNegative, StrictModel
 from auvmpc.environment.obstacles import ObstacleConfig, ObstacleState
 from auvmpc.estimation import ConstantVelocityKalman
+from auvmpc.models.layout import OBSTACLE_TRACK
 
 __all__ = ["ObstacleSensorConfig", "ObstaclePerception", "Prediction", "confidence_gain"]
 
@@ -161,14 +162,15 @@ class ObstaclePerception:
 
     def _state(self, index: int, estimate: tuple[np.ndarray, np.ndarray]) -> ObstacleState:
         mean, covariance = estimate
-        velocity = mean[2:].copy()
+        position, velocities = OBSTACLE_TRACK.position, OBSTACLE_TRACK.span("vx", "vy")
+        velocity = mean[velocities].copy()
         if self.config.prediction is Prediction.CONSTANT_POSITION:
-            velocity = np.zeros(2)
+            velocity = np.zeros_like(velocity)
             covariance = covariance.copy()
-            covariance[2:, :] = 0.0
-            covariance[:, 2:] = 0.0
+            covariance[velocities, :] = 0.0
+            covariance[:, velocities] = 0.0
         return ObstacleState(
-            center=mean[:2].copy(),
+            center=mean[position].copy(),
             radius=self.obstacles[index].radius,
             velocity=velocity,
             covariance=covariance,

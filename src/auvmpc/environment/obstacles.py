@@ -25,6 +25,7 @@ from pydantic import Field, model_validator
 
 from auvmpc.config import StrictModel
 from auvmpc.errors import FieldError
+from auvmpc.models.layout import OBSTACLE_TRACK
 
 __all__ = ["ObstacleConfig", "ObstacleState", "clearance", "visible_obstacles"]
 
@@ -78,12 +79,13 @@ class ObstacleState:
         if self.covariance is None:
             return np.zeros(len(dts))
         P = self.covariance
-        cross = P[:2, 2:] + P[2:, :2]
+        position, velocity = OBSTACLE_TRACK.position, OBSTACLE_TRACK.span("vx", "vy")
+        cross = P[position, velocity] + P[velocity, position]
         growth = self.acceleration_psd * dts**3 / 3.0
         pos = (
-            P[:2, :2][None]
+            P[position, position][None]
             + dts[:, None, None] * cross[None]
-            + (dts**2)[:, None, None] * P[2:, 2:][None]
+            + (dts**2)[:, None, None] * P[velocity, velocity][None]
             + growth[:, None, None] * np.eye(2)[None]
         )
         half_trace = 0.5 * (pos[:, 0, 0] + pos[:, 1, 1])

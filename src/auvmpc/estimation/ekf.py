@@ -28,7 +28,13 @@ from pydantic import Field
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.models.discrete import horizontal_model, world_disturbance_dynamics
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE, PLANAR_FORCE_XY, PLANAR_MOMENT
+from auvmpc.models.layout import (
+    HORIZONTAL,
+    OBSTACLE_TRACK,
+    PLANAR_FORCE,
+    PLANAR_FORCE_XY,
+    PLANAR_MOMENT,
+)
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
@@ -71,22 +77,23 @@ STATE_PROCESS_STD = (1e-3, 1e-3, 1e-3, 2e-2, 2e-2, 2e-2)
 class ObserverConfig(StrictModel):
     """Noise levels the filter assumes (tuning knobs, not the simulated noise)."""
 
-    measurement_std: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = Field(
+    # One per horizontal state, one per entry of the world force and moment.
+    measurement_std: tuple[(Positive,) * HORIZONTAL.size] = Field(
         default=(0.01, 0.01, 0.005, 0.01, 0.01, 0.005),
         description="assumed sensor noise of [x, y, psi, u, v, r] (m, rad, m/s, rad/s)",
     )
-    state_process_std: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = Field(
+    state_process_std: tuple[(Positive,) * HORIZONTAL.size] = Field(
         default=STATE_PROCESS_STD,
         description="model error per sample on [x, y, psi, u, v, r]",
     )
-    disturbance_rate_std: tuple[Positive, Positive, Positive] | None = Field(
+    disturbance_rate_std: tuple[(Positive,) * PLANAR_FORCE.size] | None = Field(
         default=None,
         description="random-walk intensity of the world force X, Y (N/sqrt(s)) and moment "
         "N (N m/sqrt(s)): larger tracks faster, smaller is smoother; omitted: 2.5 % of the "
         "vehicle's planar thrust authority (0.4 % if it is underactuated) and 0.3 % of its yaw "
         "authority per sqrt(s), see docs/tuning.md",
     )
-    initial_disturbance_std: tuple[Positive, Positive, Positive] | None = Field(
+    initial_disturbance_std: tuple[(Positive,) * PLANAR_FORCE.size] | None = Field(
         default=None,
         description="prior uncertainty of X, Y (N) and N (N m); omitted: half the vehicle's "
         "planar thrust authority and a tenth of its yaw authority, see docs/tuning.md",
@@ -373,7 +380,8 @@ class DisturbanceObserver:
         return self._filter.estimate[NX:].copy()
 
     def correct(self, measured_state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fuse a measurement; returns (state estimate (6,), disturbance estimate (3,))."""
+        """Fuse a measurement; returns (state estimate [x, y, psi, u, v, r], disturbance
+        estimate [X, Y, N])."""
         estimate = self._filter.correct(measured_state)
         disturbance = estimate[NX:]
         force, moment = np.hypot(*disturbance[PLANAR_FORCE_XY]), abs(disturbance[PLANAR_MOMENT])
@@ -392,6 +400,7 @@ class DisturbanceObserver:
 # Smallest measurement variance the obstacle tracker uses (m^2): a noise-free sensor still
 # leaves the innovation covariance invertible.
 _MIN_MEASUREMENT_VARIANCE_M2 = 1e-12
+_TRACK_POSITION, _TRACK_VELOCITY = OBSTACLE_TRACK.position, OBSTACLE_TRACK.span("vx", "vy")
 
 
 class ConstantVelocityKalman:
@@ -415,19 +424,23 @@ class ConstantVelocityKalman:
         acceleration_psd: float,
     ) -> None:
         self.t = float(t)
-        self.mean = np.concatenate([np.asarray(position, dtype=float), np.zeros(2)])
+        self.mean = np.zeros(OBSTACLE_TRACK.size)  # at rest
+        self.mean[_TRACK_POSITION] = position
         self.R = max(position_std**2, _MIN_MEASUREMENT_VARIANCE_M2) * np.eye(2)
-        self.covariance = np.diag([self.R[0, 0], self.R[1, 1], *(2 * [initial_speed_std**2])])
+        variances = np.full(OBSTACLE_TRACK.size, initial_speed_std**2)
+        variances[_TRACK_POSITION] = np.diag(self.R)
+        self.covariance = np.diag(variances)
         self.q = float(acceleration_psd)
 
     def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = dt
+        F = np.eye(OBSTACLE_TRACK.size)
+        np.fill_diagonal(F[_TRACK_POSITION, _TRACK_VELOCITY], dt)
         blocks = self.q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
         return F, np.kron(blocks, np.eye(2))
 
     def predicted(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(mean (4,), covariance (4, 4)) at ``t`` >= the filter's time, filter unchanged."""
+        """(mean, covariance) of [x, y, vx, vy] at ``t`` >= the filter's time, filter
+        unchanged."""
         F, Q = self._transition(t - self.t)
         return F @ self.mean, F @ self.covariance @ F.T + Q
 
@@ -438,11 +451,11 @@ class ConstantVelocityKalman:
 
     def correct(self, position: np.ndarray) -> None:
         """Apply a measured position (2,) at the filter's time."""
-        H = np.eye(2, 4)
+        H = np.eye(OBSTACLE_TRACK.size)[_TRACK_POSITION]  # the position is measured
         innovation = np.asarray(position, dtype=float) - H @ self.mean
         S = H @ self.covariance @ H.T + self.R
         K = np.linalg.solve(S, H @ self.covariance).T
         self.mean = self.mean + K @ innovation
-        joseph = np.eye(4) - K @ H
+        joseph = np.eye(OBSTACLE_TRACK.size) - K @ H
         P = joseph @ self.covariance @ joseph.T + K @ self.R @ K.T
         self.covariance = 0.5 * (P + P.T)

@@ -449,13 +449,13 @@ def _six_dof_pair(name: str, label: str, out_dir: Path, figures: bool) -> list[d
 def velocity_errors(log: SimLog, transient_s: float) -> dict[str, float]:
     """RMS yaw-rate, surge and sway errors after the transient (the paper's Figure 6)."""
     steady = log.t >= transient_s - 1e-9
-    velocities = HORIZONTAL.span("u", "r")  # surge, sway, yaw rate
+    velocities = HORIZONTAL.nu  # surge, sway, yaw rate
     error = log.state[steady, velocities] - log.reference[steady, velocities]
-    rms = np.sqrt(np.mean(error**2, axis=0))
+    rms = dict(zip(HORIZONTAL.names[velocities], np.sqrt(np.mean(error**2, axis=0)), strict=True))
     return {
-        "rms_surge_error_after_transient_m_per_s": float(rms[0]),
-        "rms_sway_error_after_transient_m_per_s": float(rms[1]),
-        "rms_yaw_rate_error_after_transient_rad_per_s": float(rms[2]),
+        "rms_surge_error_after_transient_m_per_s": float(rms["u"]),
+        "rms_sway_error_after_transient_m_per_s": float(rms["v"]),
+        "rms_yaw_rate_error_after_transient_rad_per_s": float(rms["r"]),
     }
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from auvmpc.models.layout import HORIZONTAL_VELOCITY, PLANAR_FORCE
 from auvmpc.models.random_vehicles import random_vehicle
 from auvmpc.models.vehicle import VehicleParams
 
@@ -94,7 +95,7 @@ def _model_error(rng: np.random.Generator, vehicle: VehicleParams) -> dict[str, 
 def _current(rng: np.random.Generator, vehicle: VehicleParams) -> list[float]:
     from auvmpc.scenario.sanity import largest_surge_thrust
 
-    surge = float(vehicle.T[0] @ largest_surge_thrust(vehicle))
+    surge = float(vehicle.T[PLANAR_FORCE.index("X")] @ largest_surge_thrust(vehicle))
     magnitude = CURRENT_SHARE * surge * rng.uniform(0.0, 1.0)
     direction = rng.uniform(0.0, 2.0 * math.pi)
     return [round(magnitude * math.cos(direction), 4), round(magnitude * math.sin(direction), 4)]
@@ -189,7 +190,8 @@ def loop_case(rng: np.random.Generator, index: int = 0) -> dict[str, Any]:
     case.update(
         duration=math.ceil(length / speed),
         reference=reference,
-        initial_state=[round(float(v), 4) for v in initial] + [0.0, 0.0, 0.0],
+        # [x, y, psi] on the path, at rest
+        initial_state=[round(float(v), 4) for v in initial] + [0.0] * HORIZONTAL_VELOCITY.size,
     )
     return case
 

@@ -176,6 +176,7 @@ def _arena_bytes(qp, program: MultipleShootingProgram, config: NmpcConfig) -> in
     )  # fmt: skip
     if step is None:
         return None
+    # auvmpc_rti_create's six int arrays per stage (nx, nu, nbx, nbu, rows, ns), 4 bytes each
     temporaries = 6 * (program.horizon + 1) * 4
     return step.memory_bytes + _ARENA_PIECES * _ARENA_ALIGN + temporaries + _ARENA_ALIGN
 

@@ -40,7 +40,8 @@ import numpy as np
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import LogOptions, VelocityLog, resample
 from auvmpc.identification.thruster_curve import thruster_curve
-from auvmpc.models.six_dof import SIX_DOF, Rzyx
+from auvmpc.models.layout import WORLD_VECTOR
+from auvmpc.models.six_dof import BODY_VELOCITY, SIX_DOF, Rzyx
 
 __all__ = ["body_velocity", "read_dataflash", "read_six_dof_dataflash"]
 
@@ -49,8 +50,10 @@ RCOU_CHANNELS = 14
 
 
 def body_velocity(roll, pitch, yaw, ned: np.ndarray) -> np.ndarray:
-    """R(phi, theta, psi)' v for each sample: (n,) angles (rad), ned (n, 3) -> (n, 3)."""
-    phi, theta, psi, v = ca.SX.sym("phi"), ca.SX.sym("theta"), ca.SX.sym("psi"), ca.SX.sym("v", 3)
+    """R(phi, theta, psi)' v for each sample: (n,) angles (rad), world velocities ``ned`` (n, 3)
+    -> body [u, v, w] (n, 3)."""
+    phi, theta, psi = ca.SX.sym("phi"), ca.SX.sym("theta"), ca.SX.sym("psi")
+    v = ca.SX.sym("v", WORLD_VECTOR.size)
     rotate = ca.Function("body", [phi, theta, psi, v], [Rzyx(phi, theta, psi).T @ v])
     n = len(ned)
     out = rotate.map(n)(np.asarray(roll)[None, :], np.asarray(pitch)[None, :],
@@ -169,7 +172,7 @@ def read_dataflash(path: str | Path, n_thrusters: int, options: LogOptions) -> V
     path = Path(path)
     flight = _read_flight(path, n_thrusters, options)
     phi, theta, psi = flight.attitude.T
-    uv = body_velocity(phi, theta, psi, flight.ned_velocity)[:, :2]
+    uv = body_velocity(phi, theta, psi, flight.ned_velocity)[:, BODY_VELOCITY.span("u", "v")]
     rates = _body_rates(flight, path, ("GyrZ",))
     if rates is None:  # the yaw's time derivative: r for a vehicle that stays level
         yaw = flight.angles[:, 2]

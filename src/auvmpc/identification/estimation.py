@@ -95,6 +95,7 @@ from scipy.signal import savgol_filter
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import MIN_SAMPLES, VELOCITY_NAMES, VelocityLog
 from auvmpc.models.integrators import rk4_step, rk4_step_time_varying
+from auvmpc.models.layout import HORIZONTAL_VELOCITY, PLANAR_FORCE
 from auvmpc.models.vehicle import (
     RK4_STABLE_STEP,
     VehicleParams,
@@ -132,6 +133,10 @@ EXTRAS = (GAIN, *CURRENT)
 EXTRA_START = {GAIN: 1.0, CURRENT[0]: 0.0, CURRENT[1]: 0.0}
 EXTRA_BOUNDS = {GAIN: (1e-9, np.inf), CURRENT[0]: (-np.inf, np.inf), CURRENT[1]: (-np.inf, np.inf)}
 EXTRA_SIZE = {GAIN: 1.0, CURRENT[0]: 0.1, CURRENT[1]: 0.1}
+# Where each velocity and force sits in the model's state and input (the velocity model is
+# [u, v, r]' = f([u, v, r], [X, Y, N])).
+_U, _V, _R = (HORIZONTAL_VELOCITY.index(name) for name in HORIZONTAL_VELOCITY.names)
+_X, _Y, _N = (PLANAR_FORCE.index(name) for name in PLANAR_FORCE.names)
 # 95 % two-sided normal quantile.
 Z95 = 1.959963984540054
 # A parameter whose interval moves its equation's force by less than this share of the
@@ -152,10 +157,11 @@ EXTRA_STEP = 1e-4
 def velocity_rhs(nu, tau, theta, iz_rb: float, absolute=np.abs):
     """[u', v', r'] of the model above (models.vehicle.velocity_derivative) with the
     parameters ``theta`` in :data:`PARAMETERS` order (any further entries are not read).
-    NumPy arrays (``nu``, ``tau`` of shape (3, ...)) or CasADi columns (``absolute=ca.fabs``)."""
+    NumPy arrays (``nu`` [u, v, r], ``tau`` [X, Y, N] along the first axis) or CasADi columns
+    (``absolute=ca.fabs``)."""
     values = dict(zip(PARAMETERS, (theta[i] for i in range(len(PARAMETERS))), strict=True))
     coefficients = SimpleNamespace(**values, Iz=iz_rb + values["Iz_added"])
-    derivative = velocity_derivative(coefficients, nu[0], nu[1], nu[2], tau, absolute)
+    derivative = velocity_derivative(coefficients, nu[_U], nu[_V], nu[_R], tau, absolute)
     if isinstance(derivative[0], ca.SX | ca.MX):
         return ca.vertcat(*derivative)
     return np.array(derivative)
@@ -179,12 +185,13 @@ def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float
 
     Parameters
     ----------
-    nu, nu_dot, tau : (N, 3) velocities, their derivatives and the applied force
+    nu, nu_dot, tau : velocities [u, v, r] (N, HORIZONTAL_VELOCITY.size), their derivatives
+        and the applied force [X, Y, N] (N, PLANAR_FORCE.size)
     iz_rb : kg m2, the rigid-body yaw inertia (known)
 
     Returns
     -------
-    A : (3, N, 9), b : (3, N): block a is axis a (surge, sway, yaw).
+    A : (axes, N, len(PARAMETERS)), b : (axes, N): block a is axis a (surge, sway, yaw).
     """
     u, v, r = nu.T
     du, dv, dr = nu_dot.T
@@ -193,7 +200,7 @@ def regression(nu: np.ndarray, nu_dot: np.ndarray, tau: np.ndarray, iz_rb: float
     sway = [-u * r, -dv, zero, zero, zero, v, np.abs(v) * v, zero, zero]
     yaw = [u * v, -u * v, -dr, zero, zero, zero, zero, r, np.abs(r) * r]
     A = np.stack([np.column_stack(block) for block in (surge, sway, yaw)])
-    b = np.stack([-tau[:, 0], -tau[:, 1], -tau[:, 2] + iz_rb * dr])
+    b = np.stack([-tau[:, _X], -tau[:, _Y], -tau[:, _N] + iz_rb * dr])
     return A, b
 
 
@@ -203,7 +210,7 @@ def filter_window(sample_time: float) -> int:
 
 
 def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
-    """Savitzky-Golay smoothed velocities and their derivatives, (N+1, 3) each."""
+    """Savitzky-Golay smoothed velocities and their derivatives, (N+1, log columns) each."""
     window = filter_window(log.sample_time)
     nu = savgol_filter(log.velocity, window, FILTER_ORDER, axis=0)
     nu_dot = savgol_filter(
@@ -213,14 +220,15 @@ def smoothed(log: VelocityLog) -> tuple[np.ndarray, np.ndarray]:
 
 
 def applied_force(log: VelocityLog, vehicle: VehicleParams) -> np.ndarray:
-    """The body force [X, Y, N] per command, (N, 3): the log's own, or tau = T F."""
+    """The body force [X, Y, N] per command, (N, PLANAR_FORCE.size): the log's own, or
+    tau = T F."""
     if log.force is not None:  # the log holds the body force itself: no allocation
         return log.force
     return log.thrust @ vehicle.T.T
 
 
 def noise_levels(logs: list[VelocityLog]) -> np.ndarray:
-    """Each velocity's noise standard deviation, from what the filter removes (3,), with a
+    """Each velocity's noise standard deviation, from what the filter removes (per column), with a
     floor of 1 % of its RMS (a noise-free log still needs finite weights)."""
     removed = np.vstack([log.velocity - smoothed(log)[0] for log in logs])
     window = filter_window(logs[0].sample_time)
@@ -326,8 +334,8 @@ class HorizontalGreyBox(GreyBox):
 
     outputs = VELOCITY_NAMES
     units = ("m/s", "m/s", "rad/s")
-    measured = (0, 1, 2)
-    state_size = 3
+    measured = tuple(range(HORIZONTAL_VELOCITY.size))
+    state_size = HORIZONTAL_VELOCITY.size
     title = "grey-box 3-DOF velocity model"
 
     def __init__(
@@ -348,7 +356,7 @@ class HorizontalGreyBox(GreyBox):
         return np.array([*start_vector(self.vehicle), *(EXTRA_START[n] for n in self.extras)])
 
     def rhs(self) -> ca.Function:
-        nu, tau = ca.SX.sym("nu", 3), ca.SX.sym("tau", 3)
+        nu, tau = ca.SX.sym("nu", HORIZONTAL_VELOCITY.size), ca.SX.sym("tau", PLANAR_FORCE.size)
         theta = ca.SX.sym("theta", len(self.parameters))
         derivative = velocity_rhs(nu, tau, theta, self.vehicle.Iz_rb, ca.fabs)
         return ca.Function("velocity_rhs", [nu, tau, theta], [derivative])
@@ -389,7 +397,7 @@ class HorizontalGreyBox(GreyBox):
             return nu, nu_dot
         psi = savgol_filter(log.heading, filter_window(log.sample_time), FILTER_ORDER)
         u_c, v_c, zero = current_rows(np.asarray(current, dtype=float), psi)
-        r = nu[:, 2]
+        r = nu[:, _R]
         return (
             nu - np.column_stack([u_c, v_c, zero]),
             nu_dot - np.column_stack([r * v_c, -r * u_c, zero]),

@@ -113,8 +113,9 @@ def _axes(vehicle: VehicleParams, dof: Dof) -> _Axes:
 
         def planar(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
             states = simulate_open_loop(vehicle, thrust, sample_time)
-            peak = np.max(np.abs(states[:, 3:]), axis=0)
-            return float(np.max(np.hypot(states[:, 0], states[:, 1]))), peak
+            peak = np.max(np.abs(states[:, HORIZONTAL.nu]), axis=0)
+            x, y = states[:, HORIZONTAL.index("x")], states[:, HORIZONTAL.index("y")]
+            return float(np.max(np.hypot(x, y))), peak
 
         n = vehicle.n_thrusters
         return _Axes(vehicle.actuators, vehicle.thrust_authority, vehicle.T_pinv, np.zeros(n),
@@ -128,7 +129,8 @@ def _axes(vehicle: VehicleParams, dof: Dof) -> _Axes:
 
     def vertical(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
         states = simulate_heave_open_loop(vehicle, thrust, sample_time)
-        return float(np.max(np.abs(states[:, 0]))), np.max(np.abs(states[:, 1:]), axis=0)
+        depth, rate = states[:, DEPTH.index("z")], states[:, DEPTH.span("w", "w")]
+        return float(np.max(np.abs(depth))), np.max(np.abs(rate), axis=0)
 
     return _Axes(
         heave.actuators,
@@ -144,7 +146,10 @@ def _six_dof_axes(vehicle: VehicleParams) -> _Axes:
     allocation ``pinv(T)``; an axis the thrusters cannot push, e.g. jmse2210's pitch, gets no
     force), about the trim that holds the nominal vehicle's net buoyancy and moments at rest
     level. The box is the 6-DOF model's distance from its start."""
+    from auvmpc.models.actuators import WRENCH
     from auvmpc.models.six_dof import (
+        BODY_VELOCITY,
+        SIX_DOF,
         PitchSingularity,
         integrate,
         plant_step_length,
@@ -166,7 +171,8 @@ def _six_dof_axes(vehicle: VehicleParams) -> _Axes:
         six.center_of_gravity[2] * six.weight(vehicle.mass)
         - six.center_of_buoyancy[2] * six.buoyancy
     )
-    authority[3:5] = np.minimum(authority[3:5], righting * math.sin(MAX_TILT_RAD))
+    tilting = WRENCH.span("K", "M")
+    authority[tilting] = np.minimum(authority[tilting], righting * math.sin(MAX_TILT_RAD))
     to_thrust = np.linalg.pinv(T)
     # Zero for an axis no thruster pushes: the pseudo-inverse maps nothing to it.
     to_thrust[:, authority <= 1e-9 * np.max(authority)] = 0.0
@@ -179,16 +185,18 @@ def _six_dof_axes(vehicle: VehicleParams) -> _Axes:
 
     def motion(thrust: np.ndarray, sample_time: float) -> tuple[float, np.ndarray]:
         substeps = substeps_for(sample_time, step)
-        states = np.zeros((len(thrust) + 1, 12))
+        states = np.zeros((len(thrust) + 1, SIX_DOF.size))
+        velocities = SIX_DOF.nu
         try:
             for k, row in enumerate(thrust):
                 states[k + 1] = integrate(model, states[k], row, sample_time, substeps)
         except PitchSingularity:
-            return math.inf, np.full(6, math.inf)
-        tilt = float(np.max(np.abs(states[:, 3:5])))
-        distance = float(np.max(np.linalg.norm(states[:, :3], axis=1)))
+            return math.inf, np.full(BODY_VELOCITY.size, math.inf)
+        tilt = float(np.max(np.abs(states[:, SIX_DOF.span("phi", "theta")])))
+        distance = float(np.max(np.linalg.norm(states[:, SIX_DOF.span("x", "z")], axis=1)))
         # a tilt beyond MAX_TILT_RAD counts as leaving the box: the amplitude shrinks
-        return (distance if tilt <= MAX_TILT_RAD else math.inf), np.max(np.abs(states[:, 6:]), 0)
+        peak = np.max(np.abs(states[:, velocities]), 0)
+        return (distance if tilt <= MAX_TILT_RAD else math.inf), peak
 
     return _Axes(vehicle.six_dof_actuators, authority, to_thrust, to_thrust @ g0, motion)
 
@@ -221,9 +229,9 @@ def _clip_to_limits(thrust: np.ndarray, actuators: ActuatorSet, sample_time: flo
 def simulate_open_loop(
     vehicle: VehicleParams, thrust: np.ndarray, sample_time: float, current_world=None
 ) -> np.ndarray:
-    """The 3-DOF model's states (N+1, 6) from rest at the origin under ``thrust`` (N, n),
-    each row held over its sample (RK4 at the plant's stable step), in a constant
-    ``current_world`` (2,: m/s) if given."""
+    """The 3-DOF model's states [x, y, psi, u, v, r] (N+1, HORIZONTAL.size) from rest at the
+    origin under ``thrust`` (N, n), each row held over its sample (RK4 at the plant's stable
+    step), in a constant horizontal ``current_world`` [x, y] (m/s) if given."""
     substeps = substeps_for(sample_time, stable_plant_step(vehicle, DEFAULT_PLANT_STEP_S))
     states = np.zeros((len(thrust) + 1, HORIZONTAL.size))
     for k, row in enumerate(thrust):
@@ -237,7 +245,7 @@ def simulate_open_loop(
 def simulate_heave_open_loop(
     vehicle: VehicleParams, thrust: np.ndarray, sample_time: float
 ) -> np.ndarray:
-    """The heave model's states ``[z, w]`` (N+1, 2) from rest at z = 0 (its start) under
+    """The heave model's states ``[z, w]`` (N+1, DEPTH.size) from rest at z = 0 (its start) under
     the vertical ``thrust`` (N, n), as the depth plant steps them in calm water."""
     substeps = substeps_for(sample_time, DepthPlantConfig().max_step)
     states = np.zeros((len(thrust) + 1, DEPTH.size))
@@ -369,7 +377,7 @@ def excitation_scenario(
     else:
         scenario |= {
             "reference": {"type": "waypoints", "points": [[0.0, 0.0], [0.1, 0.0]], "speed": 0.1},
-            "initial_state": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            "initial_state": [0.0] * HORIZONTAL.size,  # at rest at the origin
         }
     if excitation.dof is Dof.SIX_DOF:
         start_depth = box_m + DEPTH_MARGIN_M

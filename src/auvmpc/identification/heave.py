@@ -97,7 +97,8 @@ class HeaveGreyBox(GreyBox):
     def rhs(self) -> ca.Function:
         """[z', w'] (or [w']) by :func:`auvmpc.models.heave.heave_dynamics` itself, its
         parameters symbols: the model written once."""
-        x, force, theta = ca.SX.sym("x", self.state_size), ca.SX.sym("Fz"), ca.SX.sym("theta", 4)
+        x, force = ca.SX.sym("x", self.state_size), ca.SX.sym("Fz")
+        theta = ca.SX.sym("theta", len(FIELDS))
         coefficients = SimpleNamespace(**dict(zip(FIELDS, ca.vertsplit(theta), strict=True)))
         state = x if self.state_size == DEPTH.size else ca.vertcat(0.0, x)
         derivative = heave_dynamics(state, force, coefficients)[DEPTH.size - self.state_size :]
@@ -118,17 +119,20 @@ class HeaveGreyBox(GreyBox):
         if self.outputs == RATE_ONLY:
             return signals, rates
         if self.outputs == DEPTH_AND_RATE:
-            return signals, np.column_stack([signals[:, 1], rates[:, 1]])
-        w = rates[:, 0]
+            w = DEPTH_AND_RATE.index("w")
+            return signals, np.column_stack([signals[:, w], rates[:, w]])
+        z = DEPTH_ONLY.index("z")
+        w = rates[:, z]
         w_dot = savgol_filter(
-            log.velocity[:, 0], filter_window(log.sample_time), FILTER_ORDER, deriv=2,
+            log.velocity[:, z], filter_window(log.sample_time), FILTER_ORDER, deriv=2,
             delta=log.sample_time,
         )  # fmt: skip
-        return np.column_stack([signals[:, 0], w]), np.column_stack([w, w_dot])
+        return np.column_stack([signals[:, z], w]), np.column_stack([w, w_dot])
 
     def regression(self, x: np.ndarray, x_dot: np.ndarray, inputs: np.ndarray):
         """One block, heave: ``-m w' + Zw w + Zww |w| w + B = -F`` (A (1, N, 4), b (1, N))."""
-        w, w_dot = x[:, -1], x_dot[:, -1]  # w is the state's last entry
+        w_index = self.states.index("w")  # [z, w] or [w]
+        w, w_dot = x[:, w_index], x_dot[:, w_index]
         A = np.column_stack([-w_dot, w, np.abs(w) * w, np.ones_like(w)])[None]
         return A, -inputs[:, 0][None]
 
@@ -139,7 +143,8 @@ class HeaveGreyBox(GreyBox):
         return 0.01 * np.array([self.heave.m_heave] * 3 + [thrust])
 
     def damping_rate(self, logs: list[VelocityLog]) -> float:
-        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, -1])) for log in logs)
+        w_index = self.states.index("w")
+        top = 2.0 * max(np.max(np.abs(self.filtered(log)[0][:, w_index])) for log in logs)
         return abs(self.heave.Zw + 2.0 * self.heave.Zww * top) / self.heave.m_heave
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import HORIZONTAL, HORIZONTAL_VELOCITY
 from auvmpc.sim.log import read_log_table
 
 __all__ = [
@@ -45,7 +45,7 @@ __all__ = [
 MIN_SAMPLES = 100
 # The sample times of a log may wander by this share of a sample (written to 1 us).
 _TIME_JITTER = 1e-3
-VELOCITY_NAMES = ("u", "v", "r")
+VELOCITY_NAMES = HORIZONTAL_VELOCITY.names
 HEADING = HORIZONTAL.names[HORIZONTAL.heading]  # the log's heading column, psi
 
 
@@ -63,9 +63,9 @@ class VelocityLog:
 
     name: str  # where it came from (a path), for the provenance
     sample_time: float  # s
-    velocity: np.ndarray  # (N+1, 3) u, v (m/s), r (rad/s) at t_k (heave: z, w)
+    velocity: np.ndarray  # (N+1, outputs) u, v (m/s), r (rad/s) at t_k (heave: z, w)
     thrust: np.ndarray | None  # (N, n) N, held over [t_k, t_k+1)
-    force: np.ndarray | None = None  # (N, 3) X, Y (N), N (N m), held over [t_k, t_k+1)
+    force: np.ndarray | None = None  # (N, ni) X, Y (N), N (N m), held over [t_k, t_k+1)
     outputs: tuple[str, ...] = VELOCITY_NAMES  # what ``velocity``'s columns are
     heading: np.ndarray | None = None  # (N+1,) psi (rad, unwrapped) at t_k, if logged
 

@@ -45,9 +45,13 @@ from auvmpc.errors import ConfigError
 from auvmpc.identification.estimation import GreyBox, smoothed
 from auvmpc.identification.logs import VelocityLog, log_from_table, run_table
 from auvmpc.models.actuators import WRENCH
+from auvmpc.models.layout import PLANAR_FORCE, WORLD_VECTOR, Layout
 from auvmpc.models.six_dof import (
+    ANGULAR_VELOCITY,
+    BODY_VELOCITY,
     NX,
     SIX_DOF,
+    TILT,
     Tzyx,
     coriolis_added_mass,
     coriolis_rigid_body,
@@ -71,8 +75,10 @@ SECTION = "six_dof"
 # The unknowns, by the names identification.json and --fix use.
 NAMES = ("K_pdot", "M_qdot", "K_p", "K_pp", "M_q", "M_qq", "righting_moment_Nm")
 PARAMETERS = tuple(f"{SECTION}.{name}" for name in NAMES)
-# What the log measures of the state [phi, theta, p, q] (an AHRS's attitude and rates).
-OUTPUTS = ("phi", "theta", "p", "q")
+# The model's state [phi, theta, p, q], all of which the log measures (an AHRS's attitude
+# and rates).
+STATE = Layout(names=("phi", "theta", "p", "q"))
+OUTPUTS = STATE.names
 # The roll and pitch entries of the 6-DOF vectors: the wrench's K, M rows, which are nu's
 # p, q (nu = [u, v, w, p, q, r] in the wrench's order).
 _ROLL, _PITCH = WRENCH.index("K"), WRENCH.index("M")
@@ -86,6 +92,8 @@ FIELD_OF = {
     "M_q": ("linear_damping", _PITCH),
     "M_qq": ("quadratic_damping", _PITCH),
 }
+# The roll and pitch added inertias, which the coupling moments are linear in.
+_ADDED_INERTIAS = ("K_pdot", "M_qdot")
 
 
 def _section(vehicle: VehicleParams) -> SixDofParams:
@@ -200,16 +208,17 @@ def _put(data: dict[str, Any], name: str, value: float) -> None:
 
 
 def _coupling_function(vehicle: VehicleParams) -> ca.Function:
-    """(nu (6,), a (2,)) -> the roll and pitch moments (2,) of the Coriolis and centripetal
-    terms ``-[C_RB(nu) nu + C_A(nu) nu]`` (module docstring) by the 6-DOF model's own C_RB and
-    C_A, with the roll and pitch added inertias ``a`` = [K_pdot, M_qdot] symbols (C_A is
-    linear in them) and the rest of M_A the vehicle's."""
+    """(nu [u, v, w, p, q, r], a) -> the roll and pitch moments [K, M] of the Coriolis and
+    centripetal terms ``-[C_RB(nu) nu + C_A(nu) nu]`` (module docstring) by the 6-DOF model's
+    own C_RB and C_A, with the roll and pitch added inertias ``a`` = [K_pdot, M_qdot] symbols
+    (C_A is linear in them) and the rest of M_A the vehicle's."""
     six = _section(vehicle)
-    nu, derivatives = ca.SX.sym("nu", 6), ca.SX.sym("a", 2)
+    nu, derivatives = ca.SX.sym("nu", BODY_VELOCITY.size), ca.SX.sym("a", len(_ADDED_INERTIAS))
     r_g = np.array(six.center_of_gravity, dtype=float)
     added = ca.SX(ca.DM(six.added_mass_matrix))
-    added[_ROLL, _ROLL], added[_PITCH, _PITCH] = -derivatives[0], -derivatives[1]
-    C_RB = coriolis_rigid_body(vehicle.mass, six.inertia_matrix, r_g, nu[3:6])
+    k_pdot, m_qdot = (derivatives[_ADDED_INERTIAS.index(name)] for name in _ADDED_INERTIAS)
+    added[_ROLL, _ROLL], added[_PITCH, _PITCH] = -k_pdot, -m_qdot
+    C_RB = coriolis_rigid_body(vehicle.mass, six.inertia_matrix, r_g, nu[ANGULAR_VELOCITY])
     C_A = coriolis_added_mass(added, nu)
     moments = -(ca.mtimes(C_RB, nu) + ca.mtimes(C_A, nu))
     return ca.Function("coupling", [nu, derivatives], [moments[_ROLL : _PITCH + 1]])
@@ -229,6 +238,7 @@ SAMPLES_PER_PERIOD = 8
 
 # The model's input: the known roll and pitch moments, then the logged u, v, w and r.
 _INPUT_VELOCITIES = ("u", "v", "w", "r")
+INPUT = Layout(names=("K", "M", *_INPUT_VELOCITIES))
 
 
 def roll_pitch_log(
@@ -238,7 +248,7 @@ def roll_pitch_log(
     thrust: np.ndarray,
     vehicle: VehicleParams,
 ) -> VelocityLog:
-    """The log the roll and pitch model is fitted to, from 6-DOF samples ``state`` (N+1, 12)
+    """The log the roll and pitch model is fitted to, from 6-DOF samples ``state`` (N+1, NX)
     in :data:`~auvmpc.models.six_dof.SIX_DOF` order (what was measured: attitude and rates,
     velocities) and every ``six_dof`` thruster's force ``thrust`` (N, n) held over each
     sample: ``velocity`` holds [phi, theta, p, q]; ``force`` the model's input over each
@@ -248,8 +258,8 @@ def roll_pitch_log(
     six = _section(vehicle)
     if state.shape[1] != NX:
         raise ValueError(f"state must have {NX} columns, got {state.shape}")
-    nu_columns = [SIX_DOF.index(n) for n in ("u", "v", "w", "p", "q", "r")]
-    body = VelocityLog(name, sample_time, state[:, nu_columns], None, np.zeros((len(thrust), 3)))
+    unused = np.zeros((len(thrust), PLANAR_FORCE.size))  # smoothed reads the velocities alone
+    body = VelocityLog(name, sample_time, state[:, SIX_DOF.nu], None, unused)
     nu_dot = smoothed(body)[1]
     coupled = _off_diagonal_moments(vehicle, nu_dot)
     moments = thrust @ np.asarray(six.T)[_ROLL : _PITCH + 1].T + 0.5 * (coupled[:-1] + coupled[1:])
@@ -271,7 +281,7 @@ def _velocity_rates(
     the vehicle's 6-DOF model at the logged states (still water)."""
     derivative = six_dof_model(vehicle).derivative.map(len(thrust))
     columns = [SIX_DOF.index(n) for n in _INPUT_VELOCITIES]
-    still = np.zeros((3, len(thrust)))
+    still = np.zeros((WORLD_VECTOR.size, len(thrust)))  # no water velocity, nor its rate
     at = [np.asarray(derivative(x.T, thrust.T, still, still)).T[:, columns]
           for x in (state[:-1], state[1:])]  # fmt: skip
     return at[0], at[1]
@@ -288,8 +298,8 @@ class RollPitchGreyBox(GreyBox):
     upper = np.array([0.0] * 6 + [np.inf])
     outputs = OUTPUTS
     units = ("rad", "rad", "rad/s", "rad/s")
-    measured = (0, 1, 2, 3)
-    state_size = 4
+    measured = tuple(range(STATE.size))
+    state_size = STATE.size
     title = "grey-box roll and pitch model"
     linear_inputs = len(_INPUT_VELOCITIES)  # u, v, w, r: linear over each sample
     split_check = True  # the logged inputs' noise is model error its intervals do not hold
@@ -332,30 +342,32 @@ class RollPitchGreyBox(GreyBox):
 
     def _known_restoring(self, phi: np.ndarray, pitch: np.ndarray) -> np.ndarray:
         """g_K, g_M (2, N) at zero righting moment (the x and y offsets' part)."""
-        angles = ca.SX.sym("angles", 2)
-        g = ca.vertcat(*self._restoring(0.0, angles[0], angles[1]))
+        angles = ca.SX.sym("angles", TILT.size)
+        g = ca.vertcat(*self._restoring(0.0, *(angles[TILT.index(n)] for n in TILT.names)))
         function = ca.Function("known_restoring", [angles], [g]).map(len(phi))
         return np.asarray(function(np.vstack([phi, pitch])))
 
     @staticmethod
-    def _nu(state, inputs):
-        """[u, v, w, p, q, r]: p, q of the state, the rest the logged input."""
-        return ca.vertcat(inputs[2], inputs[3], inputs[4], state[2], state[3], inputs[5])
+    def _nu(state, inputs) -> list:
+        """[u, v, w, p, q, r]: p, q of the state, the rest the logged input (CasADi columns,
+        or NumPy arrays of samples, one row per entry)."""
+        return [state[STATE.index(name)] if name in STATE.names
+                else inputs[INPUT.index(name)] for name in BODY_VELOCITY.names]  # fmt: skip
 
     def rhs(self) -> ca.Function:
-        x, inputs = ca.SX.sym("x", 4), ca.SX.sym("input", 2 + len(_INPUT_VELOCITIES))
+        x, inputs = ca.SX.sym("x", STATE.size), ca.SX.sym("input", INPUT.size)
         theta = ca.SX.sym("theta", len(PARAMETERS))
         k_pdot, m_qdot, k_p, k_pp, m_q, m_qq, righting = ca.vertsplit(theta)
         phi, pitch, p, q = ca.vertsplit(x)
-        r = inputs[5]
-        angles = ca.mtimes(Tzyx(phi, pitch), ca.vertcat(p, q, r))
+        r = inputs[INPUT.index("r")]
+        phi_dot, theta_dot, _ = ca.vertsplit(ca.mtimes(Tzyx(phi, pitch), ca.vertcat(p, q, r)))
         g_k, g_m = self._restoring(righting, phi, pitch)
-        coupling = self.coupling(self._nu(x, inputs), ca.vertcat(k_pdot, m_qdot))
-        roll_moment = inputs[0] + coupling[0]
-        pitch_moment = inputs[1] + coupling[1]
+        coupling = self.coupling(ca.vertcat(*self._nu(x, inputs)), ca.vertcat(k_pdot, m_qdot))
+        roll_moment = inputs[INPUT.index("K")] + coupling[0]
+        pitch_moment = inputs[INPUT.index("M")] + coupling[1]
         p_dot = (k_p * p + k_pp * ca.fabs(p) * p - g_k + roll_moment) / (self.ix - k_pdot)
         q_dot = (m_q * q + m_qq * ca.fabs(q) * q - g_m + pitch_moment) / (self.iy - m_qdot)
-        derivative = ca.vertcat(angles[0], angles[1], p_dot, q_dot)
+        derivative = ca.vertcat(phi_dot, theta_dot, p_dot, q_dot)
         return ca.Function("roll_pitch_rhs", [x, inputs, theta], [derivative])
 
     def applied(self, log: VelocityLog) -> np.ndarray:
@@ -374,10 +386,10 @@ class RollPitchGreyBox(GreyBox):
         M_qdot), the rest on the right: ``b = Ix p' - K - c0_K + g_K(R = 0)``, likewise in
         pitch with Iy, q', M."""
         phi, pitch, p, q = x.T
-        p_dot, q_dot = x_dot[:, 2], x_dot[:, 3]
+        p_dot, q_dot = x_dot[:, STATE.index("p")], x_dot[:, STATE.index("q")]
         zero = np.zeros_like(p)
         # The coupling moments c0 + K_pdot c1 + M_qdot c2 (C_A is linear in them), (2, N) each.
-        nu = np.column_stack([inputs[:, 2:5], p, q, inputs[:, 5]]).T
+        nu = np.column_stack(self._nu(x.T, inputs.T)).T
         coupling = self.coupling.map(len(p))
         c0, c1, c2 = (np.asarray(coupling(nu, np.tile(a, (len(p), 1)).T))
                       for a in ([0.0, 0.0], [1.0, 0.0], [0.0, 1.0]))  # fmt: skip
@@ -389,8 +401,8 @@ class RollPitchGreyBox(GreyBox):
         # g at zero righting moment: the x and y offsets' part, known
         g_k, g_m = np.asarray(self._known_restoring(phi, pitch))
         b = np.stack(
-            [self.ix * p_dot - inputs[:, 0] - c0[0] + g_k,
-             self.iy * q_dot - inputs[:, 1] - c0[1] + g_m]
+            [self.ix * p_dot - inputs[:, INPUT.index("K")] - c0[0] + g_k,
+             self.iy * q_dot - inputs[:, INPUT.index("M")] - c0[1] + g_m]
         )  # fmt: skip
         return A, b
 
@@ -427,7 +439,8 @@ class RollPitchGreyBox(GreyBox):
         """The fastest of the start model's roll and pitch rates: damping at twice the logged
         rates, and the natural frequency of the righting moment."""
         start = self.start()
-        top = 2.0 * np.max(np.vstack([np.abs(log.velocity[:, 2:4]) for log in logs]), axis=0)
+        rates = STATE.span("p", "q")
+        top = 2.0 * np.max(np.vstack([np.abs(log.velocity[:, rates]) for log in logs]), axis=0)
         inertia = np.array([self.ix - start[0], self.iy - start[1]])
         damping = np.abs(start[[2, 4]] + 2.0 * start[[3, 5]] * top) / inertia
         natural = np.sqrt(max(start[6], 0.0) / inertia)
@@ -435,7 +448,7 @@ class RollPitchGreyBox(GreyBox):
 
 
 def read_six_dof_state(path: str | Path, n_thrusters: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """A 6-DOF run folder's log.csv (``kind: six-dof``): the state (N+1, 12) in SIX_DOF order
+    """A 6-DOF run folder's log.csv (``kind: six-dof``): the state (N+1, NX) in SIX_DOF order
     and every ``six_dof`` thruster's force ``F1..Fn`` (N, n), and the sample time (s); checked
     as :func:`~auvmpc.identification.logs.read_run_folder` checks a horizontal log."""
     log = log_from_table(*run_table(path), path, SIX_DOF.names, "F", n_thrusters,

@@ -47,6 +47,7 @@ import numpy as np
 
 from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import VELOCITY_NAMES, LogOptions, VelocityLog, resample
+from auvmpc.models.layout import PLANAR_FORCE, Layout
 from auvmpc.models.six_dof import SIX_DOF
 
 __all__ = [
@@ -77,6 +78,8 @@ MIRROR = {
     BodyFrame.FRD: np.array([1.0, 1.0, 1.0]),
     BodyFrame.FLU: np.array([1.0, -1.0, -1.0]),
 }
+# An odometry message as read: the pose's position and orientation quaternion, the twist.
+_ODOMETRY_ROW = Layout(names=("x", "y", "z", "qx", "qy", "qz", "qw", "u", "v", "w", "p", "q", "r"))
 _PLANAR_VELOCITY = [SIX_DOF.index(name) for name in VELOCITY_NAMES]
 _HEADING = SIX_DOF.index("psi")
 
@@ -191,12 +194,15 @@ def _read_bag(path: Path, n_thrusters: int, options: LogOptions) -> _BagMessages
     def column(topic: str, width: int) -> np.ndarray:
         return np.array(values[topic]).reshape(-1, width)
 
-    raw = column(options.odometry_topic, 13)
-    position, quaternion, linear, angular = raw[:, :3], raw[:, 3:7], raw[:, 7:10], raw[:, 10:]
+    raw = column(options.odometry_topic, _ODOMETRY_ROW.size)
+    position, quaternion, linear, angular = (
+        raw[:, _ODOMETRY_ROW.span(first, last)]
+        for first, last in (("x", "z"), ("qx", "qw"), ("u", "w"), ("p", "r"))
+    )
     angles = euler_angles(quaternion) * mirror  # the mirror turns pitch and yaw over
     angles[:, 2] = np.unwrap(angles[:, 2])
     odometry = np.column_stack([position * mirror, angles, linear * mirror, angular * mirror])
-    command = column(command_topic, 3 if options.wrench_topic else n_thrusters)
+    command = column(command_topic, PLANAR_FORCE.size if options.wrench_topic else n_thrusters)
     if options.wrench_topic:
         command = command * mirror  # (force.x, force.y, torque.z): a vector's (x, y, z)
     return _BagMessages(

@@ -57,8 +57,12 @@ from auvmpc.identification.roll_pitch import (
     roll_pitch_log,
 )
 from auvmpc.models.actuators import WRENCH
+from auvmpc.models.layout import HORIZONTAL_VELOCITY, PLANAR_FORCE
 from auvmpc.models.six_dof import (
+    ANGULAR_VELOCITY,
+    BODY_VELOCITY,
     SIX_DOF,
+    TILT,
     coriolis_added_mass,
     coriolis_rigid_body,
     restoring_forces,
@@ -80,8 +84,8 @@ __all__ = [
     "remainder",
 ]
 
-_NU = tuple(SIX_DOF.index(name) for name in ("u", "v", "w", "p", "q", "r"))
-_PLANAR_ROWS = [WRENCH.index(name) for name in ("X", "Y", "N")]
+_NU = SIX_DOF.nu
+_PLANAR_ROWS = [WRENCH.index(name) for name in PLANAR_FORCE.names]
 _HEAVE_ROW = WRENCH.index("Z")
 # The models in the order they are identified, and how many times each is (module
 # docstring: a second round has the others' identified values in its coupling).
@@ -90,17 +94,20 @@ ROUNDS = 2
 
 
 def remainder(vehicle: VehicleParams) -> ca.Function:
-    """(nu (6,), [phi, theta], nu' (6,)) -> the wrench (6,) the 6-DOF equations of
+    """(nu [u, v, w, p, q, r], [phi, theta], nu') -> the wrench [X, Y, Z, K, M, N] the 6-DOF
+    equations of
     ``vehicle`` hold beyond the 3-DOF and heave models (module docstring), NED body axes; its
     K and M rows are not used (the roll and pitch model has its own, roll_pitch.py)."""
     six = vehicle.six_dof
-    nu, angles, nu_dot = ca.SX.sym("nu", 6), ca.SX.sym("angles", 2), ca.SX.sym("nu_dot", 6)
+    nu, nu_dot = ca.SX.sym("nu", BODY_VELOCITY.size), ca.SX.sym("nu_dot", BODY_VELOCITY.size)
+    angles = ca.SX.sym("angles", TILT.size)
     r_g = np.array(six.center_of_gravity, dtype=float)
     r_b = np.array(six.center_of_buoyancy, dtype=float)
-    C_RB = coriolis_rigid_body(vehicle.mass, six.inertia_matrix, r_g, nu[3:6])
+    C_RB = coriolis_rigid_body(vehicle.mass, six.inertia_matrix, r_g, nu[ANGULAR_VELOCITY])
     C_A = coriolis_added_mass(six.added_mass_matrix, nu)
     weight, buoyancy = six.weight(vehicle.mass), six.buoyancy
-    tilted = restoring_forces(weight, buoyancy, r_g, r_b, angles[0], angles[1])
+    phi, theta = (angles[TILT.index(name)] for name in TILT.names)
+    tilted = restoring_forces(weight, buoyancy, r_g, r_b, phi, theta)
     level = restoring_forces(weight, buoyancy, r_g, r_b, 0.0, 0.0)
     mass = np.array(six.mass_matrix(vehicle.mass))
     off_diagonal = mass - np.diag(np.diag(mass))
@@ -112,7 +119,7 @@ def remainder(vehicle: VehicleParams) -> ca.Function:
         m11=reduced["m11"], m22=reduced["m22"], Iz=reduced["Iz_rb"] + reduced["Iz_added"],
         Xu=0.0, Xuu=0.0, Yv=0.0, Yvv=0.0, Nr=0.0, Nrr=0.0,
     )  # fmt: skip
-    u, v, r = nu[0], nu[1], nu[5]
+    u, v, r = (nu[BODY_VELOCITY.index(name)] for name in HORIZONTAL_VELOCITY.names)
     derivative = velocity_derivative(coefficients, u, v, r, (0.0, 0.0, 0.0), ca.fabs)
     planar = [coefficients.m11, coefficients.m22, coefficients.Iz]
     for row, rate, inertia in zip(_PLANAR_ROWS, derivative, planar, strict=True):
@@ -123,12 +130,13 @@ def remainder(vehicle: VehicleParams) -> ca.Function:
 def _wrench(
     state: np.ndarray, thrust: np.ndarray, sample_time: float, vehicle: VehicleParams
 ) -> np.ndarray:
-    """The known body wrench over each sample (N, 6): the thrusters' ``T F`` and the
+    """The known body wrench over each sample (N, WRENCH.size): the thrusters' ``T F`` and the
     :func:`remainder` at the mean of the sample's two ends (the accelerations from the
     Savitzky-Golay filter, as the equation error's)."""
     nu = state[:, _NU]
-    nu_dot = smoothed(VelocityLog("six", sample_time, nu, None, np.zeros((len(thrust), 3))))[1]
-    angles = state[:, [SIX_DOF.index("phi"), SIX_DOF.index("theta")]]
+    unused = np.zeros((len(thrust), PLANAR_FORCE.size))  # smoothed reads the velocities alone
+    nu_dot = smoothed(VelocityLog("six", sample_time, nu, None, unused))[1]
+    angles = state[:, [SIX_DOF.index(name) for name in TILT.names]]
     function = remainder(vehicle).map(len(nu))
     rest = np.asarray(function(nu.T, angles.T, nu_dot.T)).T
     return thrust @ np.asarray(vehicle.six_dof.T).T + 0.5 * (rest[:-1] + rest[1:])
@@ -137,11 +145,11 @@ def _wrench(
 def horizontal_log(
     name: str, sample_time: float, state: np.ndarray, thrust: np.ndarray, vehicle: VehicleParams
 ) -> VelocityLog:
-    """The 3-DOF model's log of 6-DOF samples ``state`` (N+1, 12; SIX_DOF order, what was
-    measured) and every six_dof thruster's ``thrust`` (N, n): ``u, v, r``, the heading, and
-    the body force ``[X, Y, N]`` of :func:`_wrench`."""
+    """The 3-DOF model's log of 6-DOF samples ``state`` (N+1, SIX_DOF.size; in SIX_DOF order,
+    what was measured) and every six_dof thruster's ``thrust`` (N, n): ``u, v, r``, the
+    heading, and the body force ``[X, Y, N]`` of :func:`_wrench`."""
     force = _wrench(state, thrust, sample_time, vehicle)[:, _PLANAR_ROWS]
-    velocity = state[:, [SIX_DOF.index(n) for n in ("u", "v", "r")]]
+    velocity = state[:, [SIX_DOF.index(n) for n in HORIZONTAL_VELOCITY.names]]
     heading = np.unwrap(state[:, SIX_DOF.index("psi")])
     return VelocityLog(name, sample_time, velocity, None, force, heading=heading)
 
@@ -209,7 +217,7 @@ def identify_six_dof(
     fixed: tuple[str, ...] = (),
 ) -> Identification:
     """The 3-DOF, heave and roll and pitch models of ``vehicle`` (the start) from 6-DOF logs
-    ``samples`` (name, sample time, state (N+1, 12), thrust (N, n)), in turn (module
+    ``samples`` (name, sample time, state (N+1, SIX_DOF.size), thrust (N, n)), in turn (module
     docstring); the ``fixed`` parameters (any model's) held at their start values. One
     :class:`Identification` of all three, in that order."""
     start = _checked(vehicle)

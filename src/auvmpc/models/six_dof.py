@@ -46,11 +46,14 @@ from auvmpc.models.six_dof_params import SixDofParams, skew
 from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
 
 __all__ = [
+    "ANGULAR_VELOCITY",
+    "BODY_VELOCITY",
     "HORIZONTAL_INDEX",
     "PITCH_LIMIT_RAD",
     "SIX_DOF",
     "SIX_DOF_MEASUREMENT",
     "PitchSingularity",
+    "TILT",
     "SixDofModel",
     "Rzyx",
     "Tzyx",
@@ -68,6 +71,12 @@ __all__ = [
 
 SIX_DOF = Layout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
 NX = SIX_DOF.size
+# nu = [u, v, w, p, q, r] (m/s, rad/s) on its own, in the order of the wrench it answers
+# (models/actuators, WRENCH: X, Y, Z, K, M, N); its angular part omega = [p, q, r].
+BODY_VELOCITY = Layout(names=SIX_DOF.names[SIX_DOF.nu])
+ANGULAR_VELOCITY = BODY_VELOCITY.span("p", "r")
+# Roll and pitch [phi, theta] (rad): the angles the restoring forces g(eta) depend on.
+TILT = Layout(names=("phi", "theta"))
 # Where the horizontal model's [x, y, psi, u, v, r] sit in the 6-DOF state.
 HORIZONTAL_INDEX = np.array([SIX_DOF.index(name) for name in HORIZONTAL.names])
 # What the 6-DOF vehicle's controllers measure: the navigation solution's [x, y, psi, u, v, r]

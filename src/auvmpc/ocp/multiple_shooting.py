@@ -58,7 +58,7 @@ class Nlp(NamedTuple):
 class Iterate:
     """A primal point of the program: the plan and its predicted states."""
 
-    states: np.ndarray  # (ny + 1, 6): X_0..X_ny
+    states: np.ndarray  # (ny + 1, NX): X_0..X_ny
     thrust: np.ndarray  # (nc, n): the thrust set at each move step
     slack: np.ndarray  # (ny, slots): s_{o,n} for n = 1..ny
 
@@ -67,10 +67,10 @@ class Iterate:
 class Sample:
     """What one sample's program depends on besides the iterate."""
 
-    state: np.ndarray  # (6,) X_0
+    state: np.ndarray  # (NX,) X_0
     previous: np.ndarray  # (n,) F_{-1}
-    reference: np.ndarray  # (ny + 1, 6) aligned
-    disturbance: np.ndarray  # (3,) world force and moment
+    reference: np.ndarray  # (ny + 1, NX) aligned
+    disturbance: np.ndarray  # (ND,) world force and moment [X, Y, N]
     slots: np.ndarray  # (slots, 5) obstacle data, parked where unused
     used: np.ndarray  # (slots,) bool
     effectiveness: np.ndarray  # (n,) each thruster's share of its command that acts
@@ -88,12 +88,12 @@ class Solution:
 class MultipleShootingProgram:
     """The NLP ``min J(w, p) s.t. lbg <= g(w, p) <= ubg, lbw <= w <= ubw``, built once.
 
-    ``w`` stacks the states X_0..X_ny (6 each), the thrusts at the move steps (n each) and one
+    ``w`` stacks the states X_0..X_ny (NX each), the thrusts at the move steps (n each) and one
     slack per predicted step and obstacle slot. ``p`` stacks the last applied thrust (n), the
-    aligned reference rows 1..ny (6 each), the world-frame force and moment (3), the
+    aligned reference rows 1..ny (NX each), the world-frame force and moment (ND), the
     obstacle slots (5 each) and the thrusters' effectiveness (n: 1 healthy, 0 dead), so a
     fault changes a parameter, not the program. ``g`` stacks the shooting gaps
-    X_{n+1} - RK4(X_n, F_n) (6 per step), the thrust changes at the move steps (n each) and,
+    X_{n+1} - RK4(X_n, F_n) (NX per step), the thrust changes at the move steps (n each) and,
     per step and slot, the distance to the obstacle minus its reach plus the slack.
     """
 

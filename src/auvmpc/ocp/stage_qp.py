@@ -16,7 +16,7 @@ deltas, stage k = 0..N:
                  |(F_k - p_k) + w_k| <= rate Te at a move step, = 0 where the thrust is held
                  (the rate limit), F_min <= p_{k+1} + dp_{k+1} <= F_max (the thrust limit,
                  on F_k + dF_k): boxes, which cost the interior point less than rows
-    obstacles    n . (p(X_{k+1}) + dX_{k+1}[:2] - c_o) + s_k >= reach_o,  written at stage k
+    obstacles    n . (p(X_{k+1}) + p(dX_{k+1}) - c_o) + s_k >= reach_o,  written at stage k
                  through the linearised dynamics (n: the unit normal from the obstacle)
     cost         the program's cost (Gauss-Newton: its Hessian is exact and constant) plus
                  rho s_k + s_k^2, a tiny Levenberg-Marquardt term on w, and the trust
@@ -147,8 +147,8 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
     # thrust columns times e (the chain rule; models/discrete.py says why not through e * F).
     acting = ca.SX.sym("a", n)
     successor = program.acting_step(X, acting, force)
-    # Both Jacobians from one reverse sweep per successor component (6), where ca.jacobian
-    # takes forward mode, one sweep per input (6 + n): with 7 RK4 substeps (BlueROV2 Heavy)
+    # Both Jacobians from one reverse sweep per successor component (NX), where ca.jacobian
+    # takes forward mode, one sweep per input (NX + n): with 7 RK4 substeps (BlueROV2 Heavy)
     # the successor and its Jacobians take 16 331 SX operations against 19 425, and the whole
     # stage 15 521 against 19 935 with its common subexpressions merged (cse below).
     transposed = ca.jtimes(successor, ca.vertcat(X, acting), ca.SX.eye(NX), True)  # (NX + n, NX)

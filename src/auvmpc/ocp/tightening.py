@@ -163,11 +163,12 @@ class Tightening:
         row_steps: np.ndarray,
         row_coefficients: np.ndarray,
     ) -> Backoffs:
-        """Back-offs along one linearisation: A (ny, nx, nx), B (ny, nx, nu), G (ny, nx, 3)
-        (world force and moment), the plan's states at steps 0..ny-1 (ny, nx), and the soft
-        rows ``row_coefficients[r] . x_{row_steps[r]} >= b_r`` (steps in 1..ny)."""
+        """Back-offs along one linearisation: A (ny, nx, nx), B (ny, nx, nu), G (ny, nx, nd)
+        (the world force and moment, nd = PLANAR_FORCE.size), the plan's states at steps
+        0..ny-1 (ny, nx), and the soft rows ``row_coefficients[r] . x_{row_steps[r]} >= b_r``
+        (steps in 1..ny)."""
         K = self.feedback(nominal)
-        M = error_responses(A, B, G, K)  # (ny + 1, nx, ny, 3)
+        M = error_responses(A, B, G, K)  # (ny + 1, nx, ny, nd)
         # Soft rows: sum_j h_W(G_j' Phi' a) = sum_j h_W(a' M[n, :, j]).
         rows = self.support(np.einsum("rk,rkjw->rjw", row_coefficients, M[row_steps]))
         # fmin: a NaN (an overflow on a diverged linearisation) becomes the cap, too.

@@ -55,8 +55,8 @@ def crab_reference(
     sample_time: float,
     heading: float,
 ) -> np.ndarray:
-    """``reference`` (nodes, 6) with the heading an underactuated ``model`` at ``heading``
-    can turn to and hold under the world-frame ``disturbance`` [X, Y, N]; returned
+    """``reference`` (nodes, HORIZONTAL.size) with the heading an underactuated ``model`` at
+    ``heading`` can turn to and hold under the world-frame ``disturbance`` [X, Y, N]; returned
     unchanged if fully actuated."""
     missing = model.unactuated_direction
     if missing is None or len(reference) < 2:

@@ -12,6 +12,7 @@ from pydantic import ValidationError
 
 from auvmpc.config import builtin_descriptions
 from auvmpc.errors import ConfigError, format_validation_error
+from auvmpc.models.layout import WORLD_VECTOR
 from auvmpc.safe_yaml import load_yaml, read_text_file, read_yaml_mapping, yaml_problem
 from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import Scenario, SixDofScenario
@@ -53,7 +54,8 @@ def planar_twin(scenario: SixDofScenario) -> Scenario:
     data["sensing"] = {"std": list(scenario.sensing.std)}
     data["plant"] = {"scale": {}}
     if water is not None:
-        velocity = [*water.velocity_m_per_s[:2], 0.0]
+        velocity = list(water.velocity_m_per_s)
+        velocity[WORLD_VECTOR.index("z")] = 0.0  # the plane has no vertical velocity
         current = water.model_copy(update={"velocity_m_per_s": tuple(velocity)})
         data["disturbance"] = {"water_current": current.model_dump(mode="json")}
     data["name"] = f"{scenario.name}-planar"

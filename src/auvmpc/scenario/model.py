@@ -24,6 +24,7 @@ from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.references import ReferenceConfig
 
 __all__ = [
@@ -84,7 +85,7 @@ class Scenario(StrictModel):
     disturbance: DisturbanceConfig = Field(default_factory=DisturbanceConfig)
     sensing: SensorNoiseConfig = Field(default_factory=SensorNoiseConfig)
     reference: ReferenceConfig
-    initial_state: tuple[float, float, float, float, float, float] = Field(
+    initial_state: tuple[(float,) * HORIZONTAL.size] = Field(
         description="[x, y, psi, u, v, r] at t = 0"
     )
     initial_thrust: tuple[float, ...] | None = Field(

@@ -12,7 +12,7 @@ import numpy as np
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import resolve_heave
-from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
+from auvmpc.models.layout import DEPTH, DEPTH_PROFILE, HORIZONTAL, Layout
 from auvmpc.models.six_dof import plant_step_length
 from auvmpc.models.vehicle import (
     VehicleParams,
@@ -176,7 +176,7 @@ class ResolvedSixDofScenario(ResolvedScenario):
         given = self.given
         initial_depth = given.initial_depth_m
         if initial_depth is None:
-            initial_depth = float(self.reference.depths([0.0])[0, 0])
+            initial_depth = float(self.reference.depths([0.0])[0, DEPTH_PROFILE.index("z")])
         bottom = given.water_depth_m
         if not 0.0 < initial_depth < bottom:
             raise ConfigError(
@@ -185,7 +185,7 @@ class ResolvedSixDofScenario(ResolvedScenario):
         # The reference over the run, at the controller's samples or finer: one out of the
         # water cannot be tracked and is no test of a controller.
         times = np.linspace(0.0, scenario.duration, max(2, int(scenario.duration / 0.1) + 1))
-        path_depths = self.reference.depths(times)[:, 0]
+        path_depths = self.reference.depths(times)[:, DEPTH_PROFILE.index("z")]
         if path_depths.min() <= 0.0 or path_depths.max() >= bottom:
             raise ConfigError(
                 "reference.depth",

@@ -51,7 +51,7 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.registry import class_of
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.layout import DEPTH_PROFILE, HORIZONTAL, PLANAR_FORCE
 from auvmpc.models.vehicle import VehicleParams, heading_turn_time, top_yaw_rate, turn_up_time
 from auvmpc.scenario import (
     ResolvedDepthScenario,
@@ -324,9 +324,9 @@ def largest_surge_thrust(params: VehicleParams) -> np.ndarray:
 def reference_thrust_needs(
     params: VehicleParams, states: np.ndarray, sample_time: float
 ) -> np.ndarray:
-    """Generalised force [f_u, f_v, M_r] (k, 3) that moves the model along ``states``
-    (k, 6) sampled every ``sample_time`` with no disturbance (the model solved for tau;
-    accelerations by central differences)."""
+    """Generalised force [f_u, f_v, M_r] (k, PLANAR_FORCE.size) that moves the model along
+    ``states`` [x, y, psi, u, v, r] (k, HORIZONTAL.size) sampled every ``sample_time`` with
+    no disturbance (the model solved for tau; accelerations by central differences)."""
     u, v, r = (states[:, HORIZONTAL.index(name)] for name in ("u", "v", "r"))
     if len(states) > 1:
         du, dv, dr = (np.gradient(q, sample_time) for q in (u, v, r))
@@ -343,7 +343,8 @@ def reference_thrust_needs(
 
 
 def feasible_forces(params: VehicleParams, tau: np.ndarray) -> np.ndarray:
-    """For each generalised force (k, 3), whether thrusts within the limits make it exactly.
+    """For each generalised force [X, Y, N] (k, PLANAR_FORCE.size), whether thrusts within
+    the limits make it exactly.
 
     The minimum-norm allocation decides most rows; the others are decided exactly by the
     interval of the null-space coordinate when the null space is one-dimensional (four
@@ -417,7 +418,7 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
     states = reference.states(t)
     warnings = _check_mission_end(reference.end_time, scenario.duration, sample_time)
     if reference.has_depth and not resolved.follows_depth:
-        depths = reference.depths(t)[:, 0]
+        depths = reference.depths(t)[:, DEPTH_PROFILE.index("z")]
         if np.ptp(depths) > 0.0:
             warnings.append(
                 f"reference: its depth changes ({depths.min():.3g} to {depths.max():.3g} m) "

@@ -21,7 +21,12 @@ import math
 
 import numpy as np
 
-from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.layout import (
+    HORIZONTAL,
+    HORIZONTAL_COMPONENTS,
+    HORIZONTAL_VELOCITY,
+    PLANAR_FORCE_XY,
+)
 
 __all__ = ["FAST_FACTOR", "likely_cause"]
 
@@ -52,8 +57,8 @@ def likely_cause(resolved) -> str:
         )
     ]
     state = np.asarray(scenario.initial_state, dtype=float)
-    start = [state[HORIZONTAL.index(name)] for name in ("u", "v", "r")]
-    for name, value, top in zip(("u", "v", "r"), start, tops, strict=True):
+    start = [state[HORIZONTAL.index(name)] for name in HORIZONTAL_VELOCITY.names]
+    for name, value, top in zip(HORIZONTAL_VELOCITY.names, start, tops, strict=True):
         if abs(value) > FAST_FACTOR * top:
             return (
                 f"initial_state: a start {name} of {value:g}, over {FAST_FACTOR:g} x the "
@@ -63,17 +68,18 @@ def likely_cause(resolved) -> str:
     disturbance = getattr(scenario, "disturbance", None)
     current = getattr(disturbance, "water_current", None)
     if current is not None:
-        speed = math.hypot(*current.velocity_m_per_s[:2])
-        if speed > min(tops[0], tops[1]):
+        speed = math.hypot(*current.velocity_m_per_s[HORIZONTAL_COMPONENTS])
+        surge, sway = (tops[HORIZONTAL_VELOCITY.index(name)] for name in ("u", "v"))
+        if speed > min(surge, sway):
             return (
                 f"disturbance.water_current: {speed:.3g} m/s, faster than the {plant.name}'s "
-                f"steady top speed ({tops[0]:.3g} m/s surge, {tops[1]:.3g} m/s sway): the "
+                f"steady top speed ({surge:.3g} m/s surge, {sway:.3g} m/s sway): the "
                 "thrusters cannot hold it"
             )
     force = getattr(disturbance, "current_force_world", None)
     if force is not None:
         magnitude = math.hypot(*force)
-        authority = float(min(plant.thrust_authority[0], plant.thrust_authority[1]))
+        authority = float(min(plant.thrust_authority[PLANAR_FORCE_XY]))
         if magnitude > authority:
             return (
                 f"disturbance.current_force_world: {magnitude:.3g} N, more than the "

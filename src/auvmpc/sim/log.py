@@ -27,7 +27,7 @@ import pandas as pd
 
 from auvmpc.controllers.shell import BACKOFF_KEYS, ESTIMATE_KEYS, LOGGED_INFO
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import DEPTH, HORIZONTAL, Layout
+from auvmpc.models.layout import DEPTH, HORIZONTAL, HORIZONTAL_COMPONENTS, Layout
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
 
 if TYPE_CHECKING:
@@ -60,7 +60,7 @@ ESTIMATE_NAMES, BACKOFF_NAMES = ESTIMATE_KEYS, BACKOFF_KEYS
 # horizontal run's first two (world x north, y east); and a 6-DOF run's depth reference
 # (NED, m and m/s).
 CURRENT_NAMES = ("current_north", "current_east", "current_down")
-HORIZONTAL_CURRENT_NAMES = CURRENT_NAMES[:2]
+HORIZONTAL_CURRENT_NAMES = CURRENT_NAMES[HORIZONTAL_COMPONENTS]
 DEPTH_REFERENCE_NAMES = ("z_ref", "z_rate_ref")
 # Stands for the log's input names in a format's columns (they depend on the vehicle).
 INPUTS = ("<inputs>",)

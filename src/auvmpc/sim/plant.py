@@ -30,7 +30,14 @@ from auvmpc.environment.waves import WaveField, morison_inertia
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import heave_plant_step
 from auvmpc.models.integrators import rk4_step_time_varying
-from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE, PLANAR_MOMENT
+from auvmpc.models.layout import (
+    DEPTH,
+    HORIZONTAL,
+    HORIZONTAL_COMPONENTS,
+    PLANAR_FORCE,
+    PLANAR_MOMENT,
+    WORLD_VECTOR,
+)
 from auvmpc.models.six_dof import (
     SIX_DOF,
     depth_rate,
@@ -257,13 +264,14 @@ class PlantStepper:
                 self.plant, state, thrust, t0, self.duration, disturbance, self.substeps
             )
         times = stage_times(t0, self.duration, self.substeps)
-        forces = disturbance.forces_world(times.ravel())  # (3 substeps, 3), time-major
+        # (3 substeps, PLANAR_FORCE.size), time-major
+        forces = disturbance.forces_world(times.ravel())
         water = disturbance.water_velocity_world(t0)
         return self._native(state, thrust, forces, _STILL_WATER if water is None else water)
 
 
 # No current: the model's relative velocity is then its velocity, to the last bit (x - 0).
-_STILL_WATER = np.zeros(2)
+_STILL_WATER = np.zeros(WORLD_VECTOR.size)[HORIZONTAL_COMPONENTS].copy()  # its x, y
 
 
 @functools.lru_cache(maxsize=32)

@@ -38,7 +38,7 @@ class AffinePrediction:
     B: np.ndarray  # (ny, nx, nu)
     c: np.ndarray  # (ny, nx)
     nominal: np.ndarray | None = None  # (ny + 1, nx) trajectory the model was linearised on
-    G: np.ndarray | None = None  # (ny, nx, 3) Jacobians in the world force and moment, if asked
+    G: np.ndarray | None = None  # (ny, nx, nd) Jacobians in the world force and moment, if asked
 
 
 @dataclass

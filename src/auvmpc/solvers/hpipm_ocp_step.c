@@ -6,10 +6,12 @@
  * CasADi's interface the QP's set-up and memory were allocated and freed on every call, about
  * five times the cost of the interior point itself.
  *
- * Memory layout of the arguments (row-major, one stage per row): X (N+1, 6) the iterate's
- * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, 6) the
- * reference, W (N, 6) the stage weights, d (3), slots (S, 5), used (S), movable (N), e (n)
- * the thrusters' effectiveness (1 healthy, 0 dead).
+ * Memory layout of the arguments (row-major, one stage per row): X (N+1, nx) the iterate's
+ * states, P (N+1, n) the thrust before each step, F (N, n) the thrust, ref (N+1, nx) the
+ * reference, W (N, nx) the stage weights, d the world force and moment, slots (S, 5), used
+ * (S), movable (N), e (n) the thrusters' effectiveness (1 healthy, 0 dead). nx, the model's
+ * state size, is the rows of the stage function's first input, X_k: no size of the model is
+ * written here.
  * Results: dz (N+1, nz), dv (N, nv), the step of [dX; dp] and [w; sigma s], w = dF - dp
  * (ocp/stage_qp.py, stage_qp).
  *
@@ -58,7 +60,6 @@ static void release(void *memory) { (void) memory; }
 #define release free
 #endif
 
-#define NX 6
 #define N_STAGE_OUT 16
 #define NOT_FINITE (-1)
 #define EVALUATION_FAILED (-2)
@@ -73,6 +74,7 @@ enum { OUT_A, OUT_B, OUT_b, OUT_Q, OUT_S, OUT_R, OUT_q, OUT_r, OUT_C, OUT_D, OUT
 
 typedef struct {
     int N, n, S, nz, nv, ng;
+    int nx; /* the model's states: z_k = [dX_k; p_k] holds nx + n */
     double inf;
     struct d_ocp_qp_dim dim;
     struct d_ocp_qp qp;
@@ -89,7 +91,7 @@ typedef struct {
     int out_size[N_STAGE_OUT];
     double *fixed; /* z_0 = [x_hat - X_0; F_prev - P_0] */
     int *index;   /* 0, 1, ..., nv - 1: every input is bounded */
-    int *state_index; /* NX, ..., nz - 1: the thrust part of every state but z_0 is bounded */
+    int *state_index; /* nx, ..., nz - 1: the thrust part of every state but z_0 is bounded */
     const casadi_real **arg_work;
     casadi_real **res_work;
     casadi_int *iw;
@@ -138,10 +140,14 @@ static int dense_of_size(const casadi_int *sp, int size) {
     return sp[0] * sp[1] == size && nonzeros == size;
 }
 
+/* The model's state size: the rows of the stage function's first input, X_k. */
+static int state_size(void) { return (int) rti_stage_sparsity_in(0)[0]; }
+
 /* Whether the generated stage functions have the sizes the caller gave. */
 static int sizes_agree(int nz, int nv, int ng) {
+    const int nx = state_size();
     const int expected[N_STAGE_OUT] = {nz * nz, nz * nv, nz, nz * nz, nv * nz, nv * nv, nz, nv,
-                                       ng * nz, ng * nv, ng, ng, nv, nv, nz - NX, nz - NX};
+                                       ng * nz, ng * nv, ng, ng, nv, nv, nz - nx, nz - nx};
     for (int i = 0; i < N_STAGE_OUT; ++i)
         if (!dense_of_size(rti_stage_sparsity_out(i), expected[i])) return 0;
     return dense_of_size(rti_terminal_sparsity_out(0), nz * nz)
@@ -157,7 +163,7 @@ static int sizes_agree(int nz, int nv, int ng) {
  * when memory runs out or the sizes or settings disagree. */
 void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const double *settings,
                         int count) {
-    if (N < 1 || nz != NX + n || count < GENERAL_SETTINGS || !sizes_agree(nz, nv, ng))
+    if (N < 1 || nz != state_size() + n || count < GENERAL_SETTINGS || !sizes_agree(nz, nv, ng))
         return NULL;
     int passes = (int) settings[1];
     if (passes < 1 || passes > MAX_PASSES
@@ -169,6 +175,7 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     s->n = n;
     s->S = S;
     s->nz = nz;
+    s->nx = nz - n;
     s->nv = nv;
     s->ng = ng;
     s->inf = settings[0];
@@ -261,7 +268,7 @@ void *auvmpc_rti_create(int N, int n, int S, int nz, int nv, int ng, const doubl
     for (int i = 0; i < N_STAGE_OUT; ++i)
         s->bytes += (long) sizeof(double) * (s->out_size[i] > 0 ? s->out_size[i] : 1);
     for (int i = 0; i < s->nv; ++i) s->index[i] = i;
-    for (int i = 0; i < n; ++i) s->state_index[i] = NX + i;
+    for (int i = 0; i < n; ++i) s->state_index[i] = s->nx + i;
     for (int k = 0; k < N; ++k) {
         d_ocp_qp_set_idxbu(k, s->index, &s->qp);
         d_ocp_qp_set_idxbx(k + 1, s->state_index, &s->qp);
@@ -344,15 +351,15 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
                     const double *movable, const double *e, int hot_start, double *dz,
                     double *dv, int *iterations) {
     Step *s = (Step *) handle;
-    const int N = s->N, n = s->n, nz = s->nz, nv = s->nv;
+    const int N = s->N, n = s->n, nz = s->nz, nv = s->nv, nx = s->nx;
     *iterations = 0;
-    for (int i = 0; i < NX; ++i) s->fixed[i] = x_hat[i] - X[i];
-    for (int i = 0; i < n; ++i) s->fixed[NX + i] = F_prev[i] - P[i];
+    for (int i = 0; i < nx; ++i) s->fixed[i] = x_hat[i] - X[i];
+    for (int i = 0; i < n; ++i) s->fixed[nx + i] = F_prev[i] - P[i];
     if (!all_finite(s->fixed, nz)) return NOT_FINITE;
     for (int k = 0; k < N; ++k) {
         double step_index = k + 1;
-        const casadi_real *in[13] = {X + NX * k, X + NX * (k + 1), P + n * k, P + n * (k + 1),
-                                     F + n * k, ref + NX * k, W + NX * k, d, slots, used,
+        const casadi_real *in[13] = {X + nx * k, X + nx * (k + 1), P + n * k, P + n * (k + 1),
+                                     F + n * k, ref + nx * k, W + nx * k, d, slots, used,
                                      movable + k, &step_index, e};
         memcpy(s->arg_work, in, sizeof(in));
         memcpy(s->res_work, s->out, sizeof(s->out));
@@ -387,7 +394,7 @@ int auvmpc_rti_step(void *handle, const double *X, const double *P, const double
         d_ocp_qp_set_lbx(k + 1, s->out[OUT_lbp_next], &s->qp);
         d_ocp_qp_set_ubx(k + 1, s->out[OUT_ubp_next], &s->qp);
     }
-    const casadi_real *in[2] = {X + NX * N, ref + NX * N};
+    const casadi_real *in[2] = {X + nx * N, ref + nx * N};
     memcpy(s->arg_work, in, sizeof(in));
     s->res_work[0] = s->out[OUT_Q];
     s->res_work[1] = s->out[OUT_q];

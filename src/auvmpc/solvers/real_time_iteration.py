@@ -83,7 +83,7 @@ class RealTimeIteration:
         program = self.program
         n, N = program.n_thrusters, program.horizon
         started = time.perf_counter()
-        states = np.asarray(guess.states, dtype=float)  # (N + 1, 6)
+        states = np.asarray(guess.states, dtype=float)  # (N + 1, nx)
         thrust = np.asarray(program.plan(guess), dtype=float)  # (N, n)
         used = sample.used.astype(float)
         fixed = (sample.state, sample.previous, sample.reference, self._weights,
