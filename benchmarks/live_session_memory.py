@@ -1,7 +1,7 @@
 """Peak Python memory (tracemalloc) of a long live session: a scenario stepped by hand through
 ``auvmpc.session(..., live_log=...)`` against the project's own plant, as a script driving a
-vehicle would; what the session holds as it goes, and the peak of its ``close()`` (metrics,
-no figures), which reads the live log back.
+vehicle would; what the session holds as it goes (its log grows by a row a sample), and the
+peak of its ``close()`` (metrics, no figures).
 
     python benchmarks/live_session_memory.py --duration 3600 --scenario bluerov2-figure-eight
 """

@@ -161,24 +161,16 @@ def test_the_live_log_holds_every_row_as_soon_as_it_is_stepped(tmp_path):
     assert filed[-1].split(",")[13] == "" != rows[-1].split(",")[13]  # F1: none filed
 
 
-def test_a_live_session_holds_at_most_a_block_of_rows(tmp_path, monkeypatch):
-    """Once the live log has written a row, the session does not keep it: after 100 steps
-    (in blocks of 16 here) its log holds at most a block; without a live log, every row.
-    Its close reads the whole run back from the file."""
+def test_a_session_log_grows_as_it_is_stepped(monkeypatch):
+    """Nothing is sized by the run's length: after k steps (in blocks of 16 here) the log
+    holds k rows, each as stepped, and reading it between steps sees exactly those."""
     monkeypatch.setattr(log_rows, "BLOCK_ROWS", 16)
-    scenario = auvmpc.load_scenario("paper-ideal", controller="baseline")
-    live = auvmpc.session(scenario, live_log=tmp_path / "live.csv")
-    whole = auvmpc.session(scenario)
-    state = live.initial_state
-    for k in range(100):
-        live.step(k * live.sample_time, state)
-        whole.step(k * whole.sample_time, state)
-    assert 0 < live.log.rows_held() <= 16 and whole.log.rows_held() == 100
-    with pytest.raises(log_rows.RowsForgotten, match="are in its live log"):
-        live.log.t  # noqa: B018 -- reading the rows it no longer holds is refused
-    run, kept = live.close(), whole.close()
-    assert run.log.steps == kept.log.steps == 99 and len(run.log.t) == 100
-    np.testing.assert_array_equal(run.log.thrust, kept.log.thrust)
+    session = auvmpc.session(auvmpc.load_scenario("paper-ideal", controller="baseline"))
+    state = session.initial_state
+    for k in range(40):
+        session.step(k * session.sample_time, state)
+        assert len(session.log.t) == k + 1 and session.log.t[k] == k * session.sample_time
+    assert session.log.thrust.shape == (40, session.log.n_thrusters)
 
 
 def test_a_live_log_never_replaces_a_file(tmp_path):

@@ -154,13 +154,6 @@ class LogFormat:
     def diagnostic_fields(self) -> frozenset[str]:
         return frozenset(d.field for d in self.diagnostics)
 
-    @property
-    def memory_only(self) -> tuple[str, ...]:
-        """The diagnostics log.csv has no column for (a 6-DOF run's ``saturated``, which its
-        metrics count): what a live session keeps in memory, its file holding the rest."""
-        written = {column.field for column in self.columns}
-        return tuple(d.field for d in self.diagnostics if d.field not in written)
-
     def command(self, result: ControlResult, thrust: np.ndarray, solve_ms: float) -> Row:
         """A row's command: the (checked) thrust, how it came, the controller call's wall
         time (or the format's channel's: ``solve_ms_attribute``) and the diagnostics the
@@ -285,18 +278,6 @@ class SimLog:
         for name, rows in self._rows.items():
             if not (final and self._per_command(name)):
                 rows.append(row[name])
-
-    def keep_only(self, fields: Iterable[str]) -> None:
-        """From now on hold every row of ``fields`` only: each other field keeps at most
-        its current block in memory, a full one forgotten (a live log has written its rows;
-        reading such a field is refused then)."""
-        for name, rows in self._rows.items():
-            if name not in fields:
-                rows.forget_full_blocks()
-
-    def rows_held(self) -> int:
-        """The most rows any field holds in memory."""
-        return max(rows.held() for rows in self._rows.values())
 
     @property
     def diagnostics(self) -> dict[str, Any]:
@@ -593,9 +574,8 @@ class LiveLog:
     every sample stepped. It is the record, not the result: the run folder (``close``) is.
     Opened exclusively: an existing file is never replaced.
 
-    ``log``'s fields that log.csv holds keep only their current block in memory from then on
-    (:meth:`SimLog.keep_only`): :meth:`read` gives the log back from the file, with what only
-    memory holds (:attr:`LogFormat.memory_only`)."""
+    The session keeps its log in memory as well: the metrics and figures at its close need
+    every row, and the log's arrays are smaller than the file read back (docs/session.md)."""
 
     def __init__(self, path: str | Path, log: SimLog) -> None:
         try:
@@ -612,7 +592,6 @@ class LiveLog:
         self._writer = csv.writer(self._file, lineterminator="\n")
         self._writer.writerow(log.columns())
         self._file.flush()
-        log.keep_only(log.format.memory_only)
 
     def append(self, row: Row) -> None:
         """A complete row of the log (the final one has no command)."""
@@ -621,24 +600,6 @@ class LiveLog:
 
     def close(self) -> None:
         self._file.close()
-
-    def read(self, finished: bool) -> SimLog:
-        """The log as the file holds it, read with the one reader (exactly: numbers are
-        written with repr), with the log's run values (sample time, F(-1)) and what only
-        memory holds. ``finished``: the file ends with the final row; else its last row's
-        command is not the log's (Session.stepped_log), and is left out."""
-        log = self._log
-        table = read_log_table(self.path, "live_log")
-        if not finished:
-            commands = [c for c in self._blocks if c.field and log._per_command(c.field)]
-            table = table.with_final_row_empty([n for c in commands for n in c.names])
-        back = SimLog.from_table(
-            table, log.initial_thrust, log.format, log.horizontal_inputs, log.input_names
-        )
-        back.sample_time = log.sample_time
-        for name in log.format.memory_only:
-            back._rows[name].replace(log._values(name)[: back.steps].copy())
-        return back
 
 
 def csv_row(blocks: Sequence[Column], row: Row) -> list[str]:

@@ -113,14 +113,6 @@ class LogTable:
                 f"before's {float(values[k - 1])!r}"
             )
 
-    def with_final_row_empty(self, names: Sequence[str]) -> LogTable:
-        """This table with the cells of ``names`` empty on its final row: a log ended at a
-        sample whose command it does not keep (a session closed before ``finish``)."""
-        last = list(self.rows[-1])
-        for name in names:
-            last[self.header.index(name)] = ""
-        return replace(self, rows=[*self.rows[:-1], last])
-
     def final_row_empty(self, names: Sequence[str]) -> None:
         """Per-command ``names`` are empty on the final row (the state after the last
         command); a final row with a command is a log cut at a row boundary."""

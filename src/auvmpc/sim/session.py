@@ -73,8 +73,7 @@ class Session:
     refused. Without :class:`Truth` the log's state columns hold the measurement and
     the vehicle-to-obstacle gap is the measured position's; a session whose measurement is
     not its whole state (6-DOF, depth) needs the truth. ``live_log``: a new file that
-    gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog); ``log`` then
-    keeps in memory only what the file does not hold, and :attr:`stepped_log` reads the file.
+    gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
     """
 
     def __init__(
@@ -232,13 +231,10 @@ class Session:
     @property
     def stepped_log(self) -> SimLog:
         """The log of the samples stepped so far: all of it after :meth:`finish`; before it,
-        the last stepped sample's state is the final row (its command is not in the log).
-        A live session's is read back from its file (LiveLog.read)."""
+        the last stepped sample's state is the final row (its command is not in the log)."""
         rows = self.k + 1 if self.finished else self.k
         if rows < 2:
             raise ConfigError("step", self.k, "a run needs at least two samples stepped")
-        if self.live_log is not None:
-            return self.live_log.read(self.finished)
         return self.log if self.finished else self.log.first(rows)
 
     def _check_open(self, what: str) -> None:
