@@ -73,7 +73,8 @@ class SessionStart:
 
     controller: Controller
     reference: StateReference
-    log: SimLog
+    log: SimLog  # empty: the session appends its rows
+    steps: int  # the run's commands (its duration over the sample time)
     initial_state: Sequence[float]
     initial_thrust: np.ndarray | None = None
     obstacles: Sequence[ObstacleConfig] = ()
@@ -249,12 +250,8 @@ class HorizontalKind(RunKind):
         return SessionStart(
             controller,
             make_reference(scenario.reference, resolved.base_dir),
-            SimLog.allocate(
-                _steps(scenario),
-                resolved.model.actuators.layout.names,
-                _sample_time(scenario),
-                self.log_format,
-            ),
+            SimLog(resolved.model.actuators.layout.names, _sample_time(scenario), self.log_format),
+            _steps(scenario),
             scenario.initial_state,
             None if given is None else np.array(given),
             **self._surroundings(scenario),
@@ -346,10 +343,11 @@ class SixDofKind(HorizontalKind):
         return SessionStart(
             controller,
             ReferenceWithDepth(resolved.reference),
-            SimLog.allocate(
-                _steps(scenario), model.six_dof_actuators.layout.names, _sample_time(scenario),
-                self.log_format, horizontal_inputs=model.n_thrusters,
+            SimLog(
+                model.six_dof_actuators.layout.names, _sample_time(scenario), self.log_format,
+                horizontal_inputs=model.n_thrusters,
             ),
+            _steps(scenario),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
             padded(scenario.initial_thrust, model.six_dof.n_thrusters),
             **self._surroundings(scenario),
@@ -411,8 +409,8 @@ class DepthKind(RunKind):
         scenario = resolved.scenario
         reference = DepthStep(scenario.reference, scenario.controller.preview)
         inputs = resolved.heave_plant.actuators.layout.names
-        log = SimLog.allocate(_steps(scenario), inputs, _sample_time(scenario), self.log_format)
-        return SessionStart(controller, reference, log, scenario.start_state())
+        log = SimLog(inputs, _sample_time(scenario), self.log_format)
+        return SessionStart(controller, reference, log, _steps(scenario), scenario.start_state())
 
     def plant(self, resolved) -> tuple[Plant, Sensor]:
         scenario, seeds = resolved.scenario, self.seeds(resolved.scenario)

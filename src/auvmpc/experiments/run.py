@@ -183,7 +183,7 @@ class RunSession(Session):
         # getattr: a controller need not derive from base.Controller (a user's own, a test's).
         self.warnings = [*warnings, *getattr(controller, "build_warnings", ())]
         super().__init__(**self.kind.start(resolved, controller).arguments(), live_log=live_log)
-        self.duration = self.log.steps * self.sample_time
+        self.duration = self.steps * self.sample_time
 
     def result(self) -> Finished:
         """What was stepped, as a finished run: its log, metrics, warnings and provenance."""

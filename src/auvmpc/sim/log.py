@@ -2,14 +2,17 @@
 
 Row k holds the TRUE plant state at t_k and the reference at t_k; the command on row k is
 what was applied over [t_k, t_k+1), so the last row has none (``shared/spec/interfaces.md``).
-Arrays are preallocated and time-major.
+Arrays are time-major, appended a row at a time as the run goes (sim/log_rows.py: blocks,
+so nothing needs the run's length up front); a live log (:class:`LiveLog`) writes each row to
+log.csv as it comes, and the log then keeps in memory only what the file does not hold.
 
 One log for every kind of run: a :class:`LogFormat` is what a kind logs, as data: the names
 of its state (a layout), reference, environment and measurement, its inputs' prefix, the
 diagnostics it keeps of each controller result, log.csv's columns and the fields they hold,
 and where its horizontal part sits. :data:`HORIZONTAL_LOG` (``x, y, psi, u, v, r``),
 :data:`DEPTH_LOG` (``z, w``) and :data:`SIX_DOF_LOG` (the 12 states, the horizontal part
-first in log.csv) are the three; one writer and one reader serve them all.
+first in log.csv) are the three; one writer (:func:`csv_row`) and one reader
+(:meth:`SimLog.from_table` of sim/log_table.py's table) serve them all.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import csv
 import io
 import math
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +32,8 @@ from auvmpc.controllers.shell import BACKOFF_KEYS, ESTIMATE_KEYS, LOGGED_INFO
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import DEPTH, HORIZONTAL, HORIZONTAL_COMPONENTS, Layout
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
+from auvmpc.sim.log_rows import FieldRows
+from auvmpc.sim.log_table import MAX_LOG_BYTES, LogTable, read_log_table
 
 if TYPE_CHECKING:
     from auvmpc.controllers.base import ControlResult
@@ -46,7 +51,9 @@ __all__ = [
     "LiveLog",
     "LogFormat",
     "LogTable",
+    "Row",
     "SimLog",
+    "csv_row",
     "read_log_table",
 ]
 
@@ -90,18 +97,17 @@ class Diagnostic:
     text: bool = False  # a status, kept as a string
     dtype: type = float
 
-    def allocate(self, steps: int) -> np.ndarray | list[str]:
-        if self.text:
-            return [""] * steps
-        shape = (steps,) if self.attribute is not None else (steps, len(self.names))
-        return np.zeros(shape, dtype=self.dtype)
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """One row's shape: a value, or one per name."""
+        return () if self.attribute is not None else (len(self.names),)
 
-    def record(self, values: np.ndarray | list[str], k: int, result: ControlResult) -> None:
+    def value(self, result: ControlResult) -> Any:
+        """What the log keeps of ``result``."""
         if self.attribute is None:
-            values[k] = [result.info.get(name, 0.0) for name in self.names]
-        else:
-            value = getattr(result, self.attribute)
-            values[k] = str(value) if self.text else value
+            return [result.info.get(name, 0.0) for name in self.names]
+        value = getattr(result, self.attribute)
+        return str(value) if self.text else value
 
 
 @dataclass(frozen=True)
@@ -144,37 +150,103 @@ class LogFormat:
             for column in self.columns
         )
 
+    @property
+    def diagnostic_fields(self) -> frozenset[str]:
+        return frozenset(d.field for d in self.diagnostics)
+
+    def command(self, result: ControlResult, thrust: np.ndarray, solve_ms: float) -> Row:
+        """A row's command: the (checked) thrust, how it came, the controller call's wall
+        time (or the format's channel's: ``solve_ms_attribute``) and the diagnostics the
+        format keeps of ``result``."""
+        attribute = self.solve_ms_attribute
+        return {
+            "thrust": thrust,
+            "solve_ms": solve_ms if attribute is None else getattr(result, attribute),
+            "status": str(result.status),
+            **{d.field: d.value(result) for d in self.diagnostics},
+        }
+
 
 # The fields with a row per sample (N + 1) and those with a row per command (N); a
-# diagnostic is per command. :meth:`SimLog.first` cuts by these lists, so a new field goes in
-# one of them (tests/test_session.py checks that every one is).
+# diagnostic is per command. A row of the log (:meth:`SimLog.append`) holds these fields by
+# name, and the final row only the per-sample ones; :meth:`SimLog.first` cuts by these lists,
+# so a new field goes in one of them (tests/test_session.py checks that every one is).
 PER_SAMPLE = ("t", "state", "reference", "environment", "clearance_m", "measured")
 PER_COMMAND = ("thrust", "solve_ms", "status")
 
+#: One row of a log: its fields by name (``PER_SAMPLE``, then ``PER_COMMAND`` and the
+#: format's diagnostics unless it is the final row, which has no command).
+Row = dict[str, Any]
 
-@dataclass
+
+def _rows_field(name: str, doc: str) -> property:
+    """A log field as an attribute: its rows so far as one array (sim/log_rows.py)."""
+
+    def read(log: SimLog) -> Any:
+        return log._rows[name].values()
+
+    def write(log: SimLog, values: Any) -> None:
+        log._rows[name].replace(values)
+
+    return property(read, write, doc=doc)
+
+
 class SimLog:
-    """Time-major record of one run (N samples, n inputs, the state of ``format.layout``)."""
+    """Time-major record of one run (N commands, n inputs, the state of ``format.layout``),
+    appended a row at a time as the run goes (:meth:`append`), so that nothing needs the
+    run's length up front.
 
-    format: LogFormat
-    t: np.ndarray  # (N+1,) s
-    state: np.ndarray  # (N+1, nx) true plant state
-    reference: np.ndarray  # (N+1, nr) reference_names
-    thrust: np.ndarray  # (N, n) applied over [t_k, t_k+1)
-    solve_ms: np.ndarray  # (N,) wall time of the controller call
-    status: list[str]  # (N,) ControlStatus values
-    environment: np.ndarray  # (N+1, nd) environment_names at t_k
-    clearance_m: np.ndarray  # (N+1,) vehicle-to-obstacle gap, inf without obstacles
-    sample_time: float
-    initial_thrust: np.ndarray  # (n,) F(-1), what the first rate limit is measured from
-    # (N+1, m) what the sensors gave at t_k (the controller's input on rows 0..N-1); in
-    # memory only for horizontal and 6-DOF runs, whose log.csv keeps the truth.
-    measured: np.ndarray
-    # The format's diagnostics by field, (N, ...) each: e.g. ``disturbance_estimate`` (what
-    # the controller assumed over [t_k, t_k+1)), ``backoff``, a 6-DOF run's depth channel.
-    diagnostics: dict[str, Any] = field(default_factory=dict)
-    horizontal_inputs: int = 0  # how many of the inputs, from the first, are horizontal
-    input_names: tuple[str, ...] = ()  # the commands' names: the thrust columns of log.csv
+    Each field is an array of the rows appended so far (kept in blocks, sim/log_rows.py,
+    joined when read and kept joined until the next append); writing into it writes the log.
+    ``inputs``: the commands' names, in order (an ActuatorSet's), or their number, named by
+    the format's prefix; ``format``: a horizontal run's unless given; ``horizontal_inputs``:
+    how many of the inputs, from the first, are horizontal (all unless given).
+    """
+
+    t = _rows_field("t", "(N+1,) s")
+    state = _rows_field("state", "(N+1, nx) true plant state")
+    reference = _rows_field("reference", "(N+1, nr) the format's reference_names")
+    thrust = _rows_field("thrust", "(N, n) the command applied over [t_k, t_k+1)")
+    solve_ms = _rows_field("solve_ms", "(N,) wall time of the controller call")
+    status = _rows_field("status", "(N,) ControlStatus values (a list of str)")
+    environment = _rows_field("environment", "(N+1, nd) environment_names at t_k")
+    clearance_m = _rows_field(
+        "clearance_m", "(N+1,) vehicle-to-obstacle gap, inf without obstacles"
+    )
+    measured = _rows_field(
+        "measured",
+        "(N+1, m) what the sensors gave at t_k (the controller's input on rows 0..N-1); in "
+        "log.csv only for depth runs: horizontal and 6-DOF runs' keeps the truth",
+    )
+
+    def __init__(
+        self,
+        inputs: int | Sequence[str],
+        sample_time: float,
+        format: LogFormat | None = None,
+        horizontal_inputs: int | None = None,
+    ) -> None:
+        self.format = HORIZONTAL_LOG if format is None else format
+        if isinstance(inputs, int):
+            inputs = [f"{self.format.input_prefix}{i + 1}" for i in range(inputs)]
+        self.input_names = tuple(inputs)  # the commands' names: the thrust columns of log.csv
+        n_inputs = len(self.input_names)
+        self.horizontal_inputs = n_inputs if horizontal_inputs is None else horizontal_inputs
+        self.sample_time = sample_time
+        self.initial_thrust = np.zeros(n_inputs)  # F(-1): the first rate limit's start
+        layout, format = self.format.layout, self.format
+        self._rows: dict[str, FieldRows] = {
+            "t": FieldRows("t"),
+            "state": FieldRows("state", (layout.size,)),
+            "reference": FieldRows("reference", (len(format.reference_names),)),
+            "environment": FieldRows("environment", (len(format.environment_names),)),
+            "clearance_m": FieldRows("clearance_m"),
+            "measured": FieldRows("measured", (len(format.measured_names),)),
+            "thrust": FieldRows("thrust", (n_inputs,)),
+            "solve_ms": FieldRows("solve_ms"),
+            "status": FieldRows("status", text=True),
+            **{d.field: FieldRows(d.field, d.shape, d.dtype, d.text) for d in format.diagnostics},
+        }
 
     @classmethod
     def allocate(
@@ -185,31 +257,34 @@ class SimLog:
         format: LogFormat | None = None,
         horizontal_inputs: int | None = None,
     ) -> SimLog:
-        """A log for ``steps`` commands of the ``inputs`` (their names, in order: an
-        ActuatorSet's; or their number, named by the format's prefix), a horizontal run's
-        unless ``format`` says otherwise; ``horizontal_inputs``: all of them unless given."""
-        format = HORIZONTAL_LOG if format is None else format
-        if isinstance(inputs, int):
-            inputs = [f"{format.input_prefix}{i + 1}" for i in range(inputs)]
-        names = tuple(inputs)
-        n_inputs = len(names)
-        return cls(
-            format=format,
-            t=sample_time * np.arange(steps + 1, dtype=float),
-            state=np.zeros((steps + 1, format.layout.size)),
-            reference=np.zeros((steps + 1, len(format.reference_names))),
-            thrust=np.zeros((steps, n_inputs)),
-            solve_ms=np.zeros(steps),
-            status=[""] * steps,
-            environment=np.zeros((steps + 1, len(format.environment_names))),
-            clearance_m=np.full(steps + 1, math.inf),
-            sample_time=sample_time,
-            initial_thrust=np.zeros(n_inputs),
-            measured=np.zeros((steps + 1, len(format.measured_names))),
-            diagnostics={d.field: d.allocate(steps) for d in format.diagnostics},
-            horizontal_inputs=n_inputs if horizontal_inputs is None else horizontal_inputs,
-            input_names=names,
-        )
+        """A whole log of ``steps`` commands, every value 0 (no obstacle: clearance inf) and
+        t on the sample grid, to fill in place (a log read from a file, a test's); a run's
+        log is appended to instead."""
+        log = cls(inputs, sample_time, format, horizontal_inputs)
+        for name, rows in log._rows.items():
+            count = steps if log._per_command(name) else steps + 1
+            if rows.text:
+                rows.replace([""] * count)
+            else:
+                fill = math.inf if name == "clearance_m" else 0.0
+                rows.replace(np.full((count, *rows.shape), fill, dtype=rows.dtype))
+        log.t = sample_time * np.arange(steps + 1, dtype=float)
+        return log
+
+    def append(self, row: Row) -> None:
+        """The next row: a sample's fields and, unless it is the final row, its command's
+        (:meth:`LogFormat.command`); a field missing is a KeyError."""
+        final = len(row) == len(PER_SAMPLE)
+        for name, rows in self._rows.items():
+            if not (final and self._per_command(name)):
+                rows.append(row[name])
+
+    @property
+    def diagnostics(self) -> dict[str, Any]:
+        """The format's diagnostics by field, (N, ...) each: e.g. ``disturbance_estimate``
+        (what the controller assumed over [t_k, t_k+1)), ``backoff``, a 6-DOF run's depth
+        channel."""
+        return {d.field: self._rows[d.field].values() for d in self.format.diagnostics}
 
     @property
     def layout(self) -> Layout:
@@ -217,20 +292,20 @@ class SimLog:
 
     @property
     def steps(self) -> int:
-        return len(self.thrust)
-
-    def first(self, rows: int) -> SimLog:
-        """A copy of the log's first ``rows`` samples (and so ``rows - 1`` commands)."""
-        cut: dict[str, Any] = {name: getattr(self, name)[:rows].copy() for name in PER_SAMPLE}
-        cut.update({name: getattr(self, name)[: rows - 1].copy() for name in PER_COMMAND})
-        cut["diagnostics"] = {
-            name: values[: rows - 1].copy() for name, values in self.diagnostics.items()
-        }
-        return replace(self, **cut)
+        return len(self._rows["thrust"])
 
     @property
     def n_thrusters(self) -> int:
-        return self.thrust.shape[1]
+        return len(self.input_names)
+
+    def first(self, rows: int) -> SimLog:
+        """A copy of the log's first ``rows`` samples (and so ``rows - 1`` commands)."""
+        cut = SimLog(self.input_names, self.sample_time, self.format, self.horizontal_inputs)
+        cut.initial_thrust = self.initial_thrust
+        for name, values in self._rows.items():
+            count = rows - 1 if self._per_command(name) else rows
+            cut._rows[name].replace(values.values()[:count].copy())
+        return cut
 
     def horizontal(self) -> SimLog:
         """The horizontal view: ``[x, y, psi, u, v, r]``, their reference and the horizontal
@@ -241,23 +316,23 @@ class SimLog:
         if part is None:
             raise TypeError(f"a {self.format.name} run has no horizontal path")
         n = self.horizontal_inputs
-        return SimLog(
-            format=HORIZONTAL_LOG,
-            t=self.t,
-            state=self.state[:, part.state],
-            reference=self.reference[:, part.reference],
-            thrust=self.thrust[:, :n],
-            solve_ms=self.solve_ms,
-            status=self.status,
-            environment=self._horizontal_environment(),
-            clearance_m=self.clearance_m,
-            sample_time=self.sample_time,
-            initial_thrust=self.initial_thrust[:n],
-            measured=self.measured[:, part.measured],
-            diagnostics={d.field: self.diagnostics[d.field] for d in HORIZONTAL_LOG.diagnostics},
-            horizontal_inputs=n,
-            input_names=self.input_names[:n],
-        )
+        view = SimLog(self.input_names[:n], self.sample_time, HORIZONTAL_LOG, n)
+        view.initial_thrust = self.initial_thrust[:n]
+        fields = {
+            "t": self.t,
+            "state": self.state[:, part.state],
+            "reference": self.reference[:, part.reference],
+            "thrust": self.thrust[:, :n],
+            "solve_ms": self.solve_ms,
+            "status": self.status,
+            "environment": self._horizontal_environment(),
+            "clearance_m": self.clearance_m,
+            "measured": self.measured[:, part.measured],
+        }
+        fields |= {d.field: self._values(d.field) for d in HORIZONTAL_LOG.diagnostics}
+        for name, values in fields.items():
+            view._rows[name].replace(values)
+        return view
 
     def _horizontal_environment(self) -> np.ndarray:
         """The horizontal view's environment: no force, the water velocity's north and east
@@ -268,18 +343,6 @@ class SimLog:
             columns = [names.index(name) for name in HORIZONTAL_CURRENT_NAMES]
             environment[:, _WATER] = self.environment[:, columns]
         return environment
-
-    def record_command(
-        self, k: int, result: ControlResult, thrust: np.ndarray, solve_ms: float
-    ) -> None:
-        """Row k's command: the (checked) thrust, how it came, the controller call's wall
-        time (or the format's channel's) and the diagnostics the format keeps."""
-        self.thrust[k] = thrust
-        attribute = self.format.solve_ms_attribute
-        self.solve_ms[k] = solve_ms if attribute is None else getattr(result, attribute)
-        self.status[k] = str(result.status)
-        for diagnostic in self.format.diagnostics:
-            diagnostic.record(self.diagnostics[diagnostic.field], k, result)
 
     def column(self, name: str) -> np.ndarray | list[str]:
         """log.csv's column ``name`` (all rows; a per-command one has N), e.g. a depth run's
@@ -297,10 +360,10 @@ class SimLog:
         raise KeyError(f"no column {name!r} in this log ({', '.join(self.columns())})")
 
     def _values(self, name: str) -> Any:
-        return self.diagnostics[name] if name in self.diagnostics else getattr(self, name)
+        return self._rows[name].values()
 
     def _per_command(self, name: str) -> bool:
-        return name in PER_COMMAND or name in self.diagnostics
+        return name in PER_COMMAND or name in self.format.diagnostic_fields
 
     def csv_columns(self) -> tuple[Column, ...]:
         """log.csv's columns, in order, and the fields they hold."""
@@ -310,39 +373,22 @@ class SimLog:
         return [name for column in self.csv_columns() for name in column.names]
 
     def to_csv_text(self) -> str:
-        return _csv_text(self.columns(), self._rows())
+        return _csv_text(self.columns(), self._csv_rows())
 
-    def _rows(self) -> Iterator[list[str]]:
+    def _csv_rows(self) -> Iterator[list[str]]:
         """log.csv's rows as text, in order."""
         blocks = self.csv_columns()
-        return (self.row(blocks, k) for k in range(self.steps + 1))
+        values = {name: rows.values() for name, rows in self._rows.items()}
+        samples = {name: values[name] for name in PER_SAMPLE}
+        steps = self.steps
+        for k in range(steps + 1):
+            row = {name: field[k] for name, field in (values if k < steps else samples).items()}
+            yield csv_row(blocks, row)
 
     def dataframe(self) -> pd.DataFrame:
         """The log as a DataFrame with log.csv's columns (:meth:`LogTable.frame` of its
         rows: a per-command column is NaN on the final row)."""
-        return LogTable(Path("log.csv"), "log", self.columns(), list(self._rows())).frame()
-
-    def row(self, blocks: tuple[Column, ...], k: int, final: bool = False) -> list[str]:
-        """Row k of log.csv by ``blocks`` (:meth:`csv_columns`, made once per log);
-        ``final``: the run's last row, which has no command (as every row past the last
-        command)."""
-        final = final or k >= self.steps
-        return [cell for block in blocks for cell in self._cells(block, k, final)]
-
-    def _cells(self, column: Column, k: int, final: bool) -> list[str]:
-        """Row k's cells of one block of columns."""
-        if column.field is None:
-            return [csv_number(0.0)] * len(column.names)
-        if final and self._per_command(column.field):
-            return [""] * len(column.names)
-        value = self._values(column.field)[k]
-        if column.text:
-            return [value]
-        if np.ndim(value) == 0:
-            finite = math.isfinite(value) or not column.empty_is_inf
-            return [csv_number(value) if finite else ""]
-        part = value if column.part is None else np.asarray(value)[column.part]
-        return [csv_number(v) for v in part]
+        return LogTable(Path("log.csv"), "log", self.columns(), list(self._csv_rows())).frame()
 
     @classmethod
     def read_csv(cls, path: Path, *options: Any, field: str = "log", **named: Any) -> SimLog:
@@ -526,7 +572,10 @@ class LiveLog:
     """log.csv written as a run goes: the header, then each row as soon as it is complete,
     flushed, so that a run that dies (a crash, a live vehicle's computer switched off) keeps
     every sample stepped. It is the record, not the result: the run folder (``close``) is.
-    Opened exclusively: an existing file is never replaced."""
+    Opened exclusively: an existing file is never replaced.
+
+    The session keeps its log in memory as well: the metrics and figures at its close need
+    every row, and the log's arrays are smaller than the file read back (docs/session.md)."""
 
     def __init__(self, path: str | Path, log: SimLog) -> None:
         try:
@@ -544,13 +593,36 @@ class LiveLog:
         self._writer.writerow(log.columns())
         self._file.flush()
 
-    def append(self, k: int, final: bool = False) -> None:
-        """Row k of the log, now complete (``final``: the state after the last command)."""
-        self._writer.writerow(self._log.row(self._blocks, k, final))
+    def append(self, row: Row) -> None:
+        """A complete row of the log (the final one has no command)."""
+        self._writer.writerow(csv_row(self._blocks, row))
         self._file.flush()
 
     def close(self) -> None:
         self._file.close()
+
+
+def csv_row(blocks: Sequence[Column], row: Row) -> list[str]:
+    """One row of log.csv by ``blocks`` (:meth:`SimLog.csv_columns`, made once per log) from
+    the fields of ``row`` (:meth:`SimLog.append`'s): the one writer's row. The final row has
+    no command: its per-command cells are empty."""
+    return [cell for block in blocks for cell in _cells(block, row)]
+
+
+def _cells(column: Column, row: Row) -> list[str]:
+    """A row's cells of one block of columns."""
+    if column.field is None:
+        return [csv_number(0.0)] * len(column.names)
+    if column.field not in row:  # the final row's command
+        return [""] * len(column.names)
+    value = row[column.field]
+    if column.text:
+        return [value]
+    if np.ndim(value) == 0:
+        finite = math.isfinite(value) or not column.empty_is_inf
+        return [csv_number(value) if finite else ""]
+    part = value if column.part is None else np.asarray(value)[column.part]
+    return [csv_number(v) for v in part]
 
 
 def _csv_text(columns: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
@@ -567,10 +639,6 @@ def csv_number(value: float) -> str:
     return repr(float(value))
 
 
-# A log.csv read whole: an hour at 0.05 s with 8 thrusters is about 60 MB; four times that
-# stays well inside memory (the rows are parsed once).
-MAX_LOG_BYTES = 256 * 1024 * 1024
-
 #: The fields a log only ever holds finite numbers of: the session checks every time,
 #: measurement and truth it is handed, a run whose plant diverged is not written, and the
 #: shell checks every command. A controller's own diagnostics (the estimate, the back-off)
@@ -578,135 +646,3 @@ MAX_LOG_BYTES = 256 * 1024 * 1024
 FINITE_FIELDS = frozenset(
     {"t", "state", "reference", "thrust", "solve_ms", "environment", "measured", "clearance_m"}
 )
-
-
-@dataclass(frozen=True)
-class LogTable:
-    """log.csv's text checked as a table: a header with ``t`` and rows of as many fields
-    (:func:`read_log_table`). Its methods read columns with the same checks for every reader
-    of a log (:meth:`SimLog.read_csv`, identification's): each damage is one line naming
-    ``field``, the file, the line and the column."""
-
-    path: Path
-    field: str
-    header: list[str]
-    rows: list[list[str]]  # the data rows; row i is the file's line i + 2
-
-    def damaged(self, reason: str) -> ConfigError:
-        return ConfigError(self.field, str(self.path), f"{self.path.name} {reason}")
-
-    def frame(self) -> pd.DataFrame:
-        """The table as a DataFrame with its columns by name, every number exactly as
-        written (Python's float parser); a text column (``status``) stays text, an empty
-        cell is NaN."""
-        columns: dict[str, Any] = {}
-        for i, name in enumerate(self.header):
-            cells = [row[i] for row in self.rows]
-            try:
-                columns[name] = np.array([float(c) if c else np.nan for c in cells])
-            except ValueError:
-                columns[name] = cells
-        return pd.DataFrame(columns)
-
-    def require(self, names: Sequence[str], what: str) -> None:
-        """Every one of ``names`` must be a column (``what``: whose log has them)."""
-        missing = [name for name in names if name not in self.header]
-        if missing:
-            raise self.damaged(f"has no column {', '.join(missing)}, which a {what} run's log has")
-
-    def _cells(self, name: str, rows: slice) -> list[str]:
-        i = self.header.index(name)
-        return [row[i] for row in self.rows[rows]]
-
-    def texts(self, name: str, rows: slice = slice(None)) -> list[str]:
-        """Column ``name`` as text; an empty cell is damage (a status is never empty)."""
-        cells = self._cells(name, rows)
-        for k, cell in enumerate(cells):
-            if not cell:
-                raise self.damaged(f"line {k + 2}, column {name}: empty, where a value belongs")
-        return cells
-
-    def numbers(
-        self,
-        name: str,
-        rows: slice = slice(None),
-        finite: bool = True,
-        empty_is_inf: bool = False,
-    ) -> np.ndarray:
-        """Column ``name`` as floats (exactly as written); ``finite``: NaN or inf is damage;
-        ``empty_is_inf``: an empty cell is inf (no obstacle), the only non-finite value."""
-        values = np.empty(len(self.rows[rows]))
-        for k, cell in enumerate(self._cells(name, rows)):
-            if empty_is_inf and not cell:
-                values[k] = math.inf
-                continue
-            try:
-                values[k] = float(cell)
-            except ValueError:
-                where = f"line {k + 2}, column {name}"
-                raise self.damaged(
-                    f"{where}: empty, where a number belongs"
-                    if not cell
-                    else f"{where}: {cell[:20]!r} is not a number"
-                ) from None
-            if (finite or empty_is_inf) and not math.isfinite(values[k]):
-                raise self.damaged(
-                    f"line {k + 2}, column {name}: {cell!r}, a value the log never holds there"
-                )
-        return values
-
-    def increasing(self, name: str, values: np.ndarray) -> None:
-        """Column ``name``'s ``values`` (read by :meth:`numbers`) must increase row by row."""
-        later = np.diff(values) > 0
-        if not later.all():
-            k = int(np.argmin(later)) + 1
-            raise self.damaged(
-                f"line {k + 2}, column {name}: {float(values[k])!r} is not after the line "
-                f"before's {float(values[k - 1])!r}"
-            )
-
-    def final_row_empty(self, names: Sequence[str]) -> None:
-        """Per-command ``names`` are empty on the final row (the state after the last
-        command); a final row with a command is a log cut at a row boundary."""
-        last = self.rows[-1]
-        if any(last[self.header.index(name)] for name in names):
-            raise self.damaged(
-                f"ends at line {len(self.rows) + 1} with a command: its final row (the state "
-                "after the last command, no command) is missing, so the log was cut short"
-            )
-
-
-def read_log_table(path: str | Path, field: str = "log") -> LogTable:
-    """A log.csv's header and rows, or one :class:`~auvmpc.errors.ConfigError` line naming
-    ``field``, the file and what is damaged: no such file, a folder, a binary file or one not
-    UTF-8, larger than :data:`MAX_LOG_BYTES`, not CSV, empty, a first line without ``t``
-    (not a log's header), a row with another number of fields than the header, a last line
-    without its end (a file cut mid-row: the writer ends every row)."""
-    from auvmpc.safe_yaml import read_text_file
-
-    path = Path(path)
-    text = read_text_file(path, field, "log.csv", MAX_LOG_BYTES)
-    table = LogTable(path, field, [], [])
-    try:
-        rows = list(csv.reader(io.StringIO(text, newline="")))
-    except csv.Error as error:
-        raise table.damaged(f"is not a CSV table ({error})") from None
-    if not rows:
-        raise table.damaged("is empty")
-    header = rows[0]
-    if "t" not in header:
-        raise table.damaged(
-            "does not start with a log's header (its first line has no column t): "
-            "not a log auvmpc wrote"
-        )
-    if not text.endswith("\n"):
-        raise table.damaged(
-            f"ends in the middle of line {len(rows)} (no line end): the file was cut short"
-        )
-    for line, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise table.damaged(
-                f"line {line} has {len(row)} fields, its header {len(header)}: "
-                "the file was cut short or edited"
-            )
-    return replace(table, header=header, rows=rows[1:])

@@ -72,11 +72,11 @@ def closed_loop(
         if disturbance is None:
             raise ValueError("closed_loop: a VehicleParams plant needs its disturbance")
         plant = HorizontalPlant(plant, disturbance, sample_time, max_plant_step)
-    steps = int(round(duration / sample_time))
     session = Session(
         controller,
         reference,
-        SimLog.allocate(steps, plant.inputs.layout.names, sample_time, plant.log_format),
+        SimLog(plant.inputs.layout.names, sample_time, plant.log_format),
+        int(round(duration / sample_time)),  # the run's commands
         initial_state=initial_state,
         initial_thrust=initial_thrust,
         obstacles=obstacles,
@@ -118,11 +118,12 @@ def run_session(
             f"run_session: the plant steps {plant.sample_time} s, the controller samples "
             f"every {session.sample_time} s"
         )
-    log = session.log
-    steps, position, perception = log.steps, session.position, session.perception
+    steps, position, perception = session.steps, session.position, session.perception
+    # The sample times k Te, each a product (never accumulated), as float64.
+    times = session.sample_time * np.arange(steps + 1, dtype=float)
     state = session.initial_state.copy()
     for k in range(steps + 1):
-        t = log.t[k]
+        t = times[k]
         truth = Truth(state, plant.environment(t, state))
         # Measured on the last row too: what the controller would have seen (a depth log shows it).
         measured = sensor.measure(state, t)
@@ -141,4 +142,4 @@ def run_session(
             raise PlantDiverged(k + 1)
         if on_step is not None:
             on_step(k + 1, steps)
-    return log
+    return session.log

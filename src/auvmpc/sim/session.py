@@ -31,7 +31,7 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
 from auvmpc.models.layout import Layout
-from auvmpc.sim.log import LiveLog, SimLog
+from auvmpc.sim.log import LiveLog, Row, SimLog
 
 __all__ = ["Session", "StateReference", "StepResult", "Truth"]
 
@@ -67,9 +67,10 @@ class StateReference(Protocol):
 class Session:
     """The controller of one run, stepped sample by sample, and the run's log.
 
-    ``log`` is allocated for the run's samples (``log.steps`` commands); each :meth:`step`
-    fills its row, :meth:`finish` the final state row, and :attr:`stepped_log` is the part
-    filled so far. Without :class:`Truth` the log's state columns hold the measurement and
+    Each :meth:`step` appends its row to ``log`` (an empty log to begin with), :meth:`finish`
+    the final state row, and :attr:`stepped_log` is the run of the rows so far; ``steps``
+    is the run's length in commands (the scenario's duration), past which :meth:`step` is
+    refused. Without :class:`Truth` the log's state columns hold the measurement and
     the vehicle-to-obstacle gap is the measured position's; a session whose measurement is
     not its whole state (6-DOF, depth) needs the truth. ``live_log``: a new file that
     gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
@@ -80,6 +81,7 @@ class Session:
         controller: Controller,
         reference: StateReference,
         log: SimLog,
+        steps: int,
         *,
         initial_state: Sequence[float],
         initial_thrust: np.ndarray | None = None,
@@ -91,6 +93,7 @@ class Session:
         self.controller = controller
         self.reference = reference
         self.log = log
+        self.steps = steps
         self.sample_time = controller.sample_time
         self.obstacles = tuple(obstacles)
         self.perception = perception
@@ -102,6 +105,7 @@ class Session:
         # What Truth.environment holds, in order (the log's environment columns).
         self.environment_names = log.format.environment_names
         self.k = 0  # samples stepped so far
+        self._previous_t: float | None = None  # the last stepped sample's time
         self.finished = False  # the final state row is in
         self.closed = False  # filed as a run: nothing more may be stepped
         # Where the position sits in the state: obstacle gaps and detections need it.
@@ -175,28 +179,26 @@ class Session:
         """
         k = self.k
         self._check_open("step")
-        if self.finished or k >= self.log.steps:
+        if self.finished or k >= self.steps:
             raise ConfigError(
-                "step", k, f"the run has {self.log.steps} samples ({self._duration_text()})"
+                "step", k, f"the run has {self.steps} samples ({self._duration_text()})"
             )
         if not trusted:
-            t, measurement, truth = self._checked(k, t, measurement, truth)
+            t, measurement, truth = self._checked(t, measurement, truth)
             if detections is not None:
                 detections = _checked_detections(detections)
-        self._record(k, t, measurement, truth)
-        log = self.log
+        row = self._sample(t, measurement, truth)
+        t = row["t"]
         observation = Observation(
             k=k,
-            t=log.t[k],
+            t=t,
             state=measurement,
             reference=self._preview,
-            obstacles=self._detections(log.t[k], measurement) if detections is None else detections,
+            obstacles=self._detections(t, measurement) if detections is None else detections,
             effectiveness=self._effectiveness,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
-        log.record_command(k, result, thrust, solve_ms)
-        if self.live_log is not None:
-            self.live_log.append(k)
+        self._append(row | self.log.format.command(result, thrust, solve_ms))
         self.k = k + 1
         return StepResult(k, thrust.copy(), result.status, solve_ms, result.info)
 
@@ -214,11 +216,10 @@ class Session:
         if self.finished:
             raise ConfigError("finish", self.k, "the run is finished already")
         if not trusted:
-            t, measurement, truth = self._checked(self.k, t, measurement, truth)
-        self._record(self.k, t, measurement, truth)
+            t, measurement, truth = self._checked(t, measurement, truth)
+        self._append(self._sample(t, measurement, truth))
         self.finished = True
         if self.live_log is not None:
-            self.live_log.append(self.k, final=True)
             self.live_log.close()
 
     def end_live_log(self) -> None:
@@ -234,7 +235,7 @@ class Session:
         rows = self.k + 1 if self.finished else self.k
         if rows < 2:
             raise ConfigError("step", self.k, "a run needs at least two samples stepped")
-        return self.log if rows == self.log.steps + 1 else self.log.first(rows)
+        return self.log if self.finished else self.log.first(rows)
 
     def _check_open(self, what: str) -> None:
         if self.closed:
@@ -242,12 +243,12 @@ class Session:
 
     # -- one row of the log ------------------------------------------------------------
     def _checked(
-        self, k: int, t: Any, measurement: Any, truth: Truth | None
+        self, t: Any, measurement: Any, truth: Truth | None
     ) -> tuple[float, np.ndarray, Truth | None]:
-        """A caller's time, measurement and truth for row k, as checked floats, or one line
-        naming the first that is wrong."""
+        """A caller's time, measurement and truth for the next row, as checked floats, or one
+        line naming the first that is wrong."""
         log = self.log
-        t = _finite_time(t, None if k == 0 else float(log.t[k - 1]))
+        t = _finite_time(t, self._previous_t)
         names = log.format.measured_names
         measured = _finite_vector("measurement", measurement, len(names), names)
         if truth is None and names != log.layout.names:
@@ -266,23 +267,35 @@ class Session:
             )  # fmt: skip
         return t, measured, truth
 
-    def _record(self, k: int, t: float, measured: np.ndarray, truth: Truth | None) -> None:
-        """Row k's time, reference preview, measurement and state (the truth's if given)."""
-        log = self.log
+    def _sample(self, t: float, measured: np.ndarray, truth: Truth | None) -> Row:
+        """The next row's sample: its time (the log's float64), reference, state (the
+        truth's if given, else the measurement), environment, obstacle gap and measurement;
+        the reference's preview from t is kept for the observation."""
         # Its first row is the reference at t; the whole preview is the observation's.
         self._preview = self.reference.states(t + self._preview_offsets)
-        log.t[k] = t
-        log.reference[k] = self._preview[0]
-        if truth is not None:
-            log.state[k] = truth.state
-            log.environment[k] = truth.environment
-        else:
-            log.state[k] = measured
+        state = measured if truth is None else truth.state
+        format = self.log.format
+        gap = math.inf  # no obstacles
         if self.position is not None:
-            log.clearance_m[k] = clearance(
-                log.state[k][self.position], t, self.obstacles, self.vehicle_radius
-            )
-        log.measured[k] = measured
+            position = np.asarray(state, float)[self.position]
+            gap = clearance(position, t, self.obstacles, self.vehicle_radius)
+        return {
+            "t": np.float64(t),
+            "state": state,
+            "reference": self._preview[0],
+            "environment": (
+                np.zeros(len(format.environment_names)) if truth is None else truth.environment
+            ),
+            "clearance_m": gap,
+            "measured": measured,
+        }
+
+    def _append(self, row: Row) -> None:
+        """The row to the log, and to the live log if there is one."""
+        self.log.append(row)
+        self._previous_t = float(row["t"])
+        if self.live_log is not None:
+            self.live_log.append(row)
 
     def _detections(self, t: float, measured: np.ndarray) -> Sequence[ObstacleState]:
         """The obstacles as the controller knows them at t: through the obstacle sensor
@@ -292,7 +305,7 @@ class Session:
         return self.perception.observe(t, measured[self._measured_position])
 
     def _duration_text(self) -> str:
-        return f"{self.log.steps * self.sample_time:g} s at {self.sample_time:g} s"
+        return f"{self.steps * self.sample_time:g} s at {self.sample_time:g} s"
 
 
 def _finite_time(t: Any, previous: float | None) -> float:
