@@ -161,13 +161,13 @@ def test_bad_wave_and_tank_parameters_name_the_field(override, field):
 def test_depth_runs_in_the_shared_loop_with_a_registered_controller(tmp_path):
     """kind: depth uses sim.loop.closed_loop, the registry's depth-mpc inside the shell (same
     ``info`` keys as the horizontal controllers) and the log named by the DEPTH layout."""
-    from auvmpc.controllers.registry import REGISTRY
+    from auvmpc.controllers.registry import DEPTH_REGISTRY
     from auvmpc.controllers.shell import INFO_KEYS
     from auvmpc.experiments.run import make_controller
     from auvmpc.sim.log import DEPTH_LOG, SimLog
 
     resolved = load_scenario("paper-depth-calm", ["duration=12", "reference.step_time_s=2"])
-    assert "depth-mpc" in REGISTRY
+    assert "depth-mpc" in DEPTH_REGISTRY
     controller = make_controller(resolved.scenario, resolved.model)
     result = controller.compute(
         Observation(k=0, t=0.0, state=np.array([-0.3]), reference=np.tile([-0.3, 0.0], (31, 1)))
