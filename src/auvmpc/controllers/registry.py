@@ -285,7 +285,7 @@ def _depth_type_tag(value: Any) -> str:
     return str(getattr(value, "type", DEPTH_MPC))  # a configuration, or what is none
 
 
-def _checked_depth_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
+def _checked_depth_type(value: Any, handler: Any) -> Any:
     """The depth type named first (a horizontal one in one line saying so), then the
     mapping validated as that type's configuration."""
     if isinstance(value, Mapping):
