@@ -4,6 +4,7 @@ resume after a real SIGKILL, worker deaths, failed runs recorded once, and the r
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -290,6 +291,38 @@ def test_grid_parameters_span_a_product_last_fastest(tmp_path):
     combos = [tuple(sample_run(camp, k).columns.values()) for k in range(12)]
     expected = [(q, t) for q in (1, 2) for t in ("mpc", "ltv-mpc", "baseline")]
     assert combos == expected + expected
+
+
+def test_the_notes_of_a_retyping_override_are_kept_per_run_and_reported_once(tmp_path):
+    """A run whose controller.type a parameter changes drops the old type's knobs, as
+    ``auvmpc run --set`` does: the note is kept in its row (and among its run warnings) and
+    the report lists it once, with how many runs it was made for."""
+    data = with_changes(
+        overrides=["duration=2", "controller.type=mpc", "controller.control_horizon=2"],
+        runs=4,
+        parameters={"controller.type": {"type": "grid", "values": ["mpc", "baseline"]}},
+        criterion=None,
+    )
+    camp = load_campaign(write_campaign(tmp_path, data))
+    out = prepare_campaign_folder(tmp_path / "out", overwrite=False, files=(RESULTS_FILE,))
+    store = campaign.store._Store(out, camp)
+    rows = [campaign.execute_run(camp.payload(), k) for k in range(3)]
+    for row in rows:
+        store.record(row)
+    store.close()
+    assert [bool(row["metrics"].get("override_notes")) for row in rows] == [False, True, False]
+    (note,) = json.loads(rows[1]["metrics"]["override_notes"])  # a failed run would keep it too
+    said = "controller.type: mpc changed to baseline by an override; dropped what baseline has "
+
+    def dropped(text: str) -> set[str]:  # the knobs in the payload's key order or the file's
+        assert text.startswith(said)
+        return set(text.removeprefix(f"{said}no knob for: ").split(", "))
+
+    assert "control_horizon" in dropped(note)  # the override's, and the file's mpc knobs
+    assert dropped(scenario_for_run(camp, 1).notes[0]) == dropped(note)  # run.json warns too
+    report = campaign.campaign_report(out, write=False, figures=False)
+    assert report.summary["override_notes"] == [{"note": note, "of": "run", "runs": 1}]
+    assert report.markdown.count(note) == 1
 
 
 @pytest.mark.parametrize(

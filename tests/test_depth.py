@@ -161,13 +161,13 @@ def test_bad_wave_and_tank_parameters_name_the_field(override, field):
 def test_depth_runs_in_the_shared_loop_with_a_registered_controller(tmp_path):
     """kind: depth uses sim.loop.closed_loop, the registry's depth-mpc inside the shell (same
     ``info`` keys as the horizontal controllers) and the log named by the DEPTH layout."""
-    from auvmpc.controllers.registry import REGISTRY
+    from auvmpc.controllers.registry import DEPTH_REGISTRY
     from auvmpc.controllers.shell import INFO_KEYS
     from auvmpc.experiments.run import make_controller
     from auvmpc.sim.log import DEPTH_LOG, SimLog
 
     resolved = load_scenario("paper-depth-calm", ["duration=12", "reference.step_time_s=2"])
-    assert "depth-mpc" in REGISTRY
+    assert "depth-mpc" in DEPTH_REGISTRY
     controller = make_controller(resolved.scenario, resolved.model)
     result = controller.compute(
         Observation(k=0, t=0.0, state=np.array([-0.3]), reference=np.tile([-0.3, 0.0], (31, 1)))
@@ -193,3 +193,49 @@ def test_each_kind_refuses_the_others_controller_in_one_line():
         load_scenario("paper-depth-calm", ["controller.type=mpc"])
     with pytest.raises(ConfigError, match="controller.type"):
         load_scenario("paper-ideal", ["controller.type=depth-mpc"])
+
+
+def test_a_knob_of_the_other_depth_controller_type_is_refused_unless_an_override_retyped(
+    tmp_path,
+):
+    """Each depth controller type's configuration holds its own knobs (a discriminated union
+    on ``type``, as the horizontal one): the other type's is refused in one line naming it; a
+    type changed by an override drops the old type's knobs and says so."""
+    from auvmpc.controllers.playback import DepthPlaybackConfig
+
+    table = tmp_path / "heave.csv"
+    table.write_text("t,Fz1,Fz2\n0.0,0.0,0.0\n")
+    with pytest.raises(
+        ConfigError,
+        match=r"^controller\.playback: a knob of thrust-playback, not of "
+        "controller type depth-mpc",
+    ):
+        load_scenario("paper-depth-calm", [f"controller.playback.path={table}"])
+    scenario = tmp_path / "heave.yaml"  # as `auvmpc excite --dof heave` writes it, plus ny
+    scenario.write_text(
+        "kind: depth\nname: heave\nduration: 1\nreference: {step_time_s: 0.5}\n"
+        "controller: {type: thrust-playback, sample_time: 0.1, playback: {path: heave.csv}, "
+        "prediction_horizon: 20}\n"
+    )
+    with pytest.raises(
+        ConfigError,
+        match=r"^controller\.prediction_horizon: a knob of depth-mpc, not of "
+        "controller type thrust-playback",
+    ):
+        load_scenario(scenario)
+    retyped = load_scenario(
+        "paper-depth-calm", ["controller.type=thrust-playback", f"controller.playback.path={table}"]
+    )
+    assert isinstance(retyped.scenario.controller, DepthPlaybackConfig)
+    assert retyped.notes[0] == (
+        "controller.type: depth-mpc changed to thrust-playback by an override; dropped what "
+        "thrust-playback has no knob for: prediction_horizon"
+    )
+    assert retyped.scenario.controller.sample_time == 0.1  # a knob both have: kept
+    with pytest.raises(
+        ConfigError, match=r"^depth_controller\.type: the 6-DOF depth channel is depth-mpc"
+    ):
+        load_scenario(
+            "paper-6dof",
+            ["depth_controller.type=thrust-playback", f"depth_controller.playback.path={table}"],
+        )

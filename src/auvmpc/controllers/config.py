@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from enum import StrEnum
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -30,22 +30,26 @@ __all__ = [
     "ControllerConfig",
     "ControllerType",
     "DEPTH_MPC",
-    "DepthControllerConfig",
-    "DepthObserverConfig",
+    "DEPTH_TYPE",
     "DEFAULT_SAMPLE_TIME_S",
     "DEFAULT_VEHICLE_RADIUS_M",
     "HEADING_PER_SAMPLE_RAD",
     "DisturbanceBound",
+    "DepthChannelConfig",
     "Horizon",
+    "HorizonLengths",
     "HorizontalControllerConfig",
+    "ObstacleSlack",
     "OffsetFree",
     "OptimisingControllerConfig",
     "PlanLinearisation",
     "PredictionModel",
+    "QpSolverOptions",
     "Relinearisation",
     "SolverOptions",
     "TightenedConstraints",
     "TrackingWeights",
+    "TypedControllerConfig",
     "type_field",
     "NmpcMode",
     "PlaybackConfig",
@@ -131,16 +135,6 @@ class PlaybackConfig(StrictModel):
     )
 
 
-def check_playback(controller_type: str, playback: PlaybackConfig | None) -> None:
-    """thrust-playback needs its table, and only it takes one (a horizontal or a depth
-    scenario's ``controller``)."""
-    playing = controller_type == ControllerType.THRUST_PLAYBACK
-    if playing and playback is None:
-        raise FieldError("playback", None, "thrust-playback needs playback.path (a CSV)")
-    if not playing and playback is not None:
-        raise FieldError("playback", playback.model_dump(), "only for thrust-playback")
-
-
 # The validation context of a scenario read back from a run folder's run.json.
 SAVED_RUN = "saved_run"
 
@@ -175,27 +169,52 @@ def check_control_horizon(control_horizon: int | None, prediction_horizon: int) 
         )
 
 
-def _foreign_knob(key: str, own_type: object) -> str | None:
-    """Why ``key`` is refused by controller type ``own_type`` when it is a knob of other
-    types: "a knob of nmpc, not of controller type baseline" (None: no type has it)."""
-    from auvmpc.controllers.registry import knob_owners
-
-    owners = knob_owners(key)
-    if not owners:
-        return None
-    return f"a knob of {', '.join(owners)}, not of controller type {own_type}"
-
-
-def type_field(name: str) -> Any:
-    """The ``type`` field of controller type ``name``'s configuration."""
-    return Field(
-        default=name,
-        description="which controller: selects this configuration (default nmpc, the "
-        "real-time nmpc that measured best on the hard-survey sweep, docs/recovery.md)",
-    )
+# What the ``type`` field of a horizontal and of a depth controller's configuration says.
+HORIZONTAL_TYPE = (
+    "which controller: selects this configuration (default nmpc, the real-time nmpc that "
+    "measured best on the hard-survey sweep, docs/recovery.md)"
+)
+DEPTH_TYPE = (
+    "depth controller; thrust-playback plays a table of the vertical thrusts open loop (a "
+    "depth scenario's, as `auvmpc excite --dof heave` writes)"
+)
 
 
-class HorizontalControllerConfig(StrictModel):
+def type_field(name: str, description: str = HORIZONTAL_TYPE) -> Any:
+    """The ``type`` field of controller type ``name``'s configuration (a depth one's says
+    DEPTH_TYPE)."""
+    return Field(default=name, description=description)
+
+
+class TypedControllerConfig(StrictModel):
+    """A controller configuration, one of its kind's chosen by ``type`` (pydantic's
+    discriminated union, controllers/registry.py). A knob that only other types of its kind
+    have is named with them ("a knob of nmpc, not of controller type baseline"); read back
+    from a saved run (context ``saved_run``) it is dropped: run folders written before the
+    per-type configurations hold every type's knobs."""
+
+    @classmethod
+    def _knob_owners(cls, knob: str) -> list[str]:
+        """The types of this configuration's kind whose configuration has ``knob``."""
+        raise NotImplementedError
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys_only(cls, data: Any, info: ValidationInfo) -> Any:
+        if isinstance(data, Mapping):
+            foreign = [key for key in data if key not in cls.model_fields]
+            if foreign and (info.context or {}).get(SAVED_RUN):
+                return {key: value for key, value in data.items() if key in cls.model_fields}
+            own_type = data.get("type", cls.model_fields["type"].default)
+            for key in foreign:
+                owners = cls._knob_owners(str(key))
+                if owners:
+                    reason = f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+                    raise FieldError(str(key), data[key], reason)
+        return super()._known_keys_only(data)
+
+
+class HorizontalControllerConfig(TypedControllerConfig):
     """What every horizontal controller's configuration holds: its type, its sample time and
     the disc round the vehicle that obstacles are kept from (which the metrics measure
     clearance from, whatever the controller). Each controller type's configuration adds
@@ -226,22 +245,11 @@ class HorizontalControllerConfig(StrictModel):
         "gap between the prediction model and the plant between samples",
     )
 
-    @model_validator(mode="before")
     @classmethod
-    def _known_keys_only(cls, data: Any, info: ValidationInfo) -> Any:
-        """A knob of another controller type is named with the types it belongs to; read
-        back from a saved run (context ``saved_run``) it is dropped: run folders written
-        before the per-type configurations hold every type's knobs."""
-        if isinstance(data, Mapping):
-            foreign = [key for key in data if key not in cls.model_fields]
-            if foreign and (info.context or {}).get(SAVED_RUN):
-                return {key: value for key, value in data.items() if key in cls.model_fields}
-            own_type = data.get("type", cls.model_fields["type"].default)
-            for key in foreign:
-                reason = _foreign_knob(str(key), own_type)
-                if reason is not None:
-                    raise FieldError(str(key), data[key], reason)
-        return super()._known_keys_only(data)
+    def _knob_owners(cls, knob: str) -> list[str]:
+        from auvmpc.controllers.registry import knob_owners
+
+        return knob_owners(knob)
 
     def _has(self, knob: str) -> bool:
         """Whether this controller type has ``knob``."""
@@ -373,11 +381,33 @@ class HorizontalControllerConfig(StrictModel):
 # --- the blocks the controller types' configurations are composed of -------------------------
 
 
-class Horizon(StrictModel):
-    """How far a predictive controller looks ahead and where its moves are free."""
+ControlHorizon = Annotated[int, Field(ge=1)] | None
+
+
+class HorizonLengths(StrictModel):
+    """How far a predictive controller looks ahead and for how many samples its moves are
+    free (every predictive controller: the horizontal ones and the depth MPC)."""
 
     prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
-    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
+    control_horizon: ControlHorizon = Field(
+        default=None, description="nc (steps); omitted = every move free"
+    )
+
+    @model_validator(mode="after")
+    def _horizons(self) -> HorizonLengths:
+        check_control_horizon(self.control_horizon, self.prediction_horizon)
+        return self
+
+    def move_schedule(self) -> tuple[int, ...]:
+        """Samples of the horizon at which a move is allowed: 0..nc-1."""
+        return tuple(range(self.control_horizon or self.prediction_horizon))
+
+
+class Horizon(HorizonLengths):
+    """The horizontal controllers' horizons: the lengths, and move blocking, where the moves
+    are free."""
+
+    control_horizon: ControlHorizon = Field(
         default=None,
         description="nc (steps): moves after nc are held; omitted = prediction_horizon "
         "(every move free, the better tracker; the paper uses 2)",
@@ -389,8 +419,7 @@ class Horizon(StrictModel):
     )
 
     @model_validator(mode="after")
-    def _horizons(self) -> Horizon:
-        check_control_horizon(self.control_horizon, self.prediction_horizon)
+    def _blocked_moves(self) -> Horizon:
         steps = self.move_steps
         if steps is not None:
             if (
@@ -411,7 +440,7 @@ class Horizon(StrictModel):
         """Samples of the horizon at which a move is allowed (0..nc-1 without blocking)."""
         if self.move_steps is not None:
             return self.move_steps
-        return tuple(range(self.control_horizon or self.prediction_horizon))
+        return super().move_schedule()
 
 
 class TrackingWeights(StrictModel):
@@ -461,12 +490,9 @@ class PredictionModel(StrictModel):
     )
 
 
-class SolverOptions(StrictModel):
-    """The optimiser's back end and budget."""
+class QpSolverOptions(StrictModel):
+    """The QP back end and its budget (every controller that solves a QP)."""
 
-    obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
-        default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
-    )
     qp_solver: QpSolverName = Field(
         default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
     )
@@ -480,6 +506,19 @@ class SolverOptions(StrictModel):
         description="a step whose optimisation takes longer is treated as a failure "
         "(the previous plan's next move is applied), as on a real-time computer",
     )
+
+
+class ObstacleSlack(StrictModel):
+    """The price of a soft obstacle constraint's slack."""
+
+    obstacle_slack_penalty: Annotated[float, Field(gt=0)] = Field(
+        default=1e5, description="exact-penalty weight on obstacle-constraint slack (per m)"
+    )
+
+
+class SolverOptions(QpSolverOptions, ObstacleSlack):  # the bases in reverse, as below
+    """The optimiser's back end and budget, and the obstacle slack's price (the horizontal
+    optimising controllers)."""
 
 
 class OffsetFree(StrictModel):
@@ -695,81 +734,23 @@ BLOCKED_MOVES = (0, 1, 2, 3, 5, 7, 10, 14, 19, 25)
 DEPTH_MPC = "depth-mpc"
 
 
-class DepthObserverConfig(StrictModel):
-    """Filter tuning. The defaults trust the model more than the sensor, so that wave-frequency
-    motion, which 5 N/s thrusters cannot cancel, is filtered out rather than chased."""
+class DepthChannelConfig(TypedControllerConfig):
+    """What every depth controller's configuration holds (a depth scenario's ``controller``,
+    a 6-DOF scenario's ``depth_controller``): its type and its sample time. The depth MPC's
+    configuration (controllers/depth_mpc.py) and thrust-playback's (controllers/playback.py)
+    add their own knobs; the mapping is one of them, chosen by ``type``
+    (controllers/registry.py)."""
 
-    measurement_std: Positive = Field(default=0.02, description="assumed depth noise (m)")
-    depth_process_std: Positive = Field(default=1e-3, description="model error per sample (m)")
-    velocity_process_std: Positive = Field(default=5e-3, description="model error per sample (m/s)")
-    disturbance_rate_std: Positive = Field(
-        default=0.1, description="random walk of the unknown vertical force (N/sqrt(s))"
-    )
-    initial_disturbance_std: Positive = Field(
-        default=5.0, description="prior uncertainty of the unknown vertical force (N)"
-    )
-
-
-class DepthControllerConfig(StrictModel):
-    """Depth MPC choice and tuning (controllers/depth_mpc.py): a depth scenario's
-    ``controller``, a 6-DOF scenario's ``depth_controller``."""
-
-    type: Literal["depth-mpc", "thrust-playback"] = Field(
-        default=DEPTH_MPC,
-        description="depth controller; thrust-playback plays a table of the vertical thrusts "
-        "open loop (a depth scenario's, as `auvmpc excite --dof heave` writes)",
-    )
+    type: str = Field(description="depth controller")
     sample_time: Positive = Field(default=0.1, description="Te (s)")
-    prediction_horizon: Annotated[int, Field(ge=1)] = Field(default=30, description="ny (steps)")
-    control_horizon: Annotated[int, Field(ge=1)] | None = Field(
-        default=None, description="nc (steps); omitted = every move free"
-    )
-    Q: tuple[NonNegative, NonNegative] = Field(default=(200.0, 1.0), description="on [z, w]")
-    S: tuple[NonNegative, NonNegative] = Field(default=(400.0, 2.0), description="terminal")
-    R: NonNegative = Field(default=0.01, description="weight per vertical thruster")
-    thrust_penalty: ThrustPenalty = Field(
-        default=ThrustPenalty.INCREMENT, description="R on F or dF"
-    )
-    offset_free: bool = Field(default=True, description="estimate the unknown vertical force")
-    preview: bool = Field(
-        default=False,
-        description="see future setpoint changes (false: a commanded step, unknown until it "
-        "happens, as in the tank experiment)",
-    )
-    known_net_buoyancy: bool = Field(
-        default=False, description="give the model the vehicle file's net buoyancy"
-    )
-    surface_margin_m: NonNegative = Field(default=0.1, description="keep this far below z = 0")
-    bottom_margin_m: NonNegative = Field(default=0.1, description="keep this far above the bottom")
-    depth_slack_penalty: Positive = Field(default=1e5, description="exact penalty on depth slack")
-    qp_solver: QpSolverName = Field(default=QpSolverName.DAQP)
-    qp_iteration_limit: Annotated[int, Field(ge=1)] | None = None
-    solver_time_limit_ms: Positive | None = None
-    observer: DepthObserverConfig = Field(default_factory=DepthObserverConfig)
-    playback: PlaybackConfig | None = Field(
-        default=None,
-        description="the vertical thrusts' table thrust-playback plays (header t, Fz1..Fzn)",
-    )
 
-    @field_validator("type", mode="before")
     @classmethod
-    def _only_the_depth_controller(cls, value: Any) -> Any:
-        if value not in (DEPTH_MPC, ControllerType.THRUST_PLAYBACK) and (
-            value in ControllerType.__members__.values()
-        ):
-            raise FieldError("", value, f"a horizontal controller; depth scenarios use {DEPTH_MPC}")
-        return value
+    def _knob_owners(cls, knob: str) -> list[str]:
+        from auvmpc.controllers.registry import depth_knob_owners
 
-    @model_validator(mode="after")
-    def _horizons(self) -> DepthControllerConfig:
-        check_control_horizon(self.control_horizon, self.prediction_horizon)
-        check_playback(self.type, self.playback)
-        return self
+        return depth_knob_owners(knob)
 
-    def move_schedule(self) -> tuple[int, ...]:
-        return tuple(range(self.control_horizon or self.prediction_horizon))
-
-    def for_vehicle(self, model: VehicleParams) -> DepthControllerConfig:
+    def for_vehicle(self, model: VehicleParams) -> DepthChannelConfig:
         """Nothing is left to fill in for a vehicle (the registry asks every config)."""
         return self
 

@@ -10,19 +10,37 @@ tank bottom are soft state constraints (exact penalty). An EKF on
 
 from __future__ import annotations
 
+from typing import Literal
+
 import casadi as ca
 import numpy as np
+from pydantic import Field
 
+from auvmpc.config import NonNegative, Positive, StrictModel
+from auvmpc.controllers.config import (
+    DEPTH_MPC,
+    DEPTH_TYPE,
+    DepthChannelConfig,
+    HorizonLengths,
+    QpSolverOptions,
+    type_field,
+)
 from auvmpc.controllers.incremental import IncrementalMpc
 from auvmpc.estimation import AugmentedEkf
 from auvmpc.models.heave import heave_dynamics, resolve_heave
 from auvmpc.models.integrators import rk4
 from auvmpc.models.layout import DEPTH
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
-from auvmpc.ocp.tracking import TrackingOcp
+from auvmpc.ocp.tracking import ThrustPenalty, TrackingOcp
 from auvmpc.solvers.condensed_qp import AffinePrediction, CondensedQp, SoftRows
 
-__all__ = ["DepthMpc"]
+__all__ = [
+    "DepthControllerConfig",
+    "DepthFilter",
+    "DepthMpc",
+    "DepthObserverConfig",
+    "DepthTrackingWeights",
+]
 
 NX = DEPTH.size  # [z, w]
 _Z = DEPTH.index("z")
@@ -31,9 +49,73 @@ _BELOW_SURFACE = np.array([-1.0 if name == "z" else 0.0 for name in DEPTH.names]
 _ABOVE_BOTTOM = np.array([1.0 if name == "z" else 0.0 for name in DEPTH.names])
 
 
+class DepthObserverConfig(StrictModel):
+    """Filter tuning. The defaults trust the model more than the sensor, so that wave-frequency
+    motion, which 5 N/s thrusters cannot cancel, is filtered out rather than chased."""
+
+    measurement_std: Positive = Field(default=0.02, description="assumed depth noise (m)")
+    depth_process_std: Positive = Field(default=1e-3, description="model error per sample (m)")
+    velocity_process_std: Positive = Field(default=5e-3, description="model error per sample (m/s)")
+    disturbance_rate_std: Positive = Field(
+        default=0.1, description="random walk of the unknown vertical force (N/sqrt(s))"
+    )
+    initial_disturbance_std: Positive = Field(
+        default=5.0, description="prior uncertainty of the unknown vertical force (N)"
+    )
+
+
+class DepthFilter(StrictModel):
+    """The filter the depth MPC always runs, an EKF on [z, w, d_z]: it estimates the heave
+    velocity from the measured depth, and with ``offset_free`` the unknown vertical force d_z
+    as well (without, d_z stays 0). Unlike the horizontal controllers' offset-free estimator
+    (controllers/config.py ``OffsetFree``), which runs only for the offset, ``observer``
+    tunes a filter that runs either way."""
+
+    offset_free: bool = Field(default=True, description="estimate the unknown vertical force")
+    observer: DepthObserverConfig = Field(default_factory=DepthObserverConfig)
+
+    def force_statistics(self) -> tuple[float, float]:
+        """The random walk (N/sqrt(s)) and the prior standard deviation (N) of d_z: zero
+        without ``offset_free``, so that d_z keeps its initial 0."""
+        if not self.offset_free:
+            return 0.0, 0.0
+        return self.observer.disturbance_rate_std, self.observer.initial_disturbance_std
+
+
+class DepthTrackingWeights(StrictModel):
+    """The depth tracking cost: [z, w] against the setpoint, the vertical thrusts."""
+
+    Q: tuple[NonNegative, NonNegative] = Field(default=(200.0, 1.0), description="on [z, w]")
+    S: tuple[NonNegative, NonNegative] = Field(default=(400.0, 2.0), description="terminal")
+    R: NonNegative = Field(default=0.01, description="weight per vertical thruster")
+    thrust_penalty: ThrustPenalty = Field(
+        default=ThrustPenalty.INCREMENT, description="R on F or dF"
+    )
+
+
+class DepthControllerConfig(  # the bases in reverse: the common fields come first
+    DepthFilter, QpSolverOptions, DepthTrackingWeights, HorizonLengths, DepthChannelConfig
+):
+    """Depth MPC choice and tuning (controllers/depth_mpc.py): a depth scenario's
+    ``controller``, a 6-DOF scenario's ``depth_controller``."""
+
+    type: Literal["depth-mpc"] = type_field(DEPTH_MPC, DEPTH_TYPE)
+    preview: bool = Field(
+        default=False,
+        description="see future setpoint changes (false: a commanded step, unknown until it "
+        "happens, as in the tank experiment)",
+    )
+    known_net_buoyancy: bool = Field(
+        default=False, description="give the model the vehicle file's net buoyancy"
+    )
+    surface_margin_m: NonNegative = Field(default=0.1, description="keep this far below z = 0")
+    bottom_margin_m: NonNegative = Field(default=0.1, description="keep this far above the bottom")
+    depth_slack_penalty: Positive = Field(default=1e5, description="exact penalty on depth slack")
+
+
 class DepthMpc(IncrementalMpc):
-    """Depth controller; ``config`` is a :class:`auvmpc.controllers.config.DepthControllerConfig`,
-    ``water_depth`` (m) where the bottom is (z = -water_depth)."""
+    """Depth controller; ``config`` is a :class:`DepthControllerConfig`, ``water_depth`` (m)
+    where the bottom is (z = -water_depth)."""
 
     @classmethod
     def from_config(
@@ -92,8 +174,7 @@ class DepthMpc(IncrementalMpc):
             healthy_observer.call([augmented, thrust * effectiveness]),
         )
         observer = config.observer
-        rate = observer.disturbance_rate_std if config.offset_free else 0.0
-        prior = observer.initial_disturbance_std if config.offset_free else 0.0
+        rate, prior = config.force_statistics()
         self._observer = AugmentedEkf(
             observer_step,
             measured=1,

@@ -26,22 +26,30 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from auvmpc.config import StrictModel
 from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, Observation
 from auvmpc.controllers.config import (
+    DEPTH_TYPE,
     ControllerType,
-    DepthControllerConfig,
+    DepthChannelConfig,
     HorizontalControllerConfig,
     PlaybackConfig,
-    check_playback,
     type_field,
 )
-from auvmpc.errors import ConfigError
+from auvmpc.errors import ConfigError, FieldError
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import read_text_file
 
-__all__ = ["ThrustPlayback", "ThrustPlaybackConfig", "read_thrust_table", "write_thrust_table"]
+__all__ = [
+    "DepthPlaybackConfig",
+    "PlaybackTable",
+    "ThrustPlayback",
+    "ThrustPlaybackConfig",
+    "read_thrust_table",
+    "write_thrust_table",
+]
 
 # How far a table's times may sit from the sample grid k Te (s): written to 1 us.
 _TIME_TOLERANCE_S = 1e-5
@@ -88,20 +96,37 @@ def read_thrust_table(path: str | Path, sample_time: float, inputs: tuple[str, .
     return table[:, 1:]
 
 
-class ThrustPlaybackConfig(HorizontalControllerConfig):
-    """``thrust-playback`` in a horizontal scenario: its table (a depth scenario's is in
-    its depth controller's configuration)."""
+class PlaybackTable(StrictModel):
+    """What ``thrust-playback`` plays, in any kind of scenario: its thrust table."""
 
-    type: Literal[ControllerType.THRUST_PLAYBACK] = type_field(ControllerType.THRUST_PLAYBACK)
     playback: PlaybackConfig | None = Field(
         default=None,
         description="the thrust table thrust-playback plays (required); `auvmpc excite` writes one",
     )
 
     @model_validator(mode="after")
-    def _playback_table(self) -> ThrustPlaybackConfig:
-        check_playback(self.type, self.playback)
+    def _table_given(self) -> PlaybackTable:
+        if self.playback is None:  # optional for pydantic, to say what is missing
+            raise FieldError("playback", None, "thrust-playback needs playback.path (a CSV)")
         return self
+
+
+class ThrustPlaybackConfig(PlaybackTable, HorizontalControllerConfig):
+    """``thrust-playback`` in a horizontal scenario: its table (a depth scenario's is in
+    its depth controller's configuration)."""
+
+    type: Literal[ControllerType.THRUST_PLAYBACK] = type_field(ControllerType.THRUST_PLAYBACK)
+
+
+class DepthPlaybackConfig(PlaybackTable, DepthChannelConfig):
+    """``thrust-playback`` in a depth scenario: a table of the vertical thrusts, as
+    `auvmpc excite --dof heave` writes."""
+
+    type: Literal["thrust-playback"] = type_field(ControllerType.THRUST_PLAYBACK.value, DEPTH_TYPE)
+    playback: PlaybackConfig | None = Field(
+        default=None,
+        description="the vertical thrusts' table thrust-playback plays (header t, Fz1..Fzn)",
+    )
 
 
 class ThrustPlayback(Controller):
@@ -131,10 +156,10 @@ class ThrustPlayback(Controller):
     def from_config(
         cls, model, config, obstacle_count: int = 0, **surroundings: float
     ) -> ThrustPlayback:
-        """A depth scenario's (a :class:`DepthControllerConfig`) plays the heave section's
+        """A depth scenario's (a :class:`DepthPlaybackConfig`) plays the heave section's
         vertical thrusters, a horizontal one's the horizontal thrusters (a 6-DOF one's every
         thruster: :meth:`playing` them, experiments/kinds.py)."""
-        depth = isinstance(config, DepthControllerConfig)
+        depth = isinstance(config, DepthChannelConfig)
         return cls.playing(model, config, model.heave.actuators if depth else model.actuators)
 
     @classmethod

@@ -6,7 +6,9 @@ one file and one :func:`register_controller` call, after which scenarios name it
 
 A scenario's ``controller`` mapping is validated as :data:`ControllerChoice`: pydantic's
 discriminated union on ``type`` over the built-in configurations, plus one member for the
-registered ones (whose classes are only known at run time)."""
+registered ones (whose classes are only known at run time). A depth scenario's
+``controller`` and a 6-DOF scenario's ``depth_controller`` are :data:`DepthControllerChoice`,
+the same over the depth kind's types (:data:`DEPTH_REGISTRY`)."""
 
 from __future__ import annotations
 
@@ -35,27 +37,30 @@ from auvmpc.controllers.config import (
     DEPTH_MPC,
     SAVED_RUN,
     ControllerType,
-    DepthControllerConfig,
+    DepthChannelConfig,
     HorizontalControllerConfig,
 )
-from auvmpc.controllers.depth_mpc import DepthMpc
+from auvmpc.controllers.depth_mpc import DepthControllerConfig, DepthMpc
 from auvmpc.controllers.dompc import DoMpcConfig, DoMpcController
 from auvmpc.controllers.ltv import LtvMpc, LtvMpcConfig
 from auvmpc.controllers.mpc import PaperMpc, PaperMpcConfig
 from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
-from auvmpc.controllers.playback import ThrustPlayback, ThrustPlaybackConfig
+from auvmpc.controllers.playback import DepthPlaybackConfig, ThrustPlayback, ThrustPlaybackConfig
 from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
 from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
+    "DEPTH_REGISTRY",
     "REGISTRY",
     "ControllerChoice",
     "ControllerEntry",
+    "DepthControllerChoice",
     "build_controller",
     "class_of",
     "controller_config",
+    "depth_knob_owners",
     "knob_owners",
     "register_controller",
     "retyped",
@@ -79,7 +84,13 @@ REGISTRY: dict[str, ControllerEntry] = {
     ControllerType.NMPC: ControllerEntry(NmpcConfig, NonlinearMpc),
     ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController),
     ControllerType.THRUST_PLAYBACK: ControllerEntry(ThrustPlaybackConfig, ThrustPlayback),
-    DEPTH_MPC: ControllerEntry(DepthControllerConfig, DepthMpc),  # kind: depth, 6-DOF's depth
+}
+# The depth kind's (a depth scenario's ``controller``, a 6-DOF scenario's
+# ``depth_controller``, which takes only the depth MPC): thrust-playback's configuration
+# there is the depth one, whose table holds the vertical thrusts.
+DEPTH_REGISTRY: dict[str, ControllerEntry] = {
+    DEPTH_MPC: ControllerEntry(DepthControllerConfig, DepthMpc),
+    ControllerType.THRUST_PLAYBACK: ControllerEntry(DepthPlaybackConfig, ThrustPlayback),
 }
 
 # The optimising horizontal controllers, whose shell recovers with the stabilising feedback
@@ -96,7 +107,7 @@ _NAME = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
 DEFAULT_TYPE = ControllerType.NMPC
 # The union member of the controllers registered at run time.
 _REGISTERED = "registered"
-_BUILT_IN = {name: entry.config for name, entry in REGISTRY.items() if name != DEPTH_MPC}
+_BUILT_IN = {name: entry.config for name, entry in REGISTRY.items()}
 
 
 def register_controller(
@@ -121,8 +132,9 @@ def register_controller(
     """
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise ValueError(f"controller name {name!r}: lower-case words joined by hyphens")
-    if name in REGISTRY or name == _REGISTERED:
-        raise ValueError(f"controller name {name!r} is taken (taken: {', '.join(REGISTRY)})")
+    if name in REGISTRY or name in DEPTH_REGISTRY or name == _REGISTERED:
+        taken = ", ".join(dict.fromkeys([*REGISTRY, *DEPTH_REGISTRY]))
+        raise ValueError(f"controller name {name!r} is taken (taken: {taken})")
     if not isinstance(controller, type) or not issubclass(controller, Controller):
         raise ValueError(f"{controller!r} is not a controllers.base.Controller subclass")
     if not isinstance(config, type) or not issubclass(config, HorizontalControllerConfig):
@@ -134,23 +146,32 @@ def register_controller(
         RECOVERED_TYPES.add(name)
 
 
-def class_of(controller_type: str) -> type[Controller]:
-    """The class of a controller type."""
-    return REGISTRY[controller_type].controller
+def _entry(config: Any) -> ControllerEntry:
+    """The registry entry of a controller configuration, of its kind's table."""
+    table = DEPTH_REGISTRY if isinstance(config, DepthChannelConfig) else REGISTRY
+    return table[config.type]
+
+
+def class_of(config: Any) -> type[Controller]:
+    """The class of a controller configuration (a horizontal or a depth one)."""
+    return _entry(config).controller
 
 
 def knob_owners(knob: str) -> list[str]:
     """The horizontal controller types whose configuration has ``knob``."""
+    return [str(name) for name, entry in REGISTRY.items() if knob in entry.config.model_fields]
+
+
+def depth_knob_owners(knob: str) -> list[str]:
+    """The depth controller types whose configuration has ``knob``."""
     return [
-        str(name)
-        for name, entry in REGISTRY.items()
-        if name != DEPTH_MPC and knob in entry.config.model_fields
+        str(name) for name, entry in DEPTH_REGISTRY.items() if knob in entry.config.model_fields
     ]
 
 
 def horizontal_types() -> list[str]:
     """The names a horizontal scenario's ``controller.type`` may take now."""
-    return [str(name) for name in REGISTRY if name != DEPTH_MPC]
+    return [str(name) for name in REGISTRY]
 
 
 def _type_tag(value: Any) -> str:
@@ -187,6 +208,12 @@ def _checked_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
         if not (isinstance(given, str) and (given in REGISTRY or saved)):
             known = ", ".join(repr(name) for name in horizontal_types())
             raise FieldError("type", given, f"input should be one of {known}")
+    return _validated_member(value, handler)
+
+
+def _validated_member(value: Any, handler: Any) -> Any:
+    """``value`` validated as its union member; an error names the field without the
+    member's tag that pydantic puts in its location."""
     try:
         return handler(value)
     except ValidationError as error:
@@ -195,10 +222,21 @@ def _checked_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
         raise FieldError(field, problem.value, problem.reason) from None
 
 
+class _AnyOfSchema:
+    """A union on ``type`` whose members all default their ``type``, as a JSON Schema:
+    ``anyOf`` them (a mapping without ``type`` is the default member's, and fits the others'
+    schemas too, which ``oneOf`` would refuse)."""
+
+    def __get_pydantic_json_schema__(
+        self, core_schema: CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        schema = handler(core_schema)
+        return {**schema, "anyOf": schema.pop("oneOf")}
+
+
 class _FileSchema:
-    """The union's JSON Schema as a scenario file may be written now: ``anyOf`` the built-in
-    types (a mapping without ``type`` is nmpc's, and fits the others' schemas too, which
-    ``oneOf`` would refuse) and the types registered when it is written."""
+    """The union's JSON Schema as a scenario file may be written now: ``anyOf`` (as
+    :class:`_AnyOfSchema`) the built-in types and the types registered when it is written."""
 
     def __get_pydantic_json_schema__(
         self, core_schema: CoreSchema, handler: GetJsonSchemaHandler
@@ -239,6 +277,41 @@ ControllerChoice = Annotated[
 """A horizontal scenario's ``controller``: the configuration of the type it names."""
 
 
+def _depth_type_tag(value: Any) -> str:
+    """The depth union member a value is validated as: the type it names (checked by
+    :func:`_checked_depth_type`), the depth MPC's for what names none."""
+    if isinstance(value, Mapping):
+        return str(value.get("type", DEPTH_MPC))
+    return str(getattr(value, "type", DEPTH_MPC))  # a configuration, or what is none
+
+
+def _checked_depth_type(value: Any, handler: Any) -> Any:
+    """The depth type named first (a horizontal one in one line saying so), then the
+    mapping validated as that type's configuration."""
+    if isinstance(value, Mapping):
+        given = value.get("type", DEPTH_MPC)
+        if not (isinstance(given, str) and given in DEPTH_REGISTRY):
+            if isinstance(given, str) and given in REGISTRY:
+                raise FieldError(
+                    "type", given, f"a horizontal controller; depth scenarios use {DEPTH_MPC}"
+                )
+            known = " or ".join(repr(str(name)) for name in DEPTH_REGISTRY)
+            raise FieldError("type", given, f"input should be {known}")
+    return _validated_member(value, handler)
+
+
+DepthControllerChoice = Annotated[
+    Union[  # noqa: UP007 (a tuple of members built from the registry)
+        tuple(Annotated[entry.config, Tag(str(name))] for name, entry in DEPTH_REGISTRY.items())
+    ],
+    Discriminator(_depth_type_tag),
+    WrapValidator(_checked_depth_type),
+    _AnyOfSchema(),
+]
+"""A depth scenario's ``controller`` and a 6-DOF scenario's ``depth_controller``: the
+configuration of the depth type it names (default depth-mpc)."""
+
+
 def controller_config(knobs: Mapping[str, Any], context: dict | None = None) -> Any:
     """``knobs`` (a ``controller`` mapping) validated as its type's configuration."""
     from pydantic import TypeAdapter
@@ -262,7 +335,7 @@ def retyped(config: HorizontalControllerConfig, new_type: str, **update: Any) ->
 
 
 def build_controller(
-    config: HorizontalControllerConfig | DepthControllerConfig,
+    config: HorizontalControllerConfig | DepthChannelConfig,
     model: VehicleParams,
     obstacle_count: int = 0,
     **surroundings: float,
@@ -271,7 +344,7 @@ def build_controller(
 
     ``surroundings``: what else the scenario says that the controller is built for, by
     name (a depth controller's ``water_depth_m``)."""
-    controller_class = class_of(config.type)
+    controller_class = class_of(config)
     filled = config.for_vehicle(model)
     if not hasattr(controller_class, "from_config"):
         return controller_class(model, filled)

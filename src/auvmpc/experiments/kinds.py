@@ -24,6 +24,7 @@ from auvmpc import __version__
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.channels import EveryThruster, HorizontalAndDepth, ReferenceWithDepth
 from auvmpc.controllers.config import ControllerType
+from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.playback import ThrustPlayback
 from auvmpc.controllers.registry import build_controller, class_of
 from auvmpc.environment.currents import WaterCurrent
@@ -204,7 +205,7 @@ class RunKind(ABC):
         """Distributions beyond numpy, scipy and casadi that the scenario's controllers use
         (each controller class declares its own)."""
         config = scenario.controller
-        return class_of(config.type).libraries(config)
+        return class_of(config).libraries(config)
 
     @abstractmethod
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
@@ -373,7 +374,7 @@ class SixDofKind(HorizontalKind):
     def libraries(self, scenario) -> tuple[str, ...]:
         """The horizontal controller's, then the depth MPC's."""
         depth = scenario.depth_controller
-        return (*super().libraries(scenario), *class_of(depth.type).libraries(depth))
+        return (*super().libraries(scenario), *class_of(depth).libraries(depth))
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         """The horizontal figures of the horizontal view, then the 6-DOF ones."""
@@ -407,7 +408,9 @@ class DepthKind(RunKind):
 
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario = resolved.scenario
-        reference = DepthStep(scenario.reference, scenario.controller.preview)
+        config = scenario.controller  # only the depth MPC looks ahead; a thrust table reads none
+        preview = isinstance(config, DepthControllerConfig) and config.preview
+        reference = DepthStep(scenario.reference, preview)
         inputs = resolved.heave_plant.actuators.layout.names
         log = SimLog(inputs, _sample_time(scenario), self.log_format)
         return SessionStart(controller, reference, log, _steps(scenario), scenario.start_state())

@@ -16,7 +16,8 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from auvmpc.config import Positive, StrictModel
-from auvmpc.controllers.config import DepthControllerConfig
+from auvmpc.controllers.depth_mpc import DepthControllerConfig
+from auvmpc.controllers.registry import DepthControllerChoice
 from auvmpc.environment.depth_sensor import DepthSensorConfig
 from auvmpc.environment.waves import WaveConfig, WaveType, wave_number
 from auvmpc.errors import FieldError
@@ -63,7 +64,11 @@ class DepthScenario(StrictModel):
     initial_state: tuple[float, float] | None = Field(
         default=None, description="[z, w]; default: at the initial depth, at rest"
     )
-    controller: DepthControllerConfig = Field(default_factory=DepthControllerConfig)
+    controller: DepthControllerChoice = Field(
+        default_factory=DepthControllerConfig,
+        description="depth controller choice and tuning: the knobs of the controller type it "
+        "names (default depth-mpc, controllers/depth_mpc.py)",
+    )
     seed: Annotated[int, Field(ge=0)] = 0
 
     @model_validator(mode="after")

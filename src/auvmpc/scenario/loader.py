@@ -131,10 +131,11 @@ def validate_scenario(data: dict[str, Any]) -> Scenario:
 def apply_override(data: dict[str, Any], override: str) -> list[str]:
     """Set ``a.b.0.c=value`` in a nested mapping; the value is read as YAML.
 
-    Returns what the user should hear of: a ``controller.type`` changed to another
-    horizontal controller drops the knobs given so far that the new type has not (the
-    previous type's, e.g. a file's nmpc_mode under ``--controller ltv-mpc``), saying which;
-    a knob set after the change is checked against the new type."""
+    Returns what the user should hear of: a ``controller.type`` (a 6-DOF scenario's
+    ``depth_controller.type``) changed to another controller of its kind drops the knobs
+    given so far that the new type has not (the previous type's, e.g. a file's nmpc_mode
+    under ``--controller ltv-mpc``), saying which; a knob set after the change is checked
+    against the new type."""
     path, separator, raw_value = override.partition("=")
     if not separator or not path:
         raise ConfigError("--set", override, "expected field=value")
@@ -159,8 +160,8 @@ def apply_override(data: dict[str, Any], override: str) -> list[str]:
         else:
             raise ConfigError(".".join(keys[:depth]), node, "is not a mapping or list")
         if last:
-            retyping = keys == ["controller", "type"]
-            old_type = _controller_type(data)
+            old_types = _controller_types(data)
+            retyping = len(keys) == 2 and keys[0] in old_types and keys[1] == "type"
             node[index] = value
         else:
             if isinstance(node, dict) and (index not in node or node[index] is None):
@@ -173,7 +174,7 @@ def apply_override(data: dict[str, Any], override: str) -> list[str]:
                     )
                 node[index] = {}
             node = node[index]
-    return _drop_foreign_knobs(data, old_type) if retyping else []
+    return _drop_foreign_knobs(data, old_types) if retyping else []
 
 
 def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> list[str]:
@@ -181,42 +182,53 @@ def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> list[str]
     where they change the controller's type, also the knobs they set that the new type has
     not are dropped (``--set controller.R=[1] --controller baseline``: the R was for the
     file's type). Returns what the user should hear of."""
-    old_type = _controller_type(data)
+    old_types = _controller_types(data)
     notes = [note for override in overrides for note in apply_override(data, override)]
-    return notes + _drop_foreign_knobs(data, old_type)
+    return notes + _drop_foreign_knobs(data, old_types)
 
 
-def _controller_type(data: dict[str, Any]) -> Any:
-    from auvmpc.controllers.registry import DEFAULT_TYPE
+def _controller_types(data: dict[str, Any]) -> dict[str, tuple[Any, dict[str, Any]]]:
+    """Scenario ``data``'s controller mappings by field (``controller``, and a 6-DOF
+    scenario's ``depth_controller``), each with the type it names (omitted: its kind's
+    default) and the registry table of its kind."""
+    from auvmpc.controllers.config import DEPTH_MPC
+    from auvmpc.controllers.registry import DEFAULT_TYPE, DEPTH_REGISTRY, REGISTRY
 
-    controller = data.get("controller")  # omitted: the default type's defaults
-    return controller.get("type", DEFAULT_TYPE) if isinstance(controller, dict) else DEFAULT_TYPE
+    kind = data.get("kind")
+    fields = {
+        "controller": (DEPTH_MPC, DEPTH_REGISTRY) if kind == "depth" else (DEFAULT_TYPE, REGISTRY)
+    }
+    if kind == "six-dof":
+        fields["depth_controller"] = (DEPTH_MPC, DEPTH_REGISTRY)
+    types = {}
+    for field, (default, table) in fields.items():
+        controller = data.get(field)  # omitted: the default type's defaults
+        given = controller.get("type", default) if isinstance(controller, dict) else default
+        types[field] = (given, table)
+    return types
 
 
-def _drop_foreign_knobs(data: dict[str, Any], old_type: Any) -> list[str]:
-    """When a horizontal or 6-DOF scenario ``data``'s ``controller.type`` is no longer
-    ``old_type``: drop the knobs its ``controller`` mapping holds that the new type's
-    configuration has not, and say so (a knob of the type it names is kept, and checked)."""
-    from auvmpc.controllers.registry import REGISTRY, horizontal_types
-
-    new_type = _controller_type(data)
-    if (
-        data.get("kind") == "depth"  # one configuration for both depth controllers
-        or new_type == old_type
-        or new_type not in horizontal_types()
-    ):
-        return []
-    controller = data["controller"]
-    knobs = REGISTRY[new_type].config.model_fields
-    dropped = [key for key in controller if key not in knobs]
-    for key in dropped:
-        del controller[key]
-    if not dropped:
-        return []
-    return [
-        f"controller.type: {old_type} changed to {new_type} by an override; dropped what "
-        f"{new_type} has no knob for: {', '.join(map(str, dropped))}"
-    ]
+def _drop_foreign_knobs(data: dict[str, Any], old_types: dict[str, tuple[Any, Any]]) -> list[str]:
+    """Where a controller mapping of scenario ``data`` no longer names the type it named
+    (``old_types``, as :func:`_controller_types` gave them): drop the knobs it holds that the
+    new type's configuration has not, and say so (a knob of the type it names is kept, and
+    checked)."""
+    notes = []
+    for field, (new_type, table) in _controller_types(data).items():
+        old_type = old_types.get(field, (new_type,))[0]
+        if new_type == old_type or not isinstance(new_type, str) or new_type not in table:
+            continue  # an unknown type is refused by the validation, naming it
+        controller = data[field]
+        knobs = table[new_type].config.model_fields
+        dropped = [key for key in controller if key not in knobs]
+        for key in dropped:
+            del controller[key]
+        if dropped:
+            notes.append(
+                f"{field}.type: {old_type} changed to {new_type} by an override; dropped what "
+                f"{new_type} has no knob for: {', '.join(map(str, dropped))}"
+            )
+    return notes
 
 
 def scenario_to_dict(scenario: Scenario | DepthScenario) -> dict[str, Any]:

@@ -16,9 +16,10 @@ from auvmpc.config import (
     NonNegative,
     StrictModel,
 )
-from auvmpc.controllers.config import DEPTH_MPC, DepthControllerConfig
+from auvmpc.controllers.config import DEPTH_MPC
+from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.nmpc import NmpcConfig
-from auvmpc.controllers.registry import ControllerChoice
+from auvmpc.controllers.registry import ControllerChoice, DepthControllerChoice
 from auvmpc.environment.currents import WaterCurrentConfig
 from auvmpc.environment.disturbances import DisturbanceConfig, SensorNoiseConfig
 from auvmpc.environment.obstacle_sensor import ObstacleSensorConfig
@@ -167,7 +168,7 @@ class SixDofScenario(Scenario):
         default_factory=SixDofDisturbanceConfig
     )
     sensing: SixDofSensingConfig = Field(default_factory=SixDofSensingConfig)  # type: ignore[assignment]
-    depth_controller: DepthControllerConfig = Field(
+    depth_controller: DepthControllerChoice = Field(
         default_factory=DepthControllerConfig,
         description="the depth MPC (controllers/depth_mpc.py); sample_time is the horizontal "
         "controller's and preview true unless given",
@@ -190,7 +191,7 @@ class SixDofScenario(Scenario):
         if not isinstance(data, dict):
             return data
         depth = data.get("depth_controller", {})
-        if not isinstance(depth, dict):
+        if not isinstance(depth, dict) or depth.get("type", DEPTH_MPC) != DEPTH_MPC:
             return data  # the field validation names what is wrong
         return {**data, "depth_controller": {"preview": True, **depth}}
 

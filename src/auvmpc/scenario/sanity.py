@@ -150,7 +150,7 @@ def memory_needs(
             f"{readable_bytes(log_bytes)} of log",
         )
     ]
-    need = class_of(config.type).memory_need(config, n, nx)
+    need = class_of(config).memory_need(config, n, nx)
     if need is not None:
         needs.append(
             (

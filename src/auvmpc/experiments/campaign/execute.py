@@ -32,6 +32,7 @@ from auvmpc.experiments.campaign.sampling import (
 from auvmpc.experiments.campaign.spec import (
     LOCK_FILE,
     MAX_WORKER_DEATHS,
+    OVERRIDE_NOTES,
     RESULTS_FILE,
     Campaign,
     CampaignSpec,
@@ -77,7 +78,8 @@ def execute_run(payload: str, index: int, twin: Mapping[str, Any] | None = None)
     -------
     dict
         ``index``, ``seed``, ``status`` (``ok`` | ``failed``), ``parameters`` (result
-        columns), ``metrics`` (empty when failed), ``error``, ``traceback``, ``wall_s``,
+        columns), ``metrics`` (empty when failed, but for ``override_notes``: the notes
+        its overrides made, where they made some), ``error``, ``traceback``, ``wall_s``,
         ``worker`` (host:pid).
     """
     from auvmpc.experiments.run import simulate
@@ -88,10 +90,12 @@ def execute_run(payload: str, index: int, twin: Mapping[str, Any] | None = None)
     metrics: dict[str, Any] = {}
     error = trace = None
     try:
-        _, _, data = plan_run(campaign, index)
+        plan = plan_run(campaign, index)
+        if plan.notes:  # kept also when the run fails: a dropped knob may be why
+            metrics[OVERRIDE_NOTES] = json.dumps(plan.notes)
         # long_ok: the campaign's cost was checked (or confirmed) before any run started.
-        result = simulate(_resolve(campaign, data), long_ok=True)
-        metrics = result.metrics
+        result = simulate(_resolve(campaign, plan.data, plan.notes), long_ok=True)
+        metrics = {**result.metrics, **metrics}
         if campaign.spec.yardstick is not None:
             metrics = {**metrics, **paired_columns(campaign, index, result, twin)}
         status = "ok"

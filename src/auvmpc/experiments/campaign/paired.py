@@ -20,7 +20,7 @@ import numpy as np
 from auvmpc import __version__
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.campaign.sampling import plan_run, reproduce_command, scenario_for_run
-from auvmpc.experiments.campaign.spec import Campaign, _resolve
+from auvmpc.experiments.campaign.spec import OVERRIDE_NOTES, Campaign, _resolve
 from auvmpc.experiments.campaign.store import (
     stored_campaign,
     stored_metrics,
@@ -95,18 +95,21 @@ def paired_columns(
 
 
 def _simulate_twin(campaign: Campaign, index: int) -> dict[str, Any]:
-    """Run ``index``'s yardstick twin: its metrics, ``lost`` and ``warnings`` count, or only
-    ``error`` (one line) if it failed."""
+    """Run ``index``'s yardstick twin: its metrics, ``lost`` and ``warnings`` count (and
+    ``override_notes`` where its overrides made some), or only ``error`` (one line) if it
+    failed."""
     from auvmpc.experiments.run import simulate
 
     try:
-        _, _, data = plan_run(campaign, index, yardstick=True)
-        finished = simulate(_resolve(campaign, data), long_ok=True)  # checked up front
+        plan = plan_run(campaign, index, yardstick=True)
+        finished = simulate(_resolve(campaign, plan.data, plan.notes), long_ok=True)  # checked
     except Exception as exc:  # the yardstick's failure is data; the tested run still counts
         from auvmpc.experiments.campaign.execute import _one_line
 
         return {"error": _one_line(exc)}
-    return {**finished.metrics, "lost": _lost(finished.metrics), "warnings": len(finished.warnings)}
+    notes = {OVERRIDE_NOTES: json.dumps(plan.notes)} if plan.notes else {}
+    lost = _lost(finished.metrics)
+    return {**finished.metrics, "lost": lost, "warnings": len(finished.warnings), **notes}
 
 
 def reusable_twins(campaign: Campaign, folder: str | Path) -> dict[int, dict[str, Any]]:

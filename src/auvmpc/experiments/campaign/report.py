@@ -32,6 +32,7 @@ from auvmpc.experiments.campaign.criterion import (
 )
 from auvmpc.experiments.campaign.paired import (
     PAIRED_FIGURES,
+    YARDSTICK_PREFIX,
     paired_summary,
     worst_case_figures,
     worst_cases,
@@ -42,6 +43,7 @@ from auvmpc.experiments.campaign.sampling import (
 from auvmpc.experiments.campaign.spec import (
     FIGURES_DIR,
     NONDETERMINISTIC_COLUMNS,
+    OVERRIDE_NOTES,
     PERCENTILES,
     REPORT_FILE,
     REPORT_JSON,
@@ -293,6 +295,7 @@ def campaign_report(
         "worst_order": order,
         "worst": worst_rows,
         "failed_runs": failed_rows,
+        "override_notes": _override_notes(frame),
     }
     drawn = (
         _report_figures(
@@ -326,6 +329,21 @@ def campaign_report(
             atomic_write_text(out / report_file, markdown)
         files += [out / report_json, out / report_file]
     return CampaignReport(summary, markdown, drawn, files)
+
+
+def _override_notes(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    """Each note the runs' overrides made (:data:`OVERRIDE_NOTES`), once: its text, whose
+    it is (``run``, or ``yardstick`` for the twins) and how many runs it was made for."""
+    counts: dict[tuple[str, str], int] = {}
+    for whose, column in (
+        ("run", OVERRIDE_NOTES),
+        ("yardstick", YARDSTICK_PREFIX + OVERRIDE_NOTES),
+    ):
+        if column in frame.columns:
+            for text in frame[column].dropna():
+                for note in json.loads(text):
+                    counts[whose, note] = counts.get((whose, note), 0) + 1
+    return [{"note": note, "of": whose, "runs": runs} for (whose, note), runs in counts.items()]
 
 
 def report_names(criterion: str | None, own: str | None) -> tuple[str, str, str]:
@@ -542,6 +560,11 @@ def _markdown(summary: Mapping[str, Any]) -> str:
             *dict.fromkeys([f"  {row['from_campaign']}", f"  {row['command']}"]),
             "  ```",
         ]
+    if summary["override_notes"]:
+        lines += ["", "## Notes from the overrides", ""]
+        for row in summary["override_notes"]:
+            whose = "yardstick twins of " if row["of"] == "yardstick" else ""
+            lines.append(f"- {row['note']} ({whose}{row['runs']} runs)")
     if summary["failed_runs"]:
         lines += ["", "## Failed runs", ""]
         for row in summary["failed_runs"]:

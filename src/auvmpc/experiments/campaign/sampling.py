@@ -29,6 +29,7 @@ from auvmpc.experiments.campaign.spec import (
     Polar,
     _check_fixed,
     _fixed_data,
+    _fixed_plan,
     _lookup,
     _related,
     _resolve,
@@ -63,6 +64,29 @@ class RunSample:
     seed: int
     draws: dict[str, Any]
     columns: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """How run ``index`` is made (:func:`plan_run`).
+
+    Attributes
+    ----------
+    sample : RunSample
+        What it draws.
+    overrides : list of str
+        The ``field=value`` strings that ``auvmpc run BASE --set ...`` is given for it.
+    data : dict
+        Its scenario mapping.
+    notes : list of str
+        What its overrides decided that the user should hear of (a knob dropped where
+        an override changed the controller's type), as ``auvmpc run`` warns of them.
+    """
+
+    sample: RunSample
+    overrides: list[str]
+    data: dict[str, Any]
+    notes: list[str]
 
 
 def _stream(master_seed: int, index: int, label: str) -> np.random.Generator:
@@ -150,8 +174,9 @@ def plan_run(
     replace: Mapping[str, Any] | None = None,
     *,
     yardstick: bool = False,
-) -> tuple[RunSample, list[str], dict[str, Any]]:
-    """Run ``index``: its sample, its ``field=value`` overrides and its scenario mapping.
+) -> RunPlan:
+    """Run ``index``: its sample, its ``field=value`` overrides, its scenario mapping and
+    the notes the overrides made.
 
     The overrides, applied with :func:`auvmpc.scenario.apply_override` to the base
     scenario in order, give exactly the mapping returned: the campaign builds each run
@@ -169,9 +194,9 @@ def plan_run(
         raise ConfigError("yardstick", campaign.spec.name, "the campaign has no yardstick")
     sample = sample_run(campaign, index)
     draws = {**sample.draws, **(replace or {})}
-    data = _fixed_data(campaign, implicit=True, index=index, yardstick=yardstick)
+    data, notes = _fixed_plan(campaign, implicit=True, index=index, yardstick=yardstick)
     overrides = [*campaign.fixed_overrides(yardstick), f"seed={sample.seed}"]
-    apply_override(data, overrides[-1])
+    notes += apply_override(data, overrides[-1])
     defaults: dict[str, Any] | None = None
     for path, distribution in campaign.spec.parameters.items():
         target, is_length = _split_length(path)
@@ -188,7 +213,7 @@ def plan_run(
                 current = _lookup(defaults, target.split("."))
             value = _combine(current, value, distribution.apply, path)
         text = f"{target}={_yaml_text(value)}"
-        _apply_parameter(data, text, path, value)
+        notes += _apply_parameter(data, text, path, value)
         overrides.append(text)
     for path in campaign.spec.parameters:
         target, is_length = _split_length(path)
@@ -207,20 +232,20 @@ def plan_run(
                 f"parameters.{path}", count, f"need a whole number in 0..{len(items)}"
             )
         text = f"{target}={_yaml_text(items[:count])}"
-        _apply_parameter(data, text, path, count)
+        notes += _apply_parameter(data, text, path, count)
         overrides.append(text)
     for i, text in enumerate(campaign.spec.yardstick if yardstick else ()):
         try:
-            apply_override(data, text)
+            notes += apply_override(data, text)
         except ConfigError as error:
             raise ConfigError(f"yardstick.{i}", text, str(error)) from None
         overrides.append(text)
-    return sample, overrides, data
+    return RunPlan(sample, overrides, data, notes)
 
 
-def _apply_parameter(data: dict[str, Any], text: str, path: str, value: Any) -> None:
+def _apply_parameter(data: dict[str, Any], text: str, path: str, value: Any) -> list[str]:
     try:
-        apply_override(data, text)
+        return apply_override(data, text)
     except ConfigError as error:
         raise ConfigError(f"parameters.{path}", value, error.reason) from None
 
@@ -228,7 +253,7 @@ def _apply_parameter(data: dict[str, Any], text: str, path: str, value: Any) -> 
 def run_overrides(campaign: Campaign, index: int, *, yardstick: bool = False) -> list[str]:
     """``field=value`` strings such that ``auvmpc run BASE --set ...`` reproduces run ``index``
     (or its yardstick twin)."""
-    return plan_run(campaign, index, yardstick=yardstick)[1]
+    return plan_run(campaign, index, yardstick=yardstick).overrides
 
 
 def reproduce_command(
@@ -272,10 +297,9 @@ def scenario_for_run(
     runs = campaign.spec.runs
     if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < runs:
         raise ConfigError("--index", index, f"need a run index in 0..{runs - 1} ({runs} runs)")
-    _, _, data = plan_run(campaign, index, yardstick=yardstick)
-    for text in overrides:
-        apply_override(data, text)
-    return _resolve(campaign, data)
+    plan = plan_run(campaign, index, yardstick=yardstick)
+    notes = [note for text in overrides for note in apply_override(plan.data, text)]
+    return _resolve(campaign, plan.data, [*plan.notes, *notes])
 
 
 def validate_campaign(
@@ -313,8 +337,7 @@ def validate_campaign(
         for yardstick in twins:
             where = f"run {index}{' yardstick' if yardstick else ''}"
             try:
-                _, _, data = plan_run(campaign, index, yardstick=yardstick)
-                validate_scenario(data)
+                validate_scenario(plan_run(campaign, index, yardstick=yardstick).data)
             except ConfigError as error:
                 raise _blame(campaign, error, None, where, yardstick) from None
 
@@ -332,10 +355,10 @@ def _check_plan(
     from auvmpc.scenario.sanity import check_memory
 
     try:
-        _, _, data = plan_run(
+        plan = plan_run(
             campaign, index, dict([replaced]) if replaced else None, yardstick=yardstick
         )
-        resolved = _resolve(campaign, data)
+        resolved = _resolve(campaign, plan.data)
         check_memory(resolved)
         return check_cost(resolved, confirmed=long_ok).seconds
     except ConfigError as error:

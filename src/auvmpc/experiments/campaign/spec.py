@@ -79,6 +79,13 @@ NONDETERMINISTIC_COLUMNS = (
 PERCENTILES = (5, 50, 95)
 
 
+# The column of a run's notes from its overrides (a JSON list; only where there are some):
+# what an override decided that the user should hear of, e.g. the knobs of the old type
+# dropped where it changed the controller's type. ``auvmpc run`` prints them and run.json
+# keeps them among its ``warnings``; the report lists each once.
+OVERRIDE_NOTES = "override_notes"
+
+
 # A "normal" without bounds is checked at mean +- this many standard deviations.
 NORMAL_CHECK_STDS = 3.0
 
@@ -721,21 +728,29 @@ def _fixed_data(
 ) -> dict[str, Any]:
     """Run ``index``'s base scenario with the file's overrides and the controller label's
     (not for the yardstick), and, if asked, the implicit ones."""
+    return _fixed_plan(campaign, implicit, index, yardstick)[0]
+
+
+def _fixed_plan(
+    campaign: Campaign, implicit: bool = False, index: int = 0, yardstick: bool = False
+) -> tuple[dict[str, Any], list[str]]:
+    """:func:`_fixed_data`, and the notes its overrides made (:data:`OVERRIDE_NOTES`)."""
     data = campaign.base_for(index)
+    notes: list[str] = []
     for i, text in enumerate(campaign.spec.overrides):
         try:
-            apply_override(data, text)
+            notes += apply_override(data, text)
         except ConfigError as error:
             raise ConfigError(f"overrides.{i}", text, str(error)) from None
     for text in () if yardstick else campaign.controller_overrides:
         try:
-            apply_override(data, text)
+            notes += apply_override(data, text)
         except ConfigError as error:
             raise ConfigError("controller", campaign.spec.controller, str(error)) from None
     if implicit:
         for text in campaign.implicit_overrides:
-            apply_override(data, text)
-    return data
+            notes += apply_override(data, text)
+    return data, notes
 
 
 def _check_fixed(campaign: Campaign) -> None:
@@ -782,8 +797,14 @@ def _lookup(data: Any, keys: Sequence[str]) -> Any:
     return node
 
 
-def _resolve(campaign: Campaign, data: dict[str, Any]) -> ResolvedScenario:
-    return ResolvedScenario(validate_scenario(data), Path(campaign.base_dir))
+def _resolve(
+    campaign: Campaign, data: dict[str, Any], notes: Sequence[str] = ()
+) -> ResolvedScenario:
+    """Scenario ``data`` resolved; ``notes``, what its overrides decided, first among its
+    own (run.json ``warnings``, as ``auvmpc run BASE --set ...`` keeps them)."""
+    resolved = ResolvedScenario(validate_scenario(data), Path(campaign.base_dir))
+    resolved.notes = [*notes, *resolved.notes]
+    return resolved
 
 
 def _canonical_json(value: Any) -> str:
