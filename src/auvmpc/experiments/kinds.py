@@ -45,7 +45,12 @@ from auvmpc.scenario import (
 from auvmpc.scenario.loader import SCENARIO_KINDS
 from auvmpc.sim.log import LogFormat, LogTable, SimLog
 from auvmpc.sim.loop import Sensor
-from auvmpc.sim.metrics import compute_depth_metrics, compute_metrics, compute_six_dof_metrics
+from auvmpc.sim.metrics import (
+    compute_depth_metrics,
+    compute_metrics,
+    compute_six_dof_metrics,
+    fault_metrics,
+)
 from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
 from auvmpc.sim.session import StateReference
 
@@ -283,7 +288,7 @@ class HorizontalKind(RunKind):
     def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
         scenario = resolved.scenario
         controller = scenario.controller
-        return self.measure(
+        metrics = self.measure(
             log,
             resolved.model,
             scenario.transient_s,
@@ -291,6 +296,9 @@ class HorizontalKind(RunKind):
             scenario.obstacles,
             controller.vehicle_radius,
         )
+        if scenario.faults:
+            metrics |= fault_metrics(log.horizontal(), scenario.transient_s, scenario.faults)
+        return metrics
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         from auvmpc.plots import run_figures, run_title

@@ -124,7 +124,7 @@ def _simulate(resolved, step, stopwatch: Stopwatch, warnings: list[str]) -> Fini
         session = RunSession(resolved, warnings, stopwatch)
         plant, sensor = run_plant(resolved)
         try:
-            run_session(session, plant, sensor, step)
+            run_session(session, plant, sensor, step, resolved.faults)
         except PlantDiverged as diverged:
             return _lost(session, resolved, diverged)
     return session.result()

@@ -27,6 +27,7 @@ from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.references import ReferenceConfig
+from auvmpc.scenario.faults import ActuatorFault
 
 __all__ = [
     "DEFAULT_PLANT_STEP_S",
@@ -105,6 +106,11 @@ class Scenario(StrictModel):
     seed: Annotated[int, Field(ge=0)] = Field(default=0, description="master random seed")
     transient_s: NonNegative = Field(
         default=20.0, description="start of the window for the steady-state metrics (s)"
+    )
+    faults: tuple[ActuatorFault, ...] = Field(
+        default=(),
+        description="actuators that fail during the run (scenario/faults.py): the plant "
+        "delivers what they still can; run.json gets the RMS before and after the first",
     )
 
 

@@ -23,6 +23,7 @@ from auvmpc.models.vehicle import (
 )
 from auvmpc.references import Reference, make_reference
 from auvmpc.scenario.depth import DepthScenario
+from auvmpc.scenario.faults import FaultSchedule
 from auvmpc.scenario.model import (
     DEFAULT_PLANT_STEP_S,
     Scenario,
@@ -57,6 +58,11 @@ class ResolvedScenario:
     def controlled_inputs(self) -> ActuatorSet:
         """The inputs its ``controller`` commands (the nominal model's)."""
         return self.model.actuators
+
+    @property
+    def plant_inputs(self) -> ActuatorSet:
+        """The inputs the simulated plant takes (the log's thrust columns)."""
+        return self.plant.actuators
 
     def __init__(self, scenario: Scenario, base_dir: Path) -> None:
         self.given = scenario  # as written: what overrides apply to
@@ -112,6 +118,8 @@ class ResolvedScenario:
                 raise ConfigError(
                     "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
                 )
+        #: Its actuator faults on the plant's inputs (None: none).
+        self.faults = FaultSchedule(scenario.faults, self.plant_inputs) if scenario.faults else None
 
 
 class ResolvedSixDofScenario(ResolvedScenario):
@@ -120,6 +128,10 @@ class ResolvedSixDofScenario(ResolvedScenario):
 
     scenario: SixDofScenario
     follows_depth = True
+
+    @property
+    def plant_inputs(self) -> ActuatorSet:
+        return self.plant.six_dof_actuators
 
     def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
         if scenario.plant.scale:
@@ -254,6 +266,7 @@ class ResolvedDepthScenario:
     """A depth scenario (``kind: depth``) and its vehicle."""
 
     controlled_layout: Layout = DEPTH
+    faults = None  # a depth scenario has none yet
     has_horizontal_path = False
 
     @property

@@ -19,6 +19,8 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.six_dof import PitchSingularity
 from auvmpc.models.vehicle import VehicleParams
+from auvmpc.scenario.faults import FaultSchedule
+from auvmpc.sim.faults import FaultyPlant
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.plant import HorizontalPlant, Plant, plant_step
 from auvmpc.sim.session import Session, StateReference, Truth
@@ -108,16 +110,20 @@ def run_session(
     plant: Plant,
     sensor: Sensor,
     on_step: Callable[[int, int], None] | None = None,
+    faults: FaultSchedule | None = None,
 ) -> SimLog:
     """Step ``session`` through its run against the built-in ``plant``: measure, step, hold
     the command over the sample; the session's log gets the plant's truth as well. A plant
     state that stops being finite raises :class:`PlantDiverged` before it reaches the
-    controller or the log."""
+    controller or the log. ``faults``: the plant's actuators fail as they say (sim/faults.py),
+    and the session is told of the declared ones from their time on."""
     if plant.sample_time != session.sample_time:
         raise ValueError(
             f"run_session: the plant steps {plant.sample_time} s, the controller samples "
             f"every {session.sample_time} s"
         )
+    if faults:
+        plant = FaultyPlant(plant, faults)
     steps, position, perception = session.steps, session.position, session.perception
     # The sample times k Te, each a product (never accumulated), as float64.
     times = session.sample_time * np.arange(steps + 1, dtype=float)
@@ -132,6 +138,8 @@ def run_session(
             break
         # The obstacle sensor looks from where the vehicle truly is.
         detections = None if perception is None else perception.observe(t, state[position])
+        if faults:
+            session.effectiveness = faults.declared(t)
         result = session.step(t, measured, detections, truth, trusted=True)
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # the state is judged below

@@ -22,6 +22,7 @@ from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.references import DepthStepConfig
+from auvmpc.scenario.faults import ActuatorFault
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 
@@ -322,6 +323,26 @@ def longest_run(flags: np.ndarray) -> int:
         current = current + 1 if flag else 0
         longest = max(longest, current)
     return longest
+
+
+def fault_metrics(
+    log: SimLog, transient_s: float, faults: Sequence[ActuatorFault]
+) -> dict[str, float | None]:
+    """How tracking fared across the first actuator fault (``faults``: the scenario's; ``log``:
+    the horizontal view). ``rms_before_fault_m``: the position error's RMS from the transient
+    to the fault; ``rms_after_fault_m``: from the fault to the end, its transient included
+    (what the fault cost); ``fault_detection_delay_s``: 0 for a fault the mission declared,
+    None for one the controller was not told of."""
+    first = min(faults, key=lambda fault: fault.at)
+    error = position_error(log)
+    reached = log.t >= first.at - 1e-9
+    before = (log.t >= transient_s - 1e-9) & ~reached
+    return {
+        "fault_time_s": float(first.at),
+        "fault_detection_delay_s": 0.0 if first.declared else None,
+        "rms_before_fault_m": _rms(error[before]),
+        "rms_after_fault_m": _rms(error[reached]),
+    }
 
 
 def _pick(metrics: dict, *names: str) -> dict:
