@@ -23,7 +23,7 @@ import numpy as np
 from auvmpc import __version__
 from auvmpc.controllers.base import Controller
 from auvmpc.controllers.channels import EveryThruster, HorizontalAndDepth, ReferenceWithDepth
-from auvmpc.controllers.config import ControllerType
+from auvmpc.controllers.config import ControllerType, stable_model_substeps
 from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.playback import ThrustPlayback
 from auvmpc.controllers.registry import build_controller, class_of
@@ -34,6 +34,8 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.environment.waves import WaveField
 from auvmpc.errors import ConfigError
+from auvmpc.estimation.fault_detection import FaultDetector
+from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import DepthStep, make_reference
 from auvmpc.scenario import (
@@ -86,6 +88,7 @@ class SessionStart:
     obstacles: Sequence[ObstacleConfig] = ()
     perception: ObstaclePerception | None = None
     vehicle_radius: float = 0.0
+    fault_detector: FaultDetector | None = None
 
     def arguments(self) -> dict[str, Any]:
         """As keyword arguments of ``Session`` (its fields are Session's parameters)."""
@@ -260,8 +263,20 @@ class HorizontalKind(RunKind):
             _steps(scenario),
             scenario.initial_state,
             None if given is None else np.array(given),
+            fault_detector=self._fault_detector(resolved),
             **self._surroundings(scenario),
         )
+
+    def _fault_detector(self, resolved) -> FaultDetector | None:
+        """The scenario's fault detector on the horizontal thrusters of the nominal model, if
+        it asks for one (``fault_detection``)."""
+        scenario = resolved.scenario
+        if not scenario.fault_detection:
+            return None
+        sample_time = _sample_time(scenario)
+        substeps = stable_model_substeps(resolved.model, sample_time)
+        noise = np.asarray(scenario.sensing.std)[HORIZONTAL.nu]
+        return FaultDetector(resolved.model, sample_time, substeps, noise)
 
     def _surroundings(self, scenario) -> dict[str, Any]:
         """The obstacles, what the controller perceives of them (through the scenario's
@@ -297,7 +312,7 @@ class HorizontalKind(RunKind):
             controller.vehicle_radius,
         )
         if scenario.faults:
-            metrics |= fault_metrics(log.horizontal(), scenario.transient_s, scenario.faults)
+            metrics |= fault_metrics(log, scenario.transient_s, scenario.faults)
         return metrics
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
@@ -359,6 +374,7 @@ class SixDofKind(HorizontalKind):
             _steps(scenario),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
             padded(scenario.initial_thrust, model.six_dof.n_thrusters),
+            fault_detector=self._fault_detector(resolved),
             **self._surroundings(scenario),
         )  # fmt: skip
 

@@ -112,6 +112,11 @@ class Scenario(StrictModel):
         description="actuators that fail during the run (scenario/faults.py): the plant "
         "delivers what they still can; run.json gets the RMS before and after the first",
     )
+    fault_detection: bool = Field(
+        default=False,
+        description="watch the horizontal thrusters for a fault from the model's prediction "
+        "residual and tell the controller what is found (estimation/fault_detection.py)",
+    )
 
 
 def whole_samples(duration: float, sample_time: float) -> tuple[float, str | None]:

@@ -172,11 +172,16 @@ class LogFormat:
 # name, and the final row only the per-sample ones; :meth:`SimLog.first` cuts by these lists,
 # so a new field goes in one of them (tests/test_session.py checks that every one is).
 PER_SAMPLE = ("t", "state", "reference", "environment", "clearance_m", "measured")
-PER_COMMAND = ("thrust", "solve_ms", "status")
+PER_COMMAND = ("thrust", "solve_ms", "status", "effectiveness")
 
 #: One row of a log: its fields by name (``PER_SAMPLE``, then ``PER_COMMAND`` and the
 #: format's diagnostics unless it is the final row, which has no command).
 Row = dict[str, Any]
+
+
+# What a whole log's fields hold before they are filled in, where not 0: no obstacle, every
+# input healthy.
+_ALLOCATED = {"clearance_m": math.inf, "effectiveness": 1.0}
 
 
 def _rows_field(name: str, doc: str) -> property:
@@ -213,6 +218,12 @@ class SimLog:
     clearance_m = _rows_field(
         "clearance_m", "(N+1,) vehicle-to-obstacle gap, inf without obstacles"
     )
+    effectiveness = _rows_field(
+        "effectiveness",
+        "(N, n) each input's effectiveness the controller assumed for the command (1 healthy, "
+        "0 dead: what it was told and what the fault detector found); in memory only, a log "
+        "read from log.csv has 1",
+    )
     measured = _rows_field(
         "measured",
         "(N+1, m) what the sensors gave at t_k (the controller's input on rows 0..N-1); in "
@@ -245,6 +256,7 @@ class SimLog:
             "thrust": FieldRows("thrust", (n_inputs,)),
             "solve_ms": FieldRows("solve_ms"),
             "status": FieldRows("status", text=True),
+            "effectiveness": FieldRows("effectiveness", (n_inputs,)),
             **{d.field: FieldRows(d.field, d.shape, d.dtype, d.text) for d in format.diagnostics},
         }
 
@@ -266,7 +278,7 @@ class SimLog:
             if rows.text:
                 rows.replace([""] * count)
             else:
-                fill = math.inf if name == "clearance_m" else 0.0
+                fill = _ALLOCATED.get(name, 0.0)
                 rows.replace(np.full((count, *rows.shape), fill, dtype=rows.dtype))
         log.t = sample_time * np.arange(steps + 1, dtype=float)
         return log
@@ -323,6 +335,7 @@ class SimLog:
             "state": self.state[:, part.state],
             "reference": self.reference[:, part.reference],
             "thrust": self.thrust[:, :n],
+            "effectiveness": self.effectiveness[:, :n],
             "solve_ms": self.solve_ms,
             "status": self.status,
             "environment": self._horizontal_environment(),

@@ -327,19 +327,34 @@ def longest_run(flags: np.ndarray) -> int:
 
 def fault_metrics(
     log: SimLog, transient_s: float, faults: Sequence[ActuatorFault]
-) -> dict[str, float | None]:
-    """How tracking fared across the first actuator fault (``faults``: the scenario's; ``log``:
-    the horizontal view). ``rms_before_fault_m``: the position error's RMS from the transient
-    to the fault; ``rms_after_fault_m``: from the fault to the end, its transient included
-    (what the fault cost); ``fault_detection_delay_s``: 0 for a fault the mission declared,
-    None for one the controller was not told of."""
+) -> dict[str, float | int | None]:
+    """How the run fared across its first actuator fault (``faults``: the scenario's; ``log``:
+    the whole run's, whose ``effectiveness`` is what the controller assumed).
+
+    ``rms_before_fault_m``: the position error's RMS from the transient to the fault;
+    ``rms_after_fault_m``: from the fault to the end, its transient included (what the fault
+    cost). ``fault_detection_delay_s``: from the fault until the controller first assumed
+    less of that actuator (told by the mission, or found by the fault detector; 0 for a
+    declared fault), None if it never did. ``false_fault_detections``: inputs the controller
+    assumed weaker with no fault of theirs yet, each counted once.
+    """
     first = min(faults, key=lambda fault: fault.at)
-    error = position_error(log)
+    error = position_error(log.horizontal())
     reached = log.t >= first.at - 1e-9
     before = (log.t >= transient_s - 1e-9) & ~reached
+    weaker = log.effectiveness < 1.0  # (N, n): what the controller assumed per command
+    commands = log.t[:-1]
+    index = log.input_names.index(first.actuator)
+    told = np.flatnonzero(weaker[:, index] & (commands >= first.at - 1e-9))
+    failed_by = {log.input_names.index(fault.actuator): fault.at for fault in faults}
+    false = sum(
+        bool(np.any(weaker[:, i] & (commands < failed_by.get(i, math.inf) - 1e-9)))
+        for i in range(log.n_thrusters)
+    )
     return {
         "fault_time_s": float(first.at),
-        "fault_detection_delay_s": 0.0 if first.declared else None,
+        "fault_detection_delay_s": float(commands[told[0]] - first.at) if len(told) else None,
+        "false_fault_detections": int(false),
         "rms_before_fault_m": _rms(error[before]),
         "rms_after_fault_m": _rms(error[reached]),
     }

@@ -30,7 +30,8 @@ from auvmpc.controllers.base import (
 from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
-from auvmpc.models.layout import Layout
+from auvmpc.estimation.fault_detection import FaultDetector, FaultFound
+from auvmpc.models.layout import HORIZONTAL, Layout
 from auvmpc.sim.log import LiveLog, Row, SimLog
 
 __all__ = ["Session", "StateReference", "StepResult", "Truth"]
@@ -74,6 +75,10 @@ class Session:
     the vehicle-to-obstacle gap is the measured position's; a session whose measurement is
     not its whole state (6-DOF, depth) needs the truth. ``live_log``: a new file that
     gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
+    ``fault_detector``: watches the horizontal thrusters (the first inputs) from the
+    measurements (estimation/fault_detection.py); what it finds is assumed from the sample
+    that finds it on, with whatever :attr:`effectiveness` says, and kept in
+    :attr:`faults_found`.
     """
 
     def __init__(
@@ -88,6 +93,7 @@ class Session:
         obstacles: Sequence[ObstacleConfig] = (),
         perception: ObstaclePerception | None = None,
         vehicle_radius: float = 0.0,
+        fault_detector: FaultDetector | None = None,
         live_log: str | Path | None = None,
     ) -> None:
         self.controller = controller
@@ -121,6 +127,14 @@ class Session:
         log.initial_thrust = previous.copy()
         self._initial_state = np.asarray(initial_state, dtype=float).copy()
         self._effectiveness: np.ndarray | None = None  # all healthy
+        self.fault_detector = fault_detector
+        self._found = np.ones(self.n_inputs)  # the detector's effectiveness of each input
+        #: What the detector found: (sample k, time, FaultFound), in order.
+        self.faults_found: list[tuple[int, float, FaultFound]] = []
+        # Where the horizontal state sits in the measurement (what the detector reads).
+        self._horizontal_measured = [
+            list(log.format.measured_names).index(name) for name in HORIZONTAL.names
+        ] if fault_detector is not None else []  # fmt: skip
         controller.reset(self._initial_state.copy(), previous.copy())
         self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
         # Created last: a session that could not be set up leaves no file behind.
@@ -189,16 +203,23 @@ class Session:
                 detections = _checked_detections(detections)
         row = self._sample(t, measurement, truth)
         t = row["t"]
+        self._detect_faults(k, t, measurement)
+        assumed = self._assumed()
         observation = Observation(
             k=k,
             t=t,
             state=measurement,
             reference=self._preview,
             obstacles=self._detections(t, measurement) if detections is None else detections,
-            effectiveness=self._effectiveness,
+            effectiveness=assumed,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
-        self._append(row | self.log.format.command(result, thrust, solve_ms))
+        acting = np.ones(self.n_inputs) if assumed is None else assumed
+        if self.fault_detector is not None:
+            watched = self.fault_detector.n_inputs
+            self.fault_detector.held(thrust[:watched], acting[:watched])
+        command = self.log.format.command(result, thrust, solve_ms)
+        self._append(row | command | {"effectiveness": acting})
         self.k = k + 1
         return StepResult(k, thrust.copy(), result.status, solve_ms, result.info)
 
@@ -236,6 +257,23 @@ class Session:
         if rows < 2:
             raise ConfigError("step", self.k, "a run needs at least two samples stepped")
         return self.log if self.finished else self.log.first(rows)
+
+    def _detect_faults(self, k: int, t: float, measurement: np.ndarray) -> None:
+        """The detector's look at this sample's measurement; what it finds is kept."""
+        if self.fault_detector is None:
+            return
+        found = self.fault_detector.check(measurement[self._horizontal_measured])
+        if found is not None:
+            self._found[found.index] = 0.0  # taken as dead (fault_detection.py: why)
+            self.faults_found.append((k, float(t), found))
+
+    def _assumed(self) -> np.ndarray | None:
+        """Each input's effectiveness the controller is to assume now: what it was told
+        (:attr:`effectiveness`) times what the detector found; None: all healthy."""
+        if self._effectiveness is None and not self.faults_found:
+            return None
+        told = np.ones(self.n_inputs) if self._effectiveness is None else self._effectiveness
+        return told * self._found
 
     def _check_open(self, what: str) -> None:
         if self.closed:
