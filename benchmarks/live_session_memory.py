@@ -16,7 +16,7 @@ from pathlib import Path
 
 import auvmpc
 from auvmpc.experiments.run import run_plant
-from auvmpc.sim.session import Truth
+from auvmpc.sim.loop import run_session
 
 
 def main() -> None:
@@ -34,17 +34,13 @@ def main() -> None:
     opened = tracemalloc.get_traced_memory()[0]
     steps = round(session.duration / session.sample_time)
     held = {}
-    state, began = session.initial_state, time.perf_counter()
-    for k in range(steps + 1):
-        t = k * session.sample_time
-        truth = Truth(state, plant.environment(t, state))
-        measured = sensor.measure(state, t)
-        if k == steps:
-            session.finish(t, measured, truth)
-            break
-        state = plant.step(state, session.step(t, measured, None, truth).u, t)
-        if k + 1 in (steps // 4, steps // 2, steps):
-            held[k + 1] = tracemalloc.get_traced_memory()[0] - opened
+
+    def sampled(k: int, _: int) -> None:
+        if k in (steps // 4, steps // 2, steps):
+            held[k] = tracemalloc.get_traced_memory()[0] - opened
+
+    began = time.perf_counter()
+    run_session(session, plant, sensor, sampled)  # the batch run's loop, on the live session
     current, peak = tracemalloc.get_traced_memory()
     mb, wall = 1e6, time.perf_counter() - began
     print(f"{args.scenario}, {args.duration:g} s: {steps} samples in {wall:.0f} s")
