@@ -94,8 +94,9 @@ def test_the_plant_is_flown_with_what_the_actuators_deliver():
 
 def test_a_declared_fault_reaches_the_controller_at_its_time():
     run = auvmpc.simulate(
-        auvmpc.load_scenario("paper-ideal", [DEAD_F3.replace("}]", ", declared: true}]")],
-                             controller="nmpc")  # fmt: skip
+        auvmpc.load_scenario(
+            "paper-ideal", [DEAD_F3.replace("}]", ", declared: true}]")], controller="nmpc"
+        )  # fmt: skip
     )
     told = run.log.effectiveness[:, 2]
     commands = run.log.t[:-1]
