@@ -232,6 +232,21 @@ def test_builtin_campaigns_are_valid(name):
     assert abs(first.initial_state[0] - 7.5) <= 1.0 and abs(first.initial_state[1] + 12.0) <= 1.0
 
 
+def test_a_six_dof_campaign_draws_its_fault_per_run():
+    """thruster-loss (issue 26's fault campaign) has a 6-DOF base: every run is checked
+    against the 6-DOF schema, and run k is the 6-DOF preset with run k's fault."""
+    camp = load_campaign("thruster-loss")
+    validate_campaign(camp, runs=20)
+    actuators = set()
+    for index in range(20):
+        resolved = scenario_for_run(camp, index)
+        (fault,) = resolved.scenario.faults
+        assert resolved.scenario.kind == "six-dof" and resolved.scenario.fault_detection
+        assert 30.0 <= fault.at <= 150.0 and 0.0 <= fault.effectiveness <= 0.6
+        actuators.add(fault.actuator)
+    assert actuators <= {f"F{i}" for i in range(1, 9)} and len(actuators) > 4
+
+
 # ------------------------------------------------------------------------------ sampling
 
 

@@ -9,6 +9,7 @@ from auvmpc.scenario.loader import (
     load_scenario,
     planar_twin,
     scenario_to_dict,
+    validate_document,
     validate_scenario,
 )
 from auvmpc.scenario.model import (
@@ -46,5 +47,6 @@ __all__ = [
     "load_scenario",
     "planar_twin",
     "scenario_to_dict",
+    "validate_document",
     "validate_scenario",
 ]

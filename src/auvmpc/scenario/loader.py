@@ -108,17 +108,22 @@ def resolve_document(
     document without a known ``kind`` is a horizontal one (which refuses a ``kind`` it is
     not: "kind: input should be 'horizontal'"). ``notes``: what the overrides decided that
     the user should hear of (run.json ``warnings``)."""
-    kind = data.get("kind")
-    schema, resolved = SCENARIO_KINDS[
-        kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
-    ]
-    try:
-        document = schema.model_validate(data)
-    except ValidationError as error:
-        raise format_validation_error(error) from None
-    scenario = resolved(document, base_dir)
+    document = validate_document(data)
+    scenario = SCENARIO_KINDS[document.kind][1](document, base_dir)
     scenario.notes = [*notes, *scenario.notes]
     return scenario
+
+
+def validate_document(data: dict[str, Any]):
+    """A scenario document validated by the schema its ``kind`` names (a horizontal one's
+    without a known ``kind``), not yet resolved for its vehicle; a bad field is one line."""
+    kind = data.get("kind")
+    known = kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
+    schema = SCENARIO_KINDS[known][0]
+    try:
+        return schema.model_validate(data)
+    except ValidationError as error:
+        raise format_validation_error(error) from None
 
 
 def validate_scenario(data: dict[str, Any]) -> Scenario:

@@ -40,7 +40,7 @@ from auvmpc.experiments.campaign.spec import (
 from auvmpc.scenario import (
     ResolvedScenario,
     apply_override,
-    validate_scenario,
+    validate_document,
 )
 
 
@@ -337,7 +337,7 @@ def validate_campaign(
         for yardstick in twins:
             where = f"run {index}{' yardstick' if yardstick else ''}"
             try:
-                validate_scenario(plan_run(campaign, index, yardstick=yardstick).data)
+                validate_document(plan_run(campaign, index, yardstick=yardstick).data)
             except ConfigError as error:
                 raise _blame(campaign, error, None, where, yardstick) from None
 

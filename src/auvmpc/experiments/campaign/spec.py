@@ -33,8 +33,8 @@ from auvmpc.scenario import (
     apply_override,
     builtin_scenarios,
     scenario_to_dict,
-    validate_scenario,
 )
+from auvmpc.scenario.loader import resolve_document
 
 RESULTS_FILE = "results.sqlite"
 
@@ -802,9 +802,7 @@ def _resolve(
 ) -> ResolvedScenario:
     """Scenario ``data`` resolved; ``notes``, what its overrides decided, first among its
     own (run.json ``warnings``, as ``auvmpc run BASE --set ...`` keeps them)."""
-    resolved = ResolvedScenario(validate_scenario(data), Path(campaign.base_dir))
-    resolved.notes = [*notes, *resolved.notes]
-    return resolved
+    return resolve_document(data, Path(campaign.base_dir), notes)
 
 
 def _canonical_json(value: Any) -> str:
