@@ -1,27 +1,30 @@
-"""Which actuator stopped delivering its command, and how much of it is left, found from the
-model's one-step prediction residual (issue 26's fault detection).
+"""Which actuator stopped delivering its command, found from the model's one-step prediction
+residual (issue 26's fault detection).
 
 Each sample the nominal model predicts the velocities from the last measurement under the
 command held since, with the actuators as the controller assumes them (effectiveness e).
-If input i delivers only (1 - lambda_i) of that, the measured velocities miss what its lost
-share would have given, to first order ``r = -sum_i lambda_i B_i e_i F_i`` (B: the sampled
-model's Jacobian in the acting thrust). Over a sliding window of samples the residuals are
-fitted by least squares to
+If input i delivers only (1 - lambda) of that from sample j on, the measured velocities miss
+what its lost share would have given, to first order ``-lambda B_i e_i F_i`` (B: the sampled
+model's Jacobian in the acting thrust). Over a sliding window, for each input i and each
+onset j inside the window (a single fault, at an unknown time), the residuals are fitted by
+least squares to
 
-    r_k = c + sum_i lambda_i g_ki,      g_ki = -B_k[:, i] e_i F_ki,
+    r_k = c + lambda g_ki [k >= j],      g_ki = -B_k[:, i] e_i F_ki,
 
 with ``c`` constant over the window: a current, the model's own error and anything else
-slow, which would otherwise read as a fault of whichever thruster pushes against it. This
-is fault detection by parameter estimation on a parity residual (Isermann, *Fault-Diagnosis
-Systems*, 2006): an input is found failed when its lambda is at least :data:`LOSS_FOUND` and
-:data:`LOSS_SIGMAS` standard errors from zero, :data:`CONFIRM_SAMPLES` samples in a row.
-Found, it is taken as dead: the controller stops relying on it, the window restarts, and the
-prediction leaves it out (a second fault is found the same way). Dead, not its estimated
-share: a single sample's estimate is rough (on the BlueROV2 Heavy's helix a dead thruster
-first read as 58 % lost, and the controller, relying on the rest, let the heading go 0.5
-rad off until the second detection 4 s later), and three of a vectored four-thruster
-vehicle's thrusters still span surge, sway and yaw, so the error on the safe side costs
-a weak thruster's remaining force, the other one the vehicle's heading.
+slow, which would otherwise read as a fault of whichever thruster pushes against it. The
+(i, j) with the smallest residual sum of squares is the likeliest single fault. This is
+fault detection by parameter estimation on a parity residual (Isermann, *Fault-Diagnosis
+Systems*, 2006): an input is found failed when its lambda is between :data:`LOSS_FOUND` and
+:data:`LOSS_MOST` and :data:`LOSS_SIGMAS` standard errors from zero, :data:`CONFIRM_SAMPLES`
+samples in a row. Found, it is taken as dead: the controller stops relying on it, the
+window restarts, and the prediction leaves it out (a second fault is found the same way).
+Dead, not its estimated share: a single sample's estimate is rough (a first version of this
+detector, one joint fit of every input, read a dead thruster on the BlueROV2 Heavy's helix
+as 58 % lost, and the controller, relying on the rest, let the heading go 0.5 rad off until
+a second detection 4 s later), and three of a vectored four-thruster vehicle's thrusters
+still span surge, sway and yaw, so the error on the safe side costs a weak thruster's
+remaining force, the other one the vehicle's heading.
 
 Limits, by design: a lost share below :data:`LOSS_FOUND` is not reported (model error of
 the size the presets carry, 20-30 %, must not read as a fault); an input that is not
