@@ -11,6 +11,9 @@ and what a dead horizontal thruster costs with and without it.
   not told): detection delay, false detections, RMS after over RMS before the fault, verdict.
 
     PYTHONPATH=src python benchmarks/fault_detection.py --presets --survey 0 20
+
+``--sigmas S`` runs with the detector's score threshold at S instead of its LOSS_SIGMAS.
+Found faults are printed with their score (lambda over its standard error).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import auvmpc
+from auvmpc.estimation import fault_detection
 from auvmpc.experiments.run import RunSession, run_plant
 from auvmpc.experiments.survey_cases import hard_survey_case
 from auvmpc.scenario.loader import resolve_document
@@ -46,7 +50,7 @@ def found_text(session: RunSession) -> str:
     names = session.input_names
     return (
         ", ".join(
-            f"{names[f.index]} at {t:g} s ({f.lost:.2f} lost, {f.sigmas:.1f} sigma)"
+            f"{names[f.index]} at {t:g} s ({f.lost:.2f} lost, score {f.sigmas:.1f})"
             for _, t, f in session.faults_found
         )
         or "none"
@@ -89,7 +93,7 @@ def survey(first: int, last: int) -> None:
         cells = []
         for detect in (True, False):
             faulty = case | {"faults": fault, "fault_detection": detect}
-            _, metrics = flown(resolve_document(faulty, Path.cwd()))
+            session, metrics = flown(resolve_document(faulty, Path.cwd()))
             label = "detected" if detect else "not told"
             if metrics is None:
                 lost[label] += 1
@@ -103,9 +107,12 @@ def survey(first: int, last: int) -> None:
                 false += metrics["false_fault_detections"]
                 if delay is not None:
                     delays.append(delay)
+                    scores = [f.sigmas for _, _, f in session.faults_found
+                              if names[f.index] == actuator]  # fmt: skip
+                    delay = f"{delay:.2f} (score {scores[0]:.0f})" if scores else f"{delay:.2f}"
             cells.append((delay, metrics["false_fault_detections"], ratio, metrics["verdict"]))
         (delay, wrong, ratio, verdict), (_, _, ratio_untold, verdict_untold) = cells
-        delay_text = "not found" if delay is None else f"{delay:.2f}"
+        delay_text = "not found" if delay is None else delay
         print(f"| {seed} | {found_text(healthy)} | {actuator} at {at:g} s | {delay_text} | "
               f"{wrong} | {ratio} | {verdict} | {ratio_untold}, {verdict_untold} |",
               flush=True)  # fmt: skip
@@ -122,7 +129,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--presets", action="store_true")
     parser.add_argument("--survey", nargs=2, type=int, metavar=("FIRST", "LAST"))
+    parser.add_argument("--sigmas", type=float, help="the detector's score threshold")
     args = parser.parse_args()
+    if args.sigmas is not None:
+        fault_detection.LOSS_SIGMAS = args.sigmas
+    print(f"score threshold {fault_detection.LOSS_SIGMAS:g}")
     began = time.perf_counter()
     if args.presets:
         presets()

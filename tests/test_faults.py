@@ -9,11 +9,15 @@ import pytest
 
 import auvmpc
 from auvmpc.errors import ConfigError
+from auvmpc.estimation.fault_detection import FaultDetector
 from auvmpc.experiments.run import RunSession, run_plant
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.actuators.thruster import FixedThruster
-from auvmpc.scenario.faults import ActuatorFault, FaultSchedule
-from auvmpc.sim.faults import FaultyPlant
+from auvmpc.models.discrete import DISTURBANCE_NAMES, horizontal_model
+from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.vehicle import load_vehicle
+from auvmpc.scenario.faults import ActuatorFault
+from auvmpc.sim.faults import FaultSchedule, FaultyPlant
 from auvmpc.sim.loop import run_session
 from tests.test_cli import run_cli
 
@@ -41,7 +45,7 @@ def test_the_schedule_delivers_each_fault_from_its_sample_on():
         ActuatorFault(actuator="F2", at=1.5, effectiveness=0.25),
         ActuatorFault(actuator="F4", at=3 * 0.1 * 5, stuck_at=-4.0, declared=True),
     ]
-    schedule = FaultSchedule(faults, _four_thrusters())
+    schedule = FaultSchedule(faults, _four_thrusters(), duration=10.0)
     command = np.array([1.0, 8.0, -2.0, 6.0])
     np.testing.assert_array_equal(schedule.delivered(command, 1.0), command)
     assert schedule.declared(1.0) is None
@@ -52,11 +56,15 @@ def test_the_schedule_delivers_each_fault_from_its_sample_on():
 @pytest.mark.parametrize(
     ("fault", "field", "message"),
     [
-        ("{actuator: F9, at: 5, effectiveness: 0}", "faults[0].actuator", "one of F1, F2"),
+        ("{actuator: F9, at: 5, effectiveness: 0}", "faults.0.actuator", "one of F1, F2"),
         ("{actuator: F1, at: 5}", "faults.0.effectiveness", "give exactly one of"),
         ("{actuator: F1, at: 5, effectiveness: 0.5, stuck_at: 1}", "faults.0.stuck_at",
          "give exactly one of"),
-        ("{actuator: F1, at: 5, stuck_at: 1e9}", "faults[0].stuck_at", "outside F1's limits"),
+        ("{actuator: F1, at: 5, stuck_at: 1e9}", "faults.0.stuck_at", "outside F1's limits"),
+        ("{actuator: F1, at: 100}", "faults.0.effectiveness", "give exactly one of"),
+        ("{actuator: F1, at: 100, effectiveness: 0}", "faults.0.at", "at or after the run's end"),
+        ("{actuator: F2, at: 5, effectiveness: 0}, {actuator: F2, at: 9, stuck_at: 1}",
+         "faults.1.actuator", "fails twice"),
         ("{actuator: F1, at: 5, effectiveness: 1.5}", "faults.0.effectiveness", "1"),
     ],
 )  # fmt: skip
@@ -107,9 +115,8 @@ def test_a_declared_fault_reaches_the_controller_at_its_time():
 
 def test_the_detector_finds_a_dead_thruster_and_the_controller_flies_on():
     """paper-ideal, nmpc, F3 dead at 50 s, nobody told: the detector finds F3 (and nothing
-    else) within two samples; after the fault the tracking is as good as before it (the
-    declared run's 0.051 m against 0.054 m before), where not telling the controller costs
-    over three times the error."""
+    else) within two samples; after the fault the tracking is within 20 % of before it,
+    where not telling the controller costs over three times the error."""
     detected = auvmpc.simulate(
         auvmpc.load_scenario("paper-ideal", [DEAD_F3, "fault_detection=true"], controller="nmpc")
     ).metrics
@@ -150,5 +157,36 @@ def test_the_bluerov2_heavy_keeps_tracking_after_losing_a_thruster():
 
 
 def test_a_fault_on_an_input_the_plant_does_not_have_is_refused_before_the_run():
-    with pytest.raises(ConfigError, match=r"faults\[0\]\.actuator: .*one of F1"):
+    with pytest.raises(ConfigError, match=r"faults\.0\.actuator: .*one of F1"):
         auvmpc.load_scenario("bluerov2-helix", ["faults=[{actuator: F9, at: 1, effectiveness: 0}]"])
+
+
+def test_the_detector_finds_the_thruster_and_the_sample_it_failed_on():
+    """Against known truth: the jmse2210's sampled model as the plant, random commands, small
+    velocity noise and a constant unknown force (which the window's constant must take up);
+    thruster 2 delivers nothing from sample 40. Nothing is found before; F3 (index 2) is
+    found, within the detector's window of the onset, and nothing else."""
+    vehicle = load_vehicle("jmse2210")
+    sample_time, substeps, noise = 0.5, 2, 0.002
+    step = horizontal_model(vehicle, sample_time, substeps, jit=False).numeric_step
+    detector = FaultDetector(vehicle, sample_time, substeps, np.full(3, noise))
+    rng = np.random.default_rng(7)
+    n = vehicle.n_thrusters
+    healthy, dead_from = np.ones(n), 40
+    force = np.array([4.0, -3.0, 1.0])[: len(DISTURBANCE_NAMES)]  # an unknown current force
+    state, found = np.zeros(HORIZONTAL.size), []
+    low, high = vehicle.thrust_limits
+    for k in range(80):
+        measured = state.copy()
+        measured[HORIZONTAL.nu] += rng.normal(0, noise, 3)
+        result = detector.check(measured)
+        if result is not None:
+            found.append((k, result.index))
+        command = rng.uniform(0.3 * low, 0.3 * high, n)
+        detector.held(command, healthy if not found else np.where(np.arange(n) == 2, 0.0, 1.0))
+        acting = command * np.where((np.arange(n) == 2) & (k >= dead_from), 0.0, 1.0)
+        state = np.asarray(step(state, acting, force, np.ones(n))).ravel()
+    # Found while the onset is still inside the window (the fit's unknown onset); on this
+    # vehicle two thrusters push alike, so telling them apart takes a few samples (5 here).
+    assert found and found[0][1] == 2 and dead_from < found[0][0] <= dead_from + detector.window
+    assert len(found) == 1

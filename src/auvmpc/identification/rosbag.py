@@ -199,6 +199,13 @@ def _read_bag(path: Path, n_thrusters: int, options: LogOptions) -> _BagMessages
         raw[:, _ODOMETRY_ROW.span(first, last)]
         for first, last in (("x", "z"), ("qx", "qw"), ("u", "w"), ("p", "r"))
     )
+    unset = np.flatnonzero(np.linalg.norm(quaternion, axis=1) == 0.0)
+    if len(unset):
+        stamp = stamps[options.odometry_topic][int(unset[0])]
+        raise ConfigError(
+            "LOG", name, f"{options.odometry_topic} has no orientation (a zero quaternion) at "
+            f"t = {stamp / 1e9:.6g} s: identify reads the heading from it",
+        )  # fmt: skip
     angles = euler_angles(quaternion) * mirror  # the mirror turns pitch and yaw over
     angles[:, 2] = np.unwrap(angles[:, 2])
     odometry = np.column_stack([position * mirror, angles, linear * mirror, angular * mirror])

@@ -23,7 +23,6 @@ from auvmpc.models.vehicle import (
 )
 from auvmpc.references import Reference, make_reference
 from auvmpc.scenario.depth import DepthScenario
-from auvmpc.scenario.faults import FaultSchedule
 from auvmpc.scenario.model import (
     DEFAULT_PLANT_STEP_S,
     Scenario,
@@ -31,6 +30,7 @@ from auvmpc.scenario.model import (
     check_one_sample_time,
     rounded_to_samples,
 )
+from auvmpc.sim.faults import FaultSchedule
 
 __all__ = [
     "ResolvedDepthScenario",
@@ -119,7 +119,11 @@ class ResolvedScenario:
                     "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
                 )
         #: Its actuator faults on the plant's inputs (None: none).
-        self.faults = FaultSchedule(scenario.faults, self.plant_inputs) if scenario.faults else None
+        self.faults = (
+            FaultSchedule(scenario.faults, self.plant_inputs, scenario.duration)
+            if scenario.faults
+            else None
+        )
 
 
 class ResolvedSixDofScenario(ResolvedScenario):

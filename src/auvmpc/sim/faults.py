@@ -1,13 +1,103 @@
-"""A plant whose actuators fail as the scenario's faults say (scenario/faults.py)."""
+"""A run's actuator faults in time (the scenario's ``faults``, scenario/faults.py): what the
+actuators deliver of each command, what the controller is told, and a plant stepped with
+what is delivered.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
+from typing import Protocol
+
 import numpy as np
 
-from auvmpc.scenario.faults import FaultSchedule
+from auvmpc.errors import ConfigError
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.sim.plant import Plant
 
-__all__ = ["FaultyPlant"]
+__all__ = ["Fault", "FaultSchedule", "FaultyPlant", "acting_sample"]
+
+# A fault "at" a sample time acts on that sample: sample times are k * Te in floating point,
+# so a time within this much before it counts as reached.
+_TIME_ROUND_OFF_S = 1e-9
+
+
+class Fault(Protocol):
+    """One actuator's failure (what scenario/faults.py's ``ActuatorFault`` holds)."""
+
+    actuator: str
+    at: float
+    effectiveness: float | None
+    stuck_at: float | None
+    declared: bool
+
+
+def acting_sample(times: np.ndarray, at: float) -> int:
+    """The first of the sample ``times`` a fault at ``at`` acts on (``len(times)``: none)."""
+    return int(np.searchsorted(times, at - _TIME_ROUND_OFF_S, side="left"))
+
+
+class FaultSchedule:
+    """The faults of a run on the plant's ``inputs``, lasting ``duration`` s; a fault naming
+    no input or an input that fails twice, stuck outside its limits, or at or after the
+    run's end, is one ConfigError line naming it."""
+
+    def __init__(self, faults: Sequence[Fault], inputs: ActuatorSet, duration: float) -> None:
+        names = list(inputs.layout.names)
+        limits = inputs.limits
+        self._index: list[int] = []
+        for i, fault in enumerate(faults):
+            if fault.actuator not in names:
+                raise ConfigError(
+                    f"faults.{i}.actuator", fault.actuator, f"one of {', '.join(names)}"
+                )
+            index = names.index(fault.actuator)
+            if index in self._index:
+                raise ConfigError(
+                    f"faults.{i}.actuator", fault.actuator, "fails twice: one fault per actuator"
+                )
+            low, high = float(limits.lower[index]), float(limits.upper[index])
+            if fault.stuck_at is not None and not low <= fault.stuck_at <= high:
+                raise ConfigError(
+                    f"faults.{i}.stuck_at", fault.stuck_at,
+                    f"outside {fault.actuator}'s limits [{low:g}, {high:g}]",
+                )  # fmt: skip
+            if fault.at >= duration - _TIME_ROUND_OFF_S:
+                raise ConfigError(
+                    f"faults.{i}.at", fault.at, f"at or after the run's end ({duration:g} s)"
+                )
+            self._index.append(index)
+        self.faults = tuple(faults)
+        self.n_inputs = len(names)
+
+    def __bool__(self) -> bool:
+        return bool(self.faults)
+
+    def _acting(self, t: float, declared_only: bool = False) -> Iterator[tuple[Fault, int]]:
+        for fault, index in zip(self.faults, self._index, strict=True):
+            if t + _TIME_ROUND_OFF_S >= fault.at and (fault.declared or not declared_only):
+                yield fault, index
+
+    def delivered(self, command: np.ndarray, t: float) -> np.ndarray:
+        """What the actuators deliver of ``command`` over the sample from ``t``."""
+        delivered = np.array(command, dtype=float)
+        for fault, index in self._acting(t):
+            if fault.stuck_at is not None:
+                delivered[index] = fault.stuck_at
+            else:
+                delivered[index] *= fault.effectiveness
+        return delivered
+
+    def declared(self, t: float) -> np.ndarray | None:
+        """Each input's effectiveness as the mission has declared it by ``t`` (None: nothing
+        declared yet, all healthy to the controller). A stuck actuator is declared as not
+        acting: its fixed force is the controller's disturbance estimate's to take up."""
+        acting = list(self._acting(t, declared_only=True))
+        if not acting:
+            return None
+        effectiveness = np.ones(self.n_inputs)
+        for fault, index in acting:
+            effectiveness[index] = 0.0 if fault.stuck_at is not None else fault.effectiveness
+        return effectiveness
 
 
 class FaultyPlant:

@@ -19,8 +19,7 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.six_dof import PitchSingularity
 from auvmpc.models.vehicle import VehicleParams
-from auvmpc.scenario.faults import FaultSchedule
-from auvmpc.sim.faults import FaultyPlant
+from auvmpc.sim.faults import FaultSchedule, FaultyPlant
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.plant import HorizontalPlant, Plant, plant_step
 from auvmpc.sim.session import Session, StateReference, Truth

@@ -22,7 +22,7 @@ from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 from auvmpc.references import DepthStepConfig
-from auvmpc.scenario.faults import ActuatorFault
+from auvmpc.sim.faults import Fault, acting_sample
 from auvmpc.sim.log import SimLog
 from auvmpc.sim.verdict import RunFacts, judge, relative_heading_turns
 
@@ -326,34 +326,42 @@ def longest_run(flags: np.ndarray) -> int:
 
 
 def fault_metrics(
-    log: SimLog, transient_s: float, faults: Sequence[ActuatorFault]
+    log: SimLog, transient_s: float, faults: Sequence[Fault]
 ) -> dict[str, float | int | None]:
-    """How the run fared across its first actuator fault (``faults``: the scenario's; ``log``:
-    the whole run's, whose ``effectiveness`` is what the controller assumed).
+    """How the run fared across its first actuator fault (``faults``: the scenario's, one per
+    actuator; ``log``: the whole run's, whose ``effectiveness`` is what the controller
+    assumed), timed from the sample the fault first acts on.
 
-    ``rms_before_fault_m``: the position error's RMS from the transient to the fault;
-    ``rms_after_fault_m``: from the fault to the end, its transient included (what the fault
-    cost). ``fault_detection_delay_s``: from the fault until the controller first assumed
-    less of that actuator (told by the mission, or found by the fault detector; 0 for a
-    declared fault), None if it never did. ``false_fault_detections``: inputs the controller
-    assumed weaker with no fault of theirs yet, each counted once.
+    ``fault_time_s``: that sample's time. ``rms_before_fault_m``: the position error's RMS from
+    the transient to that sample (None when the fault comes first); ``rms_after_fault_m``:
+    from it to the end, its transient included (what the fault cost).
+    ``fault_detection_delay_s``: from it until the controller first assumed less of that
+    actuator (told by the mission, or found by the fault detector; 0 for a declared fault),
+    None if it never did. ``false_fault_detections``: inputs the controller assumed weaker
+    before a fault of theirs acted, or with none, each counted once.
     """
     first = min(faults, key=lambda fault: fault.at)
     error = position_error(log.horizontal())
-    reached = log.t >= first.at - 1e-9
+    start = acting_sample(log.t, first.at)
+    reached = np.arange(len(log.t)) >= start
     before = (log.t >= transient_s - 1e-9) & ~reached
     weaker = log.effectiveness < 1.0  # (N, n): what the controller assumed per command
-    commands = log.t[:-1]
     index = log.input_names.index(first.actuator)
-    told = np.flatnonzero(weaker[:, index] & (commands >= first.at - 1e-9))
-    failed_by = {log.input_names.index(fault.actuator): fault.at for fault in faults}
+    told = np.flatnonzero(weaker[start:, index])
+    failed_from = {
+        log.input_names.index(fault.actuator): acting_sample(log.t, fault.at) for fault in faults
+    }
+    commands = np.arange(log.steps)
     false = sum(
-        bool(np.any(weaker[:, i] & (commands < failed_by.get(i, math.inf) - 1e-9)))
+        bool(np.any(weaker[:, i] & (commands < failed_from.get(i, log.steps))))
         for i in range(log.n_thrusters)
     )
+    fault_time = float(log.t[start])
     return {
-        "fault_time_s": float(first.at),
-        "fault_detection_delay_s": float(commands[told[0]] - first.at) if len(told) else None,
+        "fault_time_s": fault_time,
+        "fault_detection_delay_s": float(log.t[start + told[0]] - fault_time)
+        if len(told)
+        else None,
         "false_fault_detections": int(false),
         "rms_before_fault_m": _rms(error[before]),
         "rms_after_fault_m": _rms(error[reached]),
