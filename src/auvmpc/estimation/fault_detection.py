@@ -182,4 +182,3 @@ class FaultDetector:
         if len(fits) > 1 and fits[0][0] > ISOLATION * fits[1][0]:
             return None  # two inputs explain the window about as well: not isolated yet
         return fits[0][1:]
-

@@ -114,7 +114,7 @@ def resolve_document(
     return scenario
 
 
-def validate_document(data: dict[str, Any]):
+def validate_document(data: dict[str, Any]) -> Scenario | DepthScenario:
     """A scenario document validated by the schema its ``kind`` names (a horizontal one's
     without a known ``kind``), not yet resolved for its vehicle; a bad field is one line."""
     kind = data.get("kind")
