@@ -61,6 +61,28 @@ def cli(*args: str) -> None:
             assert not stop.code, f"auvmpc {' '.join(args)} exited {stop.code}"
 
 
+def odometry_rewritten(bag, out, change) -> None:
+    """The exporter's /odom and /thrust copied into a SQLite3 bag ``out`` by rosbags' own
+    reader and writer, each odometry message passed through ``change`` (it edits in place)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with (
+        AnyReader([bag]) as reader,
+        Writer(out, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer,
+    ):
+        kept = [c for c in reader.connections if c.topic in ("/odom", "/thrust")]
+        added = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in kept}
+        for connection, stamp, raw in reader.messages(connections=kept):
+            message = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == "/odom":
+                change(message)
+            writer.write(added[connection.topic], stamp,
+                         store.serialize_cdr(message, connection.msgtype))  # fmt: skip
+
+
 # The 6-DOF identification manoeuvre every 6-DOF log-format test starts from: short, for the
 # tests' time (the method's default is 40 s, of which 10 s fade in and out).
 SIX_DOF_EXCITE_VEHICLE = "bluerov2-heavy"

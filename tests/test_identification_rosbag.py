@@ -17,7 +17,7 @@ from auvmpc.errors import ConfigError
 from auvmpc.identification.logs import MIN_SAMPLES, LogOptions, read_log, read_run_folder, resample
 from auvmpc.identification.rosbag import MIRROR, BodyFrame
 from auvmpc.models.vehicle import load_vehicle
-from tests.conftest import ROUND_OFF_TOL, cli
+from tests.conftest import ROUND_OFF_TOL, cli, odometry_rewritten
 from tests.test_cli import run_cli
 
 rosbags = pytest.importorskip("rosbags")
@@ -181,25 +181,13 @@ def test_without_rosbags_the_error_names_the_extra(run, monkeypatch):
 def test_an_odometry_without_orientation_is_refused_in_one_line(run, tmp_path):
     """A driver that leaves the pose's quaternion all zeros (no orientation): one line naming
     the topic and the time, not a traceback from the rotation."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
 
-    store = get_typestore(Stores.ROS2_JAZZY)
+    def unset(message) -> None:
+        turn = message.pose.pose.orientation
+        turn.x = turn.y = turn.z = turn.w = 0.0
+
     out = tmp_path / "no-orientation"
-    with (
-        AnyReader([run / "rosbag2"]) as reader,
-        Writer(out, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer,
-    ):
-        kept = [c for c in reader.connections if c.topic in ("/odom", "/thrust")]
-        added = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in kept}
-        for connection, stamp, raw in reader.messages(connections=kept):
-            message = reader.deserialize(raw, connection.msgtype)
-            if connection.topic == "/odom":
-                turn = message.pose.pose.orientation
-                turn.x = turn.y = turn.z = turn.w = 0.0
-            writer.write(added[connection.topic], stamp,
-                         store.serialize_cdr(message, connection.msgtype))  # fmt: skip
+    odometry_rewritten(run / "rosbag2", out, unset)
     with pytest.raises(
         ConfigError, match=r"^LOG: .*/odom has no orientation \(a zero quaternion\)"
     ):

@@ -6,7 +6,6 @@ identified from the one log from a start 30 % off in every parameter."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,6 +49,7 @@ from tests.conftest import (
     START_ERROR,
     WITHIN,
     assert_recovered,
+    odometry_rewritten,
     with_sensor_noise,
 )
 from tests.test_cli import run_cli
@@ -182,28 +182,12 @@ BAG_STATE_TOL = 1e-12
 SAME_FIT_REL = 1e-6
 
 
-def _rewrite_in_rep103_axes(bag: Path, out: Path) -> None:
-    """The exporter's /odom and /thrust into a SQLite3 bag in REP 103 axes (odometry frame and
-    body y port, z up: the half turn about x), by rosbags' own reader and writer."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    with (
-        AnyReader([bag]) as reader,
-        Writer(out, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer,
-    ):
-        kept = [c for c in reader.connections if c.topic in ("/odom", "/thrust")]
-        added = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in kept}
-        for connection, stamp, raw in reader.messages(connections=kept):
-            message = reader.deserialize(raw, connection.msgtype)
-            if connection.topic == "/odom":
-                pose, twist = message.pose.pose, message.twist.twist
-                for vector in (pose.position, twist.linear, twist.angular, pose.orientation):
-                    vector.y, vector.z = -vector.y, -vector.z  # a quaternion's too: D q D
-            writer.write(added[connection.topic], stamp,
-                         store.serialize_cdr(message, connection.msgtype))  # fmt: skip
+def _in_rep103_axes(message) -> None:
+    """An odometry message in REP 103 axes (odometry frame and body y port, z up: the half
+    turn about x)."""
+    pose, twist = message.pose.pose, message.twist.twist
+    for vector in (pose.position, twist.linear, twist.angular, pose.orientation):
+        vector.y, vector.z = -vector.y, -vector.z  # a quaternion's too: D q D
 
 
 def test_six_dof_identification_from_a_ros2_bag(six_dof_excite_run, tmp_path, monkeypatch,
@@ -220,7 +204,7 @@ def test_six_dof_identification_from_a_ros2_bag(six_dof_excite_run, tmp_path, mo
     assert code == 0, err
     _, sample_time, states, thrust = read_six_dof_samples(run, truth)
     mirrored = tmp_path / "rep103"
-    _rewrite_in_rep103_axes(tmp_path / "bag", mirrored)
+    odometry_rewritten(tmp_path / "bag", mirrored, _in_rep103_axes)
     for bag, frame in ((tmp_path / "bag", "frd"), (mirrored, "flu")):
         _, bag_time, bag_states, bag_thrust = read_six_dof_samples(
             bag, truth, LogOptions(body_frame=frame)
