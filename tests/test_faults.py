@@ -117,9 +117,13 @@ def test_the_detector_finds_a_dead_thruster_and_the_controller_flies_on():
     """paper-ideal, nmpc, F3 dead at 50 s, nobody told: the detector finds F3 (and nothing
     else) within two samples; after the fault the tracking is within 20 % of before it,
     where not telling the controller costs over three times the error."""
-    detected = auvmpc.simulate(
+    run = auvmpc.simulate(
         auvmpc.load_scenario("paper-ideal", [DEAD_F3, "fault_detection=true"], controller="nmpc")
-    ).metrics
+    )
+    detected = run.metrics
+    (found,) = run.run_json()["fault_detections"]  # what it found, kept in run.json
+    assert found["actuator"] == "F3" and found["t_s"] == 50.0 + detected["fault_detection_delay_s"]
+    assert found["score"] >= 12.0 and 0.5 <= found["lost"] <= 1.5
     untold = auvmpc.simulate(
         auvmpc.load_scenario("paper-ideal", [DEAD_F3], controller="nmpc")
     ).metrics
@@ -143,6 +147,7 @@ def test_watching_a_healthy_run_changes_nothing():
     np.testing.assert_array_equal(watched.stepped_log.thrust, plain.log.thrust)
     np.testing.assert_array_equal(watched.stepped_log.state, plain.log.state)
     assert "fault_time_s" not in plain.metrics  # fault metrics only for runs with faults
+    assert "fault_detections" not in plain.run_json()  # and the list only with a detector
 
 
 @pytest.mark.slow

@@ -104,6 +104,9 @@ class Finished:
     metrics: dict[str, Any]
     provenance: dict[str, Any] = field(default_factory=dict, kw_only=True)
     warnings: list[str] = field(default_factory=list, kw_only=True)
+    #: What the fault detector found, in order (run.json ``fault_detections``); None: the run
+    #: had no detector.
+    fault_detections: list[dict[str, Any]] | None = field(default=None, kw_only=True)
 
     @property
     def scenario(self):
@@ -118,6 +121,7 @@ class Finished:
         return self.resolved.plant
 
     def run_json(self) -> dict[str, Any]:
+        detections = self.fault_detections
         return {
             "version": __version__,
             "scenario": scenario_to_dict(self.scenario),
@@ -126,6 +130,7 @@ class Finished:
             "metrics": self.metrics,
             "choices": getattr(self.resolved, "choices", {}),
             "warnings": list(self.warnings),
+            **({} if detections is None else {"fault_detections": detections}),
             "provenance": self.provenance,
         }
 

@@ -189,7 +189,14 @@ class RunSession(Session):
         """What was stepped, as a finished run: its log, metrics, warnings and provenance."""
         libraries = self.kind.libraries(self.resolved.scenario)
         provenance = self._stopwatch.record(libraries)
-        return self.kind.finished(self.resolved, self.stepped_log, provenance, self.warnings)
+        finished = self.kind.finished(self.resolved, self.stepped_log, provenance, self.warnings)
+        if self.fault_detector is not None:
+            finished.fault_detections = [
+                {"actuator": self.input_names[found.index], "t_s": t, "lost": found.lost,
+                 "score": found.sigmas}
+                for _, t, found in self.faults_found
+            ]  # fmt: skip
+        return finished
 
     def close(
         self, out_dir: str | Path | None = None, figures: bool = True, *, overwrite: bool = False
