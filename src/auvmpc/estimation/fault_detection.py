@@ -16,9 +16,10 @@ slow, which would otherwise read as a fault of whichever thruster pushes against
 (i, j) with the smallest residual sum of squares is the likeliest single fault. This is
 fault detection by parameter estimation on a parity residual (Isermann, *Fault-Diagnosis
 Systems*, 2006): an input is found failed when its lambda is between :data:`LOSS_FOUND` and
-:data:`LOSS_MOST` and :data:`LOSS_SIGMAS` standard errors from zero, :data:`CONFIRM_SAMPLES`
-samples in a row. Found, it is taken as dead: the controller stops relying on it, the
-window restarts, and the prediction leaves it out (a second fault is found the same way).
+:data:`LOSS_MOST` and its score reaches :data:`LOSS_SIGMAS`; one sample is enough, as the
+fault must first be isolated to one input (:data:`ISOLATION`). Found, it is taken as dead:
+the controller stops relying on it, the window restarts, and the prediction leaves it out
+(a second fault is found the same way).
 Dead, not its estimated share: a single sample's estimate is rough (a first version of this
 detector, one joint fit of every input, read a dead thruster on the BlueROV2 Heavy's helix
 as 58 % lost, and the controller, relying on the rest, let the heading go 0.5 rad off until
@@ -57,8 +58,6 @@ LOSS_MOST = 1.5
 # fault_detection on and no fault, `benchmarks/fault_detection.py --presets --sigmas 5`
 # finds healthy thrusters failed, and `--sigmas 12` finds none (docs/faults.md).
 LOSS_SIGMAS = 12.0
-# ... on this many samples in a row.
-CONFIRM_SAMPLES = 1
 # A fault is isolated to one input when its fit leaves at most this share of the residual
 # sum of squares the next best input's leaves; closer, the two are not told apart yet.
 ISOLATION = 0.7
@@ -97,7 +96,7 @@ class FaultDetector:
         self._weights = 1.0 / np.maximum(np.asarray(velocity_noise, dtype=float), NOISE_FLOOR)
         self.window = max(MIN_WINDOW_SAMPLES, round(WINDOW_S / sample_time))
         self._rows: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=self.window)
-        self._streak = np.zeros(self.n_inputs, dtype=int)
+        self._healthy = np.ones(self.n_inputs)
         self._state = np.zeros(HORIZONTAL.size)
         self._held: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -119,7 +118,7 @@ class FaultDetector:
     ) -> FaultFound | None:
         acting = effectiveness * command
         still = np.zeros(len(DISTURBANCE_NAMES))  # the window's constant takes any force
-        predicted, _, jacobian = self._step(before, acting, still, np.ones(self.n_inputs))
+        predicted, _, jacobian = self._step(before, acting, still, self._healthy)
         residual = (state[_NU] - np.asarray(predicted).ravel()[_NU]) * self._weights
         regressors = -np.asarray(jacobian)[_NU, :] * acting * self._weights[:, None]
         if not (np.isfinite(residual).all() and np.isfinite(regressors).all()):
@@ -129,17 +128,11 @@ class FaultDetector:
             return None
         best = self._likeliest_fault()
         if best is None:
-            self._streak[:] = 0
             return None
         index, lost, sigmas = best
-        failing = LOSS_FOUND <= lost <= LOSS_MOST and sigmas >= LOSS_SIGMAS
-        streak = self._streak[index] + 1 if failing else 0
-        self._streak[:] = 0
-        self._streak[index] = streak
-        if streak < CONFIRM_SAMPLES:
+        if not (LOSS_FOUND <= lost <= LOSS_MOST and sigmas >= LOSS_SIGMAS):
             return None
         self._rows.clear()
-        self._streak[:] = 0
         return FaultFound(index, lost, sigmas)
 
     def _likeliest_fault(self) -> tuple[int, float, float] | None:

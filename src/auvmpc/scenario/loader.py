@@ -119,16 +119,17 @@ def validate_document(data: dict[str, Any]) -> Scenario | DepthScenario:
     without a known ``kind``), not yet resolved for its vehicle; a bad field is one line."""
     kind = data.get("kind")
     known = kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
-    schema = SCENARIO_KINDS[known][0]
-    try:
-        return schema.model_validate(data)
-    except ValidationError as error:
-        raise format_validation_error(error) from None
+    return _validated(SCENARIO_KINDS[known][0], data)
 
 
 def validate_scenario(data: dict[str, Any]) -> Scenario:
+    """A horizontal scenario document validated (:func:`validate_document` takes any kind)."""
+    return _validated(Scenario, data)
+
+
+def _validated(schema: type, data: dict[str, Any]) -> Any:
     try:
-        return Scenario.model_validate(data)
+        return schema.model_validate(data)
     except ValidationError as error:
         raise format_validation_error(error) from None
 

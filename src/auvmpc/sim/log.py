@@ -3,8 +3,8 @@
 Row k holds the TRUE plant state at t_k and the reference at t_k; the command on row k is
 what was applied over [t_k, t_k+1), so the last row has none (``shared/spec/interfaces.md``).
 Arrays are time-major, appended a row at a time as the run goes (sim/log_rows.py: blocks,
-so nothing needs the run's length up front); a live log (:class:`LiveLog`) writes each row to
-log.csv as it comes, and the log then keeps in memory only what the file does not hold.
+so nothing needs the run's length up front); a live log (:class:`LiveLog`) also writes each
+row to log.csv as it comes.
 
 One log for every kind of run: a :class:`LogFormat` is what a kind logs, as data: the names
 of its state (a layout), reference, environment and measurement, its inputs' prefix, the
@@ -247,17 +247,17 @@ class SimLog:
         self.initial_thrust = np.zeros(n_inputs)  # F(-1): the first rate limit's start
         layout, format = self.format.layout, self.format
         self._rows: dict[str, FieldRows] = {
-            "t": FieldRows("t"),
-            "state": FieldRows("state", (layout.size,)),
-            "reference": FieldRows("reference", (len(format.reference_names),)),
-            "environment": FieldRows("environment", (len(format.environment_names),)),
-            "clearance_m": FieldRows("clearance_m"),
-            "measured": FieldRows("measured", (len(format.measured_names),)),
-            "thrust": FieldRows("thrust", (n_inputs,)),
-            "solve_ms": FieldRows("solve_ms"),
-            "status": FieldRows("status", text=True),
-            "effectiveness": FieldRows("effectiveness", (n_inputs,)),
-            **{d.field: FieldRows(d.field, d.shape, d.dtype, d.text) for d in format.diagnostics},
+            "t": FieldRows(),
+            "state": FieldRows((layout.size,)),
+            "reference": FieldRows((len(format.reference_names),)),
+            "environment": FieldRows((len(format.environment_names),)),
+            "clearance_m": FieldRows(),
+            "measured": FieldRows((len(format.measured_names),)),
+            "thrust": FieldRows((n_inputs,)),
+            "solve_ms": FieldRows(),
+            "status": FieldRows(text=True),
+            "effectiveness": FieldRows((n_inputs,)),
+            **{d.field: FieldRows(d.shape, d.dtype, d.text) for d in format.diagnostics},
         }
 
     @classmethod

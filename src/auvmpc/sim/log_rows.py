@@ -26,9 +26,9 @@ class FieldRows:
     writes the field (it is the field's storage until the next append)."""
 
     def __init__(
-        self, name: str, shape: tuple[int, ...] = (), dtype: type = float, text: bool = False
+        self, shape: tuple[int, ...] = (), dtype: type = float, text: bool = False
     ) -> None:
-        self.name, self.shape, self.dtype, self.text = name, shape, dtype, text
+        self.shape, self.dtype, self.text = shape, dtype, text
         self._blocks: list[Any] = []  # arrays (lists for text); the last one is being filled
         self._filled = 0  # rows in the last block
         self.count = 0  # rows appended

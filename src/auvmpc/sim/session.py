@@ -128,6 +128,8 @@ class Session:
         self._initial_state = np.asarray(initial_state, dtype=float).copy()
         self._effectiveness: np.ndarray | None = None  # all healthy
         self.fault_detector = fault_detector
+        self._healthy = np.ones(self.n_inputs)  # what "all healthy" assumes (never written)
+        self._healthy.setflags(write=False)
         self._found = np.ones(self.n_inputs)  # the detector's effectiveness of each input
         #: What the detector found: (sample k, time, FaultFound), in order.
         self.faults_found: list[tuple[int, float, FaultFound]] = []
@@ -214,7 +216,7 @@ class Session:
             effectiveness=assumed,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
-        acting = np.ones(self.n_inputs) if assumed is None else assumed
+        acting = self._healthy if assumed is None else assumed
         if self.fault_detector is not None:
             watched = self.fault_detector.n_inputs
             self.fault_detector.held(thrust[:watched], acting[:watched])
@@ -272,7 +274,7 @@ class Session:
         (:attr:`effectiveness`) times what the detector found; None: all healthy."""
         if self._effectiveness is None and not self.faults_found:
             return None
-        told = np.ones(self.n_inputs) if self._effectiveness is None else self._effectiveness
+        told = self._healthy if self._effectiveness is None else self._effectiveness
         return told * self._found
 
     def _check_open(self, what: str) -> None:
