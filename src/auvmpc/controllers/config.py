@@ -249,7 +249,7 @@ class HorizontalControllerConfig(TypedControllerConfig):
     def _knob_owners(cls, knob: str) -> list[str]:
         from auvmpc.controllers.registry import knob_owners
 
-        return knob_owners(knob)
+        return knob_owners(knob, cls)
 
     def _has(self, knob: str) -> bool:
         """Whether this controller type has ``knob``."""
@@ -746,9 +746,9 @@ class DepthChannelConfig(TypedControllerConfig):
 
     @classmethod
     def _knob_owners(cls, knob: str) -> list[str]:
-        from auvmpc.controllers.registry import depth_knob_owners
+        from auvmpc.controllers.registry import knob_owners
 
-        return depth_knob_owners(knob)
+        return knob_owners(knob, cls)
 
     def for_vehicle(self, model: VehicleParams) -> DepthChannelConfig:
         """Nothing is left to fill in for a vehicle (the registry asks every config)."""

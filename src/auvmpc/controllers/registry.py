@@ -60,7 +60,6 @@ __all__ = [
     "build_controller",
     "class_of",
     "controller_config",
-    "depth_knob_owners",
     "knob_owners",
     "register_controller",
     "retyped",
@@ -157,16 +156,11 @@ def class_of(config: Any) -> type[Controller]:
     return _entry(config).controller
 
 
-def knob_owners(knob: str) -> list[str]:
-    """The horizontal controller types whose configuration has ``knob``."""
-    return [str(name) for name, entry in REGISTRY.items() if knob in entry.config.model_fields]
-
-
-def depth_knob_owners(knob: str) -> list[str]:
-    """The depth controller types whose configuration has ``knob``."""
-    return [
-        str(name) for name, entry in DEPTH_REGISTRY.items() if knob in entry.config.model_fields
-    ]
+def knob_owners(knob: str, kind: type = HorizontalControllerConfig) -> list[str]:
+    """The controller types of ``kind``'s table (a horizontal or a depth configuration class)
+    whose configuration has ``knob``."""
+    table = DEPTH_REGISTRY if issubclass(kind, DepthChannelConfig) else REGISTRY
+    return [str(name) for name, entry in table.items() if knob in entry.config.model_fields]
 
 
 def horizontal_types() -> list[str]:
