@@ -73,8 +73,9 @@ def test_a_registered_controller_has_knobs_of_its_own(tmp_path, example):
     # the knobs of paper-ideal's mpc in a file that names this type: refused, not ignored
     text = (Path(auvmpc.__file__).parent / "presets/scenarios/paper-ideal.yaml").read_text()
     (tmp_path / "own.yaml").write_text(text.replace("type: mpc", f"type: {NAME}"))
-    with pytest.raises(ConfigError, match=f"controller.prediction_horizon: a knob of mpc, "
-                       f"ltv-mpc, nmpc, do-mpc, not of controller type {NAME}"):  # fmt: skip
+    owners = "mpc, ltv-mpc, nmpc, do-mpc, six-dof-nmpc"
+    with pytest.raises(ConfigError, match=f"controller.prediction_horizon: a knob of {owners}, "
+                       f"not of controller type {NAME}"):  # fmt: skip
         auvmpc.load_scenario(tmp_path / "own.yaml")
 
 

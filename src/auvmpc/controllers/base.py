@@ -109,6 +109,9 @@ class Controller(ABC):
 
     sample_time: float
     preview_steps: int
+    # Whether it commands every input of the 6-DOF vehicle on the whole measured 6-DOF state
+    # (kind: six-dof only), rather than the horizontal thrusters on [x, y, psi, u, v, r].
+    whole_vehicle: bool = False
     # What a run should record about how this controller was built (e.g. a slower path
     # taken because the machine lacks something); the run adds them to its warnings.
     build_warnings: tuple[str, ...] = ()

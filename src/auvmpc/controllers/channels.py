@@ -204,8 +204,9 @@ class HorizontalAndDepth(Controller):
 
 
 class EveryThruster(Controller):
-    """A controller of every ``six_dof`` thruster at once (``thrust-playback`` of a 6-DOF
-    table: roll and pitch moments the depth channel's equal split cannot make), as the 6-DOF
+    """A controller of every ``six_dof`` input at once (``thrust-playback`` of a 6-DOF
+    table: roll and pitch moments the depth channel's equal split cannot make; a controller of
+    the whole vehicle, ``Controller.whole_vehicle``, e.g. ``six-dof-nmpc``), as the 6-DOF
     loop sees the pair: a :class:`ChannelResult` with the depth channel idle. It sees the
     6-DOF observation as it is; its command goes to the thrusters unmapped (it keeps its own
     limits)."""
@@ -216,7 +217,11 @@ class EveryThruster(Controller):
         self.preview_steps = controller.preview_steps
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self.controller.reset(horizontal_state(initial_state), initial_thrust)
+        """The true 6-DOF start for a controller of the whole vehicle, else its horizontal
+        part (a thrust table reads neither)."""
+        whole = self.controller.whole_vehicle
+        self.controller.reset(initial_state if whole else horizontal_state(initial_state),
+                              initial_thrust)  # fmt: skip
 
     def compute(self, observation: Observation) -> ChannelResult:
         result = self.controller.compute(observation)

@@ -77,6 +77,7 @@ class ControllerType(StrEnum):
     NMPC = "nmpc"  # nonlinear multiple shooting (CasADi): full IPOPT solve or real-time SQP
     DO_MPC = "do-mpc"  # the same OCP solved by do-mpc (pip install auvmpc[compare]), a yardstick
     THRUST_PLAYBACK = "thrust-playback"  # open loop: a thrust table played sample by sample
+    SIX_DOF_NMPC = "six-dof-nmpc"  # every 6-DOF input on the 6-DOF model (kind: six-dof only)
 
 
 class NmpcMode(StrEnum):

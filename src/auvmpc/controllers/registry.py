@@ -48,6 +48,7 @@ from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
 from auvmpc.controllers.playback import DepthPlaybackConfig, ThrustPlayback, ThrustPlaybackConfig
 from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
+from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
 from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
@@ -63,6 +64,7 @@ __all__ = [
     "knob_owners",
     "register_controller",
     "retyped",
+    "whole_vehicle",
 ]
 
 
@@ -83,6 +85,7 @@ REGISTRY: dict[str, ControllerEntry] = {
     ControllerType.NMPC: ControllerEntry(NmpcConfig, NonlinearMpc),
     ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController),
     ControllerType.THRUST_PLAYBACK: ControllerEntry(ThrustPlaybackConfig, ThrustPlayback),
+    ControllerType.SIX_DOF_NMPC: ControllerEntry(SixDofNmpcConfig, SixDofNmpc),
 }
 # The depth kind's (a depth scenario's ``controller``, a 6-DOF scenario's
 # ``depth_controller``, which takes only the depth MPC): thrust-playback's configuration
@@ -154,6 +157,12 @@ def _entry(config: Any) -> ControllerEntry:
 def class_of(config: Any) -> type[Controller]:
     """The class of a controller configuration (a horizontal or a depth one)."""
     return _entry(config).controller
+
+
+def whole_vehicle(config: Any) -> bool:
+    """Whether the configuration's controller commands every 6-DOF input itself on the 6-DOF
+    state (``Controller.whole_vehicle``), rather than the horizontal thrusters."""
+    return bool(getattr(class_of(config), "whole_vehicle", False))
 
 
 def knob_owners(knob: str, kind: type = HorizontalControllerConfig) -> list[str]:

@@ -26,7 +26,7 @@ from auvmpc.controllers.channels import EveryThruster, HorizontalAndDepth, Refer
 from auvmpc.controllers.config import ControllerType, stable_model_substeps
 from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.playback import ThrustPlayback
-from auvmpc.controllers.registry import build_controller, class_of
+from auvmpc.controllers.registry import build_controller, class_of, whole_vehicle
 from auvmpc.environment.currents import WaterCurrent
 from auvmpc.environment.depth_sensor import PressureSensor
 from auvmpc.environment.disturbances import SensorNoise, WorldDisturbance
@@ -45,7 +45,7 @@ from auvmpc.scenario import (
     scenario_to_dict,
 )
 from auvmpc.scenario.loader import SCENARIO_KINDS
-from auvmpc.sim.log import LogFormat, LogTable, SimLog
+from auvmpc.sim.log import WHOLE_VEHICLE_LOG, LogFormat, LogTable, SimLog
 from auvmpc.sim.loop import Sensor
 from auvmpc.sim.metrics import (
     compute_depth_metrics,
@@ -53,7 +53,14 @@ from auvmpc.sim.metrics import (
     compute_six_dof_metrics,
     fault_metrics,
 )
-from auvmpc.sim.plant import HeavePlant, HorizontalPlant, Plant, SixDofPlant, SixDofSensor
+from auvmpc.sim.plant import (
+    HeavePlant,
+    HorizontalPlant,
+    Plant,
+    SixDofPlant,
+    SixDofSensor,
+    WholeStateSensor,
+)
 from auvmpc.sim.session import StateReference
 
 if TYPE_CHECKING:
@@ -256,7 +263,13 @@ class HorizontalKind(RunKind):
         return {"current": current, "sensor": sensor, "obstacles": obstacles}
 
     def controller(self, scenario, model: VehicleParams) -> Controller:
-        return build_controller(scenario.controller, model, obstacle_count=len(scenario.obstacles))
+        config = scenario.controller
+        if whole_vehicle(config):
+            raise ConfigError(
+                "controller.type", str(config.type),
+                "commands every input of the 6-DOF vehicle: kind: six-dof scenarios only",
+            )  # fmt: skip
+        return build_controller(config, model, obstacle_count=len(scenario.obstacles))
 
     def start(self, resolved, controller: Controller) -> SessionStart:
         scenario = resolved.scenario
@@ -357,6 +370,9 @@ class SixDofKind(HorizontalKind):
         if config.type == ControllerType.THRUST_PLAYBACK:
             filled = config.for_vehicle(model)
             return EveryThruster(ThrustPlayback.playing(model, filled, model.six_dof_actuators))
+        if whole_vehicle(config):
+            count = len(scenario.obstacles)
+            return EveryThruster(build_controller(config, model, obstacle_count=count))
         return super().controller(scenario, model)
 
     def start(self, resolved, controller: Controller) -> SessionStart:
@@ -369,11 +385,12 @@ class SixDofKind(HorizontalKind):
                 controller, depth, model, scenario.depth_controller.preview
             )
         x, y, psi, u, v, r = scenario.initial_state
+        log_format = WHOLE_VEHICLE_LOG if whole_vehicle(scenario.controller) else self.log_format
         return SessionStart(
             controller,
             ReferenceWithDepth(resolved.reference),
             SimLog(
-                model.six_dof_actuators.layout.names, _sample_time(scenario), self.log_format,
+                model.six_dof_actuators.layout.names, _sample_time(scenario), log_format,
                 horizontal_inputs=model.n_thrusters,
             ),
             _steps(scenario),
@@ -393,7 +410,8 @@ class SixDofKind(HorizontalKind):
             else WaterCurrent(water, sample_time, np.random.default_rng(seeds["current"]))
         )
         sensing = scenario.sensing
-        sensor = SixDofSensor(
+        measures = WholeStateSensor if whole_vehicle(scenario.controller) else SixDofSensor
+        sensor = measures(
             SensorNoise(sensing, np.random.default_rng(seeds["sensor"])),
             sensing.depth_std_m, sensing.depth_rate_std_m_per_s,
             np.random.default_rng(seeds["depth"]),
@@ -401,7 +419,10 @@ class SixDofKind(HorizontalKind):
         return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
 
     def libraries(self, scenario) -> tuple[str, ...]:
-        """The horizontal controller's, then the depth MPC's."""
+        """The horizontal controller's, then the depth MPC's (none beside a controller of
+        the whole vehicle)."""
+        if whole_vehicle(scenario.controller):
+            return super().libraries(scenario)
         depth = scenario.depth_controller
         return (*super().libraries(scenario), *class_of(depth).libraries(depth))
 

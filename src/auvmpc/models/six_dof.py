@@ -43,7 +43,7 @@ import numpy as np
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
 from auvmpc.models.layout import HORIZONTAL, Layout
 from auvmpc.models.six_dof_params import SixDofParams, skew
-from auvmpc.models.vehicle import VehicleParams, stable_plant_step, steady_speed
+from auvmpc.models.vehicle import RK4_STABLE_STEP, VehicleParams, stable_plant_step, steady_speed
 
 __all__ = [
     "ANGULAR_VELOCITY",
@@ -224,6 +224,8 @@ def _expression(params: VehicleParams, state, thrust, current_world, current_rat
     )  # D(nu_r) nu_r, diagonal: element-wise
     g = restoring_forces(six.weight(params.mass), six.buoyancy, r_g, r_b, phi, theta)
     tau = params.six_dof_actuators.force(nu_r, thrust)
+    if six.hull_lift is not None:
+        tau = tau + hull_lift(six.hull_lift, nu_r)
 
     forces = (
         tau
@@ -238,6 +240,14 @@ def _expression(params: VehicleParams, state, thrust, current_world, current_rat
     return ca.vertcat(eta_dot, nu_dot)
 
 
+def hull_lift(derivatives, nu_r):
+    """The hull's lift and its moment at relative velocity ``nu_r`` (Prestero's body lift,
+    SixDofParams.hull_lift): [0, Y_uv u v, Z_uw u w, 0, M_uw u w, N_uv u v]."""
+    y_uv, z_uw, m_uw, n_uv = derivatives
+    sideslip, attack = nu_r[0] * nu_r[1], nu_r[0] * nu_r[2]
+    return ca.vertcat(0, y_uv * sideslip, z_uw * attack, 0, m_uw * attack, n_uv * sideslip)
+
+
 class SixDofModel:
     """The 6-DOF model of one vehicle as compiled CasADi functions, built once.
 
@@ -250,7 +260,7 @@ class SixDofModel:
     def __init__(self, params: VehicleParams) -> None:
         six_dof_section(params)
         self.params = params
-        self.n_thrusters = params.six_dof.n_thrusters
+        self.n_thrusters = params.six_dof_actuators.size
         state, thrust = ca.SX.sym("x", NX), ca.SX.sym("F", self.n_thrusters)
         current, current_rate = ca.SX.sym("v_c", 3), ca.SX.sym("v_c_rate", 3)
         derivative = _expression(params, state, thrust, current, current_rate)
@@ -339,6 +349,14 @@ def plant_step_length(params: VehicleParams, longest: float) -> float:
         if math.isfinite(top):
             rates.append(abs(linear + 2.0 * quadratic * top) / inertia[axis])
     return min(stable_plant_step(params, longest), ACCURATE_RATE_STEP / max(rates))
+
+
+def stable_substeps(params: VehicleParams, sample_time: float) -> int:
+    """The fewest RK4 steps per ``sample_time`` that keep a prediction stable on the 6-DOF
+    model's fastest mode (h |lambda| <= RK4_STABLE_STEP; :func:`plant_step_length` finds the
+    rate, with the accuracy rule the plant needs)."""
+    fastest = ACCURATE_RATE_STEP / plant_step_length(params, sample_time)
+    return max(1, math.ceil(sample_time * fastest / RK4_STABLE_STEP))
 
 
 CurrentAt = Callable[[float, np.ndarray], tuple[np.ndarray, np.ndarray]]

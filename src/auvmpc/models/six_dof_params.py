@@ -131,6 +131,13 @@ class SixDofParams(StrictModel):
     quadratic_damping: Damping6 = Field(
         description="[X_uu, Y_vv, Z_ww, K_pp, M_qq, N_rr] (negative; N s2/m2, N m s2)"
     )
+    hull_lift: tuple[float, float, float, float] | None = Field(
+        default=None,
+        description="the hull's lift in a sideslip or an angle of attack, Prestero's body-lift "
+        "derivatives [Y_uv, Z_uw, M_uw, N_uv] (kg/m, kg/m, kg, kg): Y = Y_uv u_r v_r, Z = "
+        "Z_uw u_r w_r, M = M_uw u_r w_r, N = N_uv u_r v_r; omitted: none (a slender hull "
+        "moving fast needs it, a box-shaped ROV does not)",
+    )
     thrusters: tuple[Thruster3D, ...] = Field(
         min_length=1,
         description="every thruster (horizontal and vertical); the 6-DOF plant takes one "

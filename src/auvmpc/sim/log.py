@@ -48,6 +48,7 @@ __all__ = [
     "MAX_LOG_BYTES",
     "REFERENCE_NAMES",
     "SIX_DOF_LOG",
+    "WHOLE_VEHICLE_LOG",
     "LiveLog",
     "LogFormat",
     "LogTable",
@@ -117,7 +118,7 @@ class HorizontalPart:
 
     state: np.ndarray
     reference: slice
-    measured: slice
+    measured: slice | np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -578,6 +579,13 @@ SIX_DOF_LOG = LogFormat(
         HORIZONTAL_INDEX, _HORIZONTAL_REFERENCE, SIX_DOF_MEASUREMENT.span("x", "r")
     ),
     solve_ms_attribute="horizontal_solve_ms",  # the channel's own time, not the mapping's
+)
+# The same log for a controller of the whole vehicle (Controller.whole_vehicle): it measures
+# the whole 6-DOF state, in the state's order; log.csv's columns are the same.
+WHOLE_VEHICLE_LOG = replace(
+    SIX_DOF_LOG,
+    measured_names=SIX_DOF.names,
+    horizontal_part=replace(SIX_DOF_LOG.horizontal_part, measured=HORIZONTAL_INDEX),
 )
 
 

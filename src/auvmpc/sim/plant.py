@@ -39,6 +39,7 @@ from auvmpc.models.layout import (
     WORLD_VECTOR,
 )
 from auvmpc.models.six_dof import (
+    HORIZONTAL_INDEX,
     SIX_DOF,
     depth_rate,
     horizontal_state,
@@ -214,6 +215,21 @@ class SixDofSensor:
         depth = true_state[_SIX_DOF_DEPTH] + self.depth_std * self._rng.standard_normal()
         rate = depth_rate(true_state) + self.rate_std * self._rng.standard_normal()
         return np.concatenate([horizontal, [depth, rate]])  # SIX_DOF_MEASUREMENT's order
+
+
+class WholeStateSensor(SixDofSensor):
+    """What a controller of the whole vehicle measures: the whole 6-DOF state (SIX_DOF's
+    order), the navigation sensor's ``[x, y, psi, u, v, r]`` and the depth with their noise
+    as :class:`SixDofSensor` draws it; roll, pitch, heave velocity and the roll and pitch rates
+    as they are (an attitude and heading reference and a DVL measure them far better than the
+    position: their noise is not modelled)."""
+
+    def measure(self, true_state: np.ndarray, t: float) -> np.ndarray:
+        noisy = self.navigation.measure(horizontal_state(true_state))
+        measured = np.array(true_state, dtype=float)
+        measured[HORIZONTAL_INDEX] = noisy
+        measured[_SIX_DOF_DEPTH] += self.depth_std * self._rng.standard_normal()
+        return measured
 
 
 def plant_step(

@@ -1,0 +1,364 @@
+"""Nonlinear MPC of the whole 6-DOF vehicle (``six-dof-nmpc``): every input at once, on the
+6-DOF model, for any actuator kinds (thrusters, a propeller, fins).
+
+The paper's architecture splits the 6-DOF vehicle into a horizontal and a depth channel, each
+on its own reduced model with fixed thrusters (controllers/channels.py). A torpedo AUV has no
+such split: one propeller, a rudder and stern planes whose forces grow with the speed squared
+and couple surge, yaw, pitch and depth (models/actuators). This controller predicts with the
+6-DOF model itself (models/six_dof.py, through the vehicle's ``six_dof_actuators``), so one
+statement flies a thruster vehicle and a torpedo.
+
+The program (multiple shooting, built once as expanded SX; IPOPT from the shifted previous
+solution, to convergence or its iteration cap):
+
+    min  sum_{n=1}^{N} |e(x_n, r_n)|_Q^2 + sum_{n=0}^{N-1} |(u_n - u_{n-1}) / range|_R^2
+    s.t. x_{n+1} = RK4(x_n, u_n; e, v_c),  lower <= u_n <= upper,
+         |u_n - u_{n-1}| <= rate Te,  |theta_n| <= PITCH_BOUND_RAD
+
+e(x, r): the position and depth errors, the heading's as 2 (1 - cos(psi - psi_r)), the
+surge's, and roll, pitch and the angular rates against the reference's (level, the path's
+turn rate). Each input is weighted over its own range, so rpm and degrees weigh alike; e is
+each actuator's effectiveness (a parameter: a fault changes it, not the program).
+
+Path following with a speed profile: the reference is the path's point at t_k + n Te. A
+vehicle that can push sideways tracks the reference's heading; one that cannot (a torpedo:
+no actuator makes a sway force at rest) is asked for the crab heading that holds the path's
+ground track through the estimated current (the velocity through the water is the path's
+ground velocity less the current), not to point along a path it can only follow crabbing.
+The current is estimated offset-free from the one-step prediction error of the position and
+velocity: a damped Gauss-Newton step of the world-frame horizontal current each sample
+(``current_gain``).
+
+Safety shell: a solution lies inside the hard limits by construction; a failed solve applies
+the previous plan's next move (``fallback``), and after the plan is used up holds the last
+command.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Literal
+
+import casadi as ca
+import numpy as np
+from pydantic import Field
+
+from auvmpc.config import NonNegative
+from auvmpc.controllers.base import (
+    Controller,
+    ControlResult,
+    ControlStatus,
+    Observation,
+    next_planned_move,
+)
+from auvmpc.controllers.config import (
+    ControllerType,
+    HorizontalControllerConfig,
+    default_vehicle_radius,
+    type_field,
+)
+from auvmpc.errors import ConfigError
+from auvmpc.models.actuators import WRENCH, ActuatorSet
+from auvmpc.models.integrators import rk4
+from auvmpc.models.six_dof import (
+    BODY_VELOCITY,
+    PITCH_LIMIT_RAD,
+    SIX_DOF,
+    six_dof_model,
+    stable_substeps,
+)
+from auvmpc.models.vehicle import VehicleParams
+
+__all__ = ["SIX_DOF_NMPC", "SixDofNmpc", "SixDofNmpcConfig"]
+
+SIX_DOF_NMPC = ControllerType.SIX_DOF_NMPC
+NX = SIX_DOF.size
+# The reference rows a 6-DOF controller sees (controllers/channels.py, ReferenceWithDepth):
+# [x, y, psi, u, v, r, z, z'].
+_REF_XY, _REF_R, _REF_Z = slice(0, 2), 5, 6
+_XY = SIX_DOF.span("x", "y")
+_Z, _PHI, _THETA, _PSI = (SIX_DOF.index(name) for name in ("z", "phi", "theta", "psi"))
+_U = SIX_DOF.index("u")
+_RATES = SIX_DOF.span("p", "r")
+# What the current observer compares: the horizontal position and the body velocities.
+_OBSERVED = np.array([SIX_DOF.index(name) for name in ("x", "y", "u", "v", "w")])
+# IPOPT's tolerance and iteration cap per sample; its barrier start from a shifted solution.
+_TOLERANCE = 1e-6
+_WARM_MU_INIT = 1e-4
+# The prediction's pitch bound (rad), well short of the kinematics' singularity.
+PITCH_BOUND_RAD = math.radians(45.0)
+assert PITCH_BOUND_RAD < PITCH_LIMIT_RAD
+# Reference parameters per node: x, y, z, heading, surge, yaw rate, pitch.
+_NODE = 7
+# The current observer's ridge, as a share of its normal matrix's trace, and that trace's floor
+# (a vehicle feeling no current at all: the estimate then stays where it is).
+_RIDGE = 1e-2
+_RIDGE_FLOOR = 1e-12
+# A force below this (N) is none: round-off of a wrench that should vanish.
+_NO_FORCE_N = 1e-9
+# Below this ground speed (m/s) the path gives no direction: hold the reference's heading.
+_STILL_M_PER_S = 1e-3
+
+
+class SixDofNmpcConfig(HorizontalControllerConfig):
+    """``six-dof-nmpc``: the whole vehicle's nonlinear MPC (module docstring)."""
+
+    type: Literal[ControllerType.SIX_DOF_NMPC] = type_field(SIX_DOF_NMPC)
+    prediction_horizon: int = Field(default=40, ge=2, le=400, description="N (samples)")
+    model_substeps: int | None = Field(
+        default=None, ge=1, le=50,
+        description="RK4 steps per sample of the prediction; omitted: the fewest that keep RK4 "
+        "stable on the vehicle's fastest 6-DOF mode (models/six_dof.py, stable_substeps)",
+    )  # fmt: skip
+    position_weight: NonNegative = Field(default=1.0, description="Q of x and y (1/m2)")
+    depth_weight: NonNegative = Field(default=4.0, description="Q of the depth (1/m2)")
+    heading_weight: NonNegative = Field(
+        default=1.0, description="Q of 2 (1 - cos(heading error)) (1/rad2)"
+    )
+    speed_weight: NonNegative = Field(default=1.0, description="Q of the surge (s2/m2)")
+    attitude_weight: NonNegative = Field(default=1.0, description="Q of roll and pitch (1/rad2)")
+    rate_weight: NonNegative = Field(
+        default=1.0, description="Q of the angular rates p, q, r (s2/rad2)"
+    )
+    input_change_weight: NonNegative = Field(
+        default=1.0, description="R of each input's change per sample, over its range"
+    )
+    current_gain: float = Field(
+        default=0.2, ge=0.0, le=1.0,
+        description="share of the one-step position prediction error taken into the current "
+        "estimate each sample (0: no estimate)",
+    )  # fmt: skip
+    max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
+
+    def for_vehicle(self, model: VehicleParams) -> SixDofNmpcConfig:
+        """Filled: the sample time (0.2 s unless given), the RK4 steps and the vehicle
+        radius."""
+        update: dict = {}
+        sample_time = self.sample_time or DEFAULT_SAMPLE_TIME_S
+        if self.sample_time is None:
+            update["sample_time"] = sample_time
+        if self.model_substeps is None and model.six_dof is not None:
+            update["model_substeps"] = stable_substeps(model, sample_time)
+        if self.vehicle_radius is None:
+            update["vehicle_radius"] = default_vehicle_radius(model)
+        return self.model_copy(update=update) if update else self
+
+
+DEFAULT_SAMPLE_TIME_S = 0.2
+
+
+def pushes_sideways(inputs: ActuatorSet) -> bool:
+    """Whether some command of ``inputs`` makes a sway force with the vehicle at rest (a
+    thruster set does; a propeller and fins, whose forces need the flow, do not)."""
+    at_rest = np.zeros(BODY_VELOCITY.size)
+    sway = WRENCH.index("Y")
+    for command in (inputs.limits.lower, inputs.limits.upper):
+        full = np.broadcast_to(command, (inputs.size,)).astype(float)
+        for i in range(inputs.size):
+            alone = np.where(np.arange(inputs.size) == i, full, 0.0)
+            if abs(float(inputs.force(at_rest, alone)[sway])) > _NO_FORCE_N:
+                return True
+    return False
+
+
+class SixDofNmpc(Controller):
+    """The whole vehicle's nonlinear MPC (module docstring)."""
+
+    #: Commands every 6-DOF input itself (experiments/kinds.py pairs no depth channel).
+    whole_vehicle = True
+
+    def __init__(self, model: VehicleParams, config: SixDofNmpcConfig) -> None:
+        if model.six_dof is None:
+            raise ConfigError("vehicle.six_dof", model.name, "missing: six-dof-nmpc predicts "
+                              "with the 6-DOF model (docs/six-dof.md)")  # fmt: skip
+        config = config.for_vehicle(model)
+        self.model, self.config = model, config
+        self.sample_time = float(config.sample_time)
+        self.horizon = n = config.prediction_horizon
+        self.preview_steps = n
+        inputs = model.six_dof_actuators
+        self.limits = inputs.limits
+        self.n_inputs = nu = inputs.size
+        self._range = np.asarray(self.limits.upper - self.limits.lower, dtype=float)
+        self.crabs = not pushes_sideways(inputs)
+        self._build()
+        self.reset(np.zeros(NX), np.zeros(nu))
+
+    @classmethod
+    def from_config(cls, model, config, obstacle_count: int = 0) -> Controller:
+        return cls(model, config)
+
+    # -- the program --------------------------------------------------------------------
+    def _build(self) -> None:
+        config, n, nu = self.config, self.horizon, self.n_inputs
+        derivative = six_dof_model(self.model).derivative
+        x, u = ca.SX.sym("x", NX), ca.SX.sym("u", nu)
+        current, share = ca.SX.sym("v_c", 3), ca.SX.sym("e", nu)
+        still = ca.DM.zeros(3)
+
+        def f(state, command):
+            return derivative(state, command * share, current, still)
+
+        step = ca.Function(
+            "step", [x, u, current, share],
+            [rk4(f, x, u, self.sample_time, config.model_substeps)],
+        )  # fmt: skip
+        self._step = step
+        # How the predicted state moves with the horizontal current: the observer's map.
+        self._current_sensitivity = ca.Function(
+            "current_sensitivity", [x, u, current, share],
+            [ca.jacobian(step(x, u, current, share), current)[:, 0:2]],
+        )  # fmt: skip
+        X = ca.SX.sym("X", NX, n + 1)
+        U = ca.SX.sym("U", nu, n)
+        x0, u_prev = ca.SX.sym("x0", NX), ca.SX.sym("u_prev", nu)
+        nodes = ca.SX.sym("r", _NODE, n)  # per predicted node 1..N: x, y, z, psi, u, r, theta
+        scale = ca.DM(1.0 / self._range)
+        weights = config
+        cost = 0
+        gaps = [X[:, 0] - x0]
+        changes = []
+        previous = u_prev
+        for i in range(n):
+            gaps.append(X[:, i + 1] - step(X[:, i], U[:, i], current, share))
+            change = (U[:, i] - previous) * scale
+            changes.append(U[:, i] - previous)
+            cost += weights.input_change_weight * ca.sumsqr(change)
+            previous = U[:, i]
+            state, node = X[:, i + 1], nodes[:, i]
+            cost += weights.position_weight * ca.sumsqr(state[_XY.start : _XY.stop] - node[0:2])
+            cost += weights.depth_weight * (state[_Z] - node[2]) ** 2
+            cost += weights.heading_weight * 2.0 * (1.0 - ca.cos(state[_PSI] - node[3]))
+            cost += weights.speed_weight * (state[_U] - node[4]) ** 2
+            cost += weights.attitude_weight * (state[_PHI] ** 2 + (state[_THETA] - node[6]) ** 2)
+            rates = state[_RATES.start : _RATES.stop] - ca.vertcat(0, 0, node[5])
+            cost += weights.rate_weight * ca.sumsqr(rates)
+        w = ca.vertcat(ca.vec(X), ca.vec(U))
+        p = ca.vertcat(x0, u_prev, ca.vec(nodes), current, share)
+        g = ca.vertcat(*gaps, *changes)
+        nlp = {"x": w, "p": p, "f": cost, "g": g}
+        options = {
+            "ipopt": {
+                "print_level": 0, "sb": "yes", "tol": _TOLERANCE,
+                "max_iter": config.max_iterations,
+                "warm_start_init_point": "yes", "mu_init": _WARM_MU_INIT,
+                "warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
+            },
+            "print_time": False,
+        }  # fmt: skip
+        self._solver = ca.nlpsol("six_dof_nmpc", "ipopt", nlp, options)
+        # Bounds: states free but the pitch; inputs in their box; gaps zero; changes in rate.
+        lower_x = np.full((NX, n + 1), -np.inf)
+        upper_x = np.full((NX, n + 1), np.inf)
+        lower_x[_THETA, 1:], upper_x[_THETA, 1:] = -PITCH_BOUND_RAD, PITCH_BOUND_RAD
+        lower_u = np.tile(np.broadcast_to(self.limits.lower, (nu,)), n)
+        upper_u = np.tile(np.broadcast_to(self.limits.upper, (nu,)), n)
+        self._lbw = np.concatenate([lower_x.ravel(order="F"), lower_u])
+        self._ubw = np.concatenate([upper_x.ravel(order="F"), upper_u])
+        max_change = np.tile(np.broadcast_to(self.limits.rate * self.sample_time, (nu,)), n)
+        zeros = np.zeros(NX * (n + 1))
+        self._lbg = np.concatenate([zeros, -max_change])
+        self._ubg = np.concatenate([zeros, max_change])
+        self._n_states = NX * (n + 1)
+
+    # -- the controller -----------------------------------------------------------------
+    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
+        self._previous = np.asarray(initial_thrust, dtype=float).copy()
+        self._guess: tuple[np.ndarray, np.ndarray] | None = None  # (w, lam_g) shifted
+        self._plan: np.ndarray | None = None
+        self._current = np.zeros(3)
+        self._predicted: np.ndarray | None = None  # x_{k} as the last sample predicted it
+
+    def compute(self, observation: Observation) -> ControlResult:
+        state = np.asarray(observation.state, dtype=float)
+        share = (
+            np.ones(self.n_inputs)
+            if observation.effectiveness is None
+            else np.asarray(observation.effectiveness, dtype=float)
+        )
+        self._estimate_current(state)
+        nodes = self._nodes(state, observation.reference)
+        parameters = np.concatenate(
+            [state, self._previous, nodes.ravel(order="F"), self._current, share]
+        )
+        w0, lam0 = self._guess if self._guess is not None else self._cold(state)
+        started = time.perf_counter()
+        solution = self._solver(
+            x0=w0, lam_g0=lam0, p=parameters,
+            lbx=self._lbw, ubx=self._ubw, lbg=self._lbg, ubg=self._ubg,
+        )  # fmt: skip
+        solve_time = time.perf_counter() - started
+        stats = self._solver.stats()
+        w = np.asarray(solution["x"], dtype=float).ravel()
+        usable = stats["success"] or stats["return_status"] == "Maximum_Iterations_Exceeded"
+        if usable and np.all(np.isfinite(w)):
+            states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
+            plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
+            command = self.limits.project(plan[0], self._previous, self.sample_time)[0]
+            self._guess = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
+            self._plan, status = plan, ControlStatus.OK
+        else:
+            wanted, self._plan = next_planned_move(self._plan, self._previous)
+            command = self.limits.project(wanted, self._previous, self.sample_time)[0]
+            self._guess, status = None, ControlStatus.FALLBACK
+        self._predicted = np.asarray(
+            self._step(state, command, self._current, share), dtype=float
+        ).ravel()
+        self._sensitivity = np.asarray(
+            self._current_sensitivity(state, command, self._current, share), dtype=float
+        )
+        self._previous = command
+        info = {"iterations": float(stats.get("iter_count", 0))}
+        return ControlResult(command.copy(), status, solve_time, info=info)
+
+    def _estimate_current(self, state: np.ndarray) -> None:
+        """The world-frame horizontal current, moved by ``current_gain`` of the least-squares
+        correction that explains the last one-step prediction's error (the prediction
+        assumed the estimate; its sensitivity to the current maps the error back)."""
+        if self._predicted is None:
+            return
+        error = state[_OBSERVED] - self._predicted[_OBSERVED]
+        sensitivity = self._sensitivity[_OBSERVED]
+        # Ridge-regularised: where the flow barely acts (a vehicle at rest under quadratic
+        # damping alone feels no first-order change of a small current) the plain least
+        # squares would divide by almost nothing (measured: a 3000 m/s estimate).
+        normal = sensitivity.T @ sensitivity
+        ridge = _RIDGE * max(float(np.trace(normal)), _RIDGE_FLOOR)
+        correction = np.linalg.solve(normal + ridge * np.eye(2), sensitivity.T @ error)
+        self._current[:2] += self.config.current_gain * correction
+
+    def _nodes(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """(_NODE, N) targets of nodes 1..N: position, depth, the crab heading through the
+        estimated current (continuous with the vehicle's heading), the surge that makes the
+        ground speed good along it, the path's turn rate and the pitch of its climb."""
+        rows = np.asarray(reference, dtype=float)[1 : self.horizon + 1]
+        ground = np.diff(np.asarray(reference, dtype=float)[:, _REF_XY], axis=0)[: self.horizon]
+        ground = ground / self.sample_time
+        through_water = ground - self._current[:2]
+        speed = np.hypot(through_water[:, 0], through_water[:, 1])
+        tangent = rows[:, 2]
+        crab = np.arctan2(through_water[:, 1], through_water[:, 0])
+        heading = np.where(self.crabs & (speed > _STILL_M_PER_S), crab, tangent)
+        # unwrap onto the vehicle's turn: the cost's cosine does not mind, the guess does
+        heading = state[_PSI] + np.angle(np.exp(1j * (heading - state[_PSI])))
+        surge = np.hypot(ground[:, 0], ground[:, 1]) * np.cos(
+            np.arctan2(ground[:, 1], ground[:, 0]) - heading
+        )
+        climb = np.diff(np.asarray(reference, dtype=float)[:, _REF_Z])[: self.horizon]
+        pitch = np.arctan2(-climb / self.sample_time, np.maximum(speed, _STILL_M_PER_S))
+        return np.vstack(
+            [rows[:, 0], rows[:, 1], rows[:, _REF_Z], heading, surge, rows[:, _REF_R], pitch]
+        )
+
+    def _cold(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A first guess: the measured state held, the previous command held."""
+        states = np.tile(state, self.horizon + 1)
+        plan = np.tile(self._previous, self.horizon)
+        return np.concatenate([states, plan]), np.zeros(self._lbg.size)
+
+    def _shifted(self, states, plan, multipliers) -> tuple[np.ndarray, np.ndarray]:
+        """The solution one sample on (its last node and move repeated) as the next guess."""
+        states = np.hstack([states[:, 1:], states[:, -1:]])
+        plan = np.vstack([plan[1:], plan[-1:]])
+        return np.concatenate([states.ravel(order="F"), plan.ravel()]), multipliers

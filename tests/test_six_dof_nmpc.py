@@ -1,0 +1,107 @@
+"""The whole vehicle's nonlinear MPC (controllers/six_dof_nmpc.py) and what it stands on:
+the hull's lift, the prediction's RK4 steps, the current observer, the kind's wiring."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from auvmpc.controllers.base import Observation
+from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig, pushes_sideways
+from auvmpc.experiments.run import simulate
+from auvmpc.models import six_dof
+from auvmpc.models.actuators import ActuatorSet, ControlSurface, Propeller
+from auvmpc.models.vehicle import RK4_STABLE_STEP, load_vehicle
+from auvmpc.scenario import load_scenario
+from tests.test_cli import run_cli
+
+HEAVY = "bluerov2-heavy"
+# A short helix on the BlueROV2 Heavy with a short horizon: enough samples to see the
+# tracking settle, few enough for a unit test.
+SHORT = ["duration=8", "controller.type=six-dof-nmpc", "controller.prediction_horizon=10"]
+
+
+def test_hull_lift_adds_prestero_body_lift_to_the_model():
+    """The derivative with hull lift minus without is M^-1 [0, Y_uv u v, Z_uw u w, 0, M_uw u w,
+    N_uv u v] at any state: the terms enter as written (Prestero 2001, Table C.4's form)."""
+    base = load_vehicle(HEAVY)
+    lift = (-28.6, -20.0, -4.47, 4.47)
+    data = base.model_dump()
+    data["six_dof"]["hull_lift"] = lift
+    lifted = type(base).model_validate(data)
+    state = np.array([1.0, 2.0, 3.0, 0.05, -0.04, 0.3, 0.8, 0.2, -0.1, 0.01, 0.02, 0.03])
+    thrust = np.zeros(base.six_dof_actuators.size)
+    difference = six_dof.dynamics(state, thrust, lifted) - six_dof.dynamics(state, thrust, base)
+    u, v, w = state[6:9]
+    expected_force = np.array(
+        [0, lift[0] * u * v, lift[1] * u * w, 0, lift[2] * u * w, lift[3] * u * v]
+    )
+    mass = base.six_dof.mass_matrix(base.mass)
+    np.testing.assert_allclose(difference[6:], np.linalg.solve(mass, expected_force), atol=1e-12)
+    np.testing.assert_array_equal(difference[:6], 0.0)
+
+
+def test_prediction_substeps_keep_rk4_stable_on_the_fastest_mode():
+    """h |lambda| <= RK4_STABLE_STEP for every vehicle with a 6-DOF section, at the default
+    sample time and a longer one (the rule the prediction's substeps are chosen by)."""
+    for name in (HEAVY, "jmse2210"):
+        vehicle = load_vehicle(name)
+        fastest = six_dof.ACCURATE_RATE_STEP / six_dof.plant_step_length(vehicle, 1.0)
+        for sample_time in (0.2, 0.5):
+            steps = six_dof.stable_substeps(vehicle, sample_time)
+            assert sample_time / steps * fastest <= RK4_STABLE_STEP + 1e-12
+
+
+def test_a_torpedo_cannot_push_sideways_a_thruster_vehicle_can():
+    propeller = Propeller("propeller_rpm", (-0.8, 0, 0), (1, 0, 0), 0.14, 0.4566, 0.007, 1026.0,
+                          0.0, 1525.0, 1525.0)  # fmt: skip
+    rudder = ControlSurface("rudder_deg", (-0.64, 0, 0), (0, 0, 1), 0.0133, 1.41, 0.4, 1026.0,
+                            -20.0, 20.0, 100.0)  # fmt: skip
+    assert not pushes_sideways(ActuatorSet((propeller, rudder)))
+    assert pushes_sideways(load_vehicle(HEAVY).six_dof_actuators)
+
+
+def test_the_observer_finds_a_steady_current():
+    """Held still in a 0.2 m/s current by the controller on the nominal model, the estimate
+    converges on the true current: within 2 % after 10 s (the observer's gain 0.2 per sample
+    leaves 0.8^50 of the first error; the rest is the model's own prediction error)."""
+    vehicle = load_vehicle(HEAVY)
+    controller = SixDofNmpc(vehicle, SixDofNmpcConfig(prediction_horizon=5))
+    model = six_dof.six_dof_model(vehicle)
+    current = np.array([0.2, -0.1, 0.0])
+    state = np.zeros(12)
+    state[2] = 2.0
+    thrust = np.zeros(vehicle.six_dof_actuators.size)
+    controller.reset(state, thrust)
+    hold = np.tile([0, 0, 0, 0, 0, 0, 2.0, 0], (6, 1))  # [x, y, psi, u, v, r, z, z']
+    for k in range(50):
+        result = controller.compute(Observation(k, 0.2 * k, state.copy(), hold))
+        substeps = controller.config.model_substeps
+        state = six_dof.integrate(model, state, result.thrust, 0.2, substeps, held_current=current)
+    np.testing.assert_allclose(controller._current[:2], current[:2], rtol=0.02)
+
+
+def test_it_flies_the_six_dof_helix_within_the_hard_limits():
+    """BlueROV2 Heavy, 8 s of the helix: every sample solved, no input beyond its limits or
+    rate, position within 5 cm and depth within 2 cm after 4 s (the helix starts on the
+    vehicle; these bound the settling, the 60 s run measures 9 mm, CHANGELOG)."""
+    result = simulate(load_scenario("bluerov2-helix", SHORT))
+    metrics = result.metrics
+    assert metrics["thrust_limit_violations"] == metrics["thrust_rate_violations"] == 0
+    assert metrics["fallback_steps"] == 0
+    log = result.log
+    late = log.t >= 4.0
+    horizontal = log.horizontal()
+    error = np.hypot(*(horizontal.state[late, i] - horizontal.reference[late, i] for i in (0, 1)))
+    assert error.max() < 0.05
+    assert np.abs(log.column("z") - log.column("z_ref"))[late].max() < 0.02
+    assert log.format.measured_names == six_dof.SIX_DOF.names
+
+
+def test_a_horizontal_scenario_refuses_it_in_one_line(monkeypatch, capsys):
+    code, out, err = run_cli(
+        monkeypatch, capsys, "run", "paper-ideal", "--set", "controller.type=six-dof-nmpc",
+        "--no-figures", "--out", "never",
+    )  # fmt: skip
+    assert code == 2
+    assert "controller.type" in err and "six-dof" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
