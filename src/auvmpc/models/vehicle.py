@@ -183,10 +183,10 @@ class VehicleParams(StrictModel):
         "vehicle underactuated (``underactuated``); required unless ``actuators`` is given",
     )
     thrust_limits: ThrustLimits | None = Field(
-        default=None, description="per thruster [min, max] (N); required with ``thrusters``"
+        default=None, description="per thruster [min, max], required with ``thrusters`` (N)"
     )
     thrust_rate_limit: PositiveFloat | None = Field(
-        default=None, description="per thruster |dF/dt| bound (N/s); required with ``thrusters``"
+        default=None, description="per thruster |dF/dt| bound, required with ``thrusters`` (N/s)"
     )
     heave: HeaveParams | None = Field(default=None, description="depth model, if any")
     six_dof: SixDofParams | None = Field(
