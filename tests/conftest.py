@@ -194,11 +194,3 @@ HELIX_RMS_TOL_M = 0.1
 # here and on the estimator's BlueROV2 lawnmower, where the hand-written C estimator had
 # differed by up to 8.9e-6 N); 1e-9 N is issue 25's bound.
 C_EXPORT_COMMAND_TOL_N = 1e-9
-
-
-def thruster_presets() -> list[str]:
-    """The vehicle presets that fixed thrusters drive, what the 3-DOF and depth models and
-    their controllers fly (remus100 has a propeller and fins: 6-DOF only)."""
-    from auvmpc.models.vehicle import load_vehicle, preset_names
-
-    return [name for name in preset_names() if load_vehicle(name).has_thrusters]

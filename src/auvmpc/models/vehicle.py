@@ -30,6 +30,7 @@ import casadi as ca
 import numpy as np
 from pydantic import (
     AfterValidator,
+    ConfigDict,
     Field,
     SerializerFunctionWrapHandler,
     ValidationError,
@@ -61,6 +62,7 @@ __all__ = [
     "preset_names",
     "scaled",
     "steady_speed",
+    "thruster_preset_names",
     "top_yaw_rate",
     "heading_turn_time",
     "turn_up_time",
@@ -141,7 +143,9 @@ class VehicleSize(StrictModel):
 
 
 class VehicleParams(StrictModel):
-    """Everything the 3-DOF model needs, validated and immutable.
+    """Everything the 3-DOF model needs, validated and immutable; with ``actuators`` (a
+    propeller and fins) the 3-DOF coefficients m11 ... Nrr may be omitted: they are read off
+    ``six_dof``.
 
     Field names follow ``shared/spec/interfaces.md`` (the vehicle file contract). A vehicle
     is driven either by fixed ``thrusters`` (with ``thrust_limits``, ``thrust_rate_limit`` and,
@@ -150,6 +154,15 @@ class VehicleParams(StrictModel):
     omitted, read off ``six_dof`` (:func:`horizontal_equivalent`), and everything made of
     fixed thrusters (``T``, ``actuators``, ``n_thrusters``, ...) refuses it in one line.
     """
+
+    # The 3-DOF coefficients are required unless ``actuators`` is given (then read off
+    # six_dof, _horizontal_from_six_dof): a JSON schema cannot say "unless", so it lists them
+    # as optional and the loader says which is missing.
+    model_config = ConfigDict(
+        json_schema_extra=lambda schema: schema.update(
+            required=[n for n in schema.get("required", []) if n not in HORIZONTAL_MODEL_FIELDS]
+        )
+    )
 
     name: str = Field(description="short identifier")
     description: str = Field(default="", description="one line for humans")
@@ -784,6 +797,13 @@ def preset_names() -> list[str]:
     return sorted(
         p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml")
     )
+
+
+def thruster_preset_names() -> list[str]:
+    """The presets fixed thrusters drive: what the 3-DOF and depth models and their
+    controllers fly (a preset with ``actuators:``, a propeller and fins, flies only the 6-DOF
+    model)."""
+    return [name for name in preset_names() if load_vehicle(name).has_thrusters]
 
 
 def vehicle_data(

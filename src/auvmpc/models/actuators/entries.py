@@ -61,8 +61,10 @@ def _entry_model(kind: str, actuator: type) -> type[ActuatorEntryBase]:
     """The entry of ``kind``: ``kind`` plus the fields of the ``actuator`` dataclass."""
     hints = get_type_hints(actuator)
     fields: dict[str, Any] = {
-        field.name: (hints[field.name], ... if field.default is dataclasses.MISSING
-                     else field.default)
+        field.name: (hints[field.name], Field(
+            ... if field.default is dataclasses.MISSING else field.default,
+            description=field.metadata.get("description", ""),
+        ))
         for field in dataclasses.fields(actuator)
     }  # fmt: skip
     return create_model(
