@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from auvmpc.experiments.run import simulate
-from auvmpc.models.vehicle import VehicleParams, load_vehicle, preset_names
+from auvmpc.models.vehicle import VehicleParams, load_vehicle, thruster_preset_names
 from auvmpc.references import FigureEightConfig, make_reference
 from auvmpc.scenario import ResolvedScenario, apply_override, validate_scenario
 
@@ -130,7 +130,7 @@ def run_one(job: tuple[str, str, str, list[str]]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--vehicles", nargs="+", default=preset_names())
+    parser.add_argument("--vehicles", nargs="+", default=thruster_preset_names())
     parser.add_argument("--tracks", nargs="+", default=list(TRACKS), choices=TRACKS)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--set", dest="overrides", action="append", default=[])

@@ -49,7 +49,7 @@ from auvmpc.experiments.run import simulate
 from auvmpc.identification.estimation import HorizontalGreyBox, identify
 from auvmpc.identification.report import vehicle_file_text
 from auvmpc.models.random_vehicles import random_vehicle
-from auvmpc.models.vehicle import load_vehicle, preset_names, stable_plant_step
+from auvmpc.models.vehicle import load_vehicle, stable_plant_step, thruster_preset_names
 from auvmpc.scenario import ResolvedScenario, validate_scenario
 from auvmpc.scenario.model import DEFAULT_PLANT_STEP_S
 
@@ -72,7 +72,7 @@ def vehicle(job: tuple[str, int]):
     """(name, truth) of a preset or of random vehicle ``index``."""
     kind, index = job
     if kind == "preset":
-        return preset_names()[index], load_vehicle(preset_names()[index])
+        return thruster_preset_names()[index], load_vehicle(thruster_preset_names()[index])
     name = f"random-{index}"
     return name, random_vehicle(np.random.default_rng(index), name=name)
 
@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     eight_random = args.random if args.eight_random is None else args.eight_random
     accurate = not args.default_plant_step
     jobs = [("preset", i, i, args.duration, not args.no_eight, accurate)
-            for i in range(len(preset_names()))]  # fmt: skip
+            for i in range(len(thruster_preset_names()))]  # fmt: skip
     jobs += [
         ("random", args.seed + i, args.seed + i, args.duration,
          not args.no_eight and i < eight_random, accurate)

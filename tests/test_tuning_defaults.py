@@ -22,7 +22,13 @@ from auvmpc.estimation import ObserverConfig
 from auvmpc.experiments.run import simulate
 from auvmpc.models.integrators import rk4_step
 from auvmpc.models.random_vehicles import random_vehicle
-from auvmpc.models.vehicle import dynamics, load_vehicle, preset_names, scaled, stable_plant_step
+from auvmpc.models.vehicle import (
+    dynamics,
+    load_vehicle,
+    scaled,
+    stable_plant_step,
+    thruster_preset_names,
+)
 from auvmpc.scenario import (
     DEFAULT_PLANT_STEP_S,
     ResolvedDepthScenario,
@@ -41,7 +47,7 @@ FORMER_TUNING_RTOL = 0.11  # measured: 6 % (X, Y) and 10 % (N) away
 PAPER_VEHICLE_RADIUS_M = 0.5  # r_auv, paper-model.md section 7
 
 
-@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize("preset", thruster_preset_names())
 def test_default_thrust_weight_prices_a_half_range_move_the_same_on_every_vehicle(preset):
     model = load_vehicle(preset)
     config = ControllerConfig().for_vehicle(model)
@@ -143,7 +149,7 @@ def test_default_controller_tracks_an_ideal_circle_on_any_preset(preset):
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize("preset", thruster_preset_names())
 def test_presets_keep_the_default_plant_step(preset):
     assert stable_plant_step(load_vehicle(preset), DEFAULT_PLANT_STEP_S) == DEFAULT_PLANT_STEP_S
 
@@ -214,7 +220,7 @@ def test_a_campaign_may_scale_a_default_that_depends_on_the_vehicle(tmp_path):
 # -- controller.vehicle_radius from the vehicle's size ----------------------------------------
 
 
-@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize("preset", thruster_preset_names())
 def test_the_default_vehicle_radius_is_the_disc_through_the_planforms_corners(preset):
     """Omitted, the radius is half the length x width diagonal: the disc round the middle
     of the planform that its farthest corner touches, so it holds the hull at any heading;
@@ -253,7 +259,7 @@ def test_a_given_vehicle_radius_wins_over_the_size():
     assert given.ocp(model).keep_out_extra == 0.8 + given.obstacle_margin
 
 
-@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize("preset", thruster_preset_names())
 @pytest.mark.parametrize(
     "controller", [kind for kind in ControllerType if kind is not ControllerType.THRUST_PLAYBACK]
 )

@@ -25,7 +25,7 @@ from auvmpc.models.vehicle import (
     dynamics,
     heading_turn_time,
     load_vehicle,
-    preset_names,
+    thruster_preset_names,
     top_yaw_rate,
     turn_up_time,
 )
@@ -143,7 +143,7 @@ def test_the_crab_turns_no_faster_than_the_bound(videoray):
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.parametrize("preset", thruster_preset_names())
 def test_sample_time_resolves_an_underactuated_turn(preset):
     model = load_vehicle(preset)
     te = default_sample_time(model)
@@ -245,7 +245,7 @@ def test_sqp_steps_follow_the_vehicle_not_its_sample():
         velocity_change_time,
     )
 
-    for preset in preset_names():
+    for preset in thruster_preset_names():
         assert ControllerConfig().for_vehicle(load_vehicle(preset)).linearisation_iterations == 1
     agile = [
         vehicle

@@ -498,9 +498,12 @@ def vehicles() -> None:
         vehicle = load_vehicle(name)
         size = vehicle.size
         vertical = vehicle.heave.thruster_count if vehicle.heave is not None else 0
-        thrusters = f"{vehicle.n_thrusters}" + (f" + {vertical} vertical" if vertical else "")
+        if vehicle.has_thrusters:
+            thrusters = f"{vehicle.n_thrusters}" + (f" + {vertical} vertical" if vertical else "")
+        else:  # a propeller and fins: its inputs by name
+            thrusters = "none: " + ", ".join(vehicle.six_dof_actuators.layout.names)
         models = (
-            ["3-DOF"]
+            (["3-DOF"] if vehicle.has_thrusters else [])
             + (["depth"] if vehicle.heave else [])
             + (["6-DOF"] if vehicle.six_dof else [])
         )

@@ -42,10 +42,11 @@ class StrictModel(BaseModel):
         ``duraton: 200`` would otherwise read ``duration: field required`` and hide the
         typo (``extra="forbid"`` reports it after the fields)."""
         if isinstance(data, Mapping):
+            fields = _fields_by_key(cls)
             for key, value in data.items():
-                if key not in cls.model_fields:
-                    raise FieldError(str(key), value, unknown_key(key, cls.model_fields))
-                _numbers_as_numbers(str(key), value, cls.model_fields[key].annotation)
+                if key not in fields:
+                    raise FieldError(str(key), value, unknown_key(key, fields))
+                _numbers_as_numbers(str(key), value, fields[key].annotation)
         return data
 
     def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False):
@@ -57,6 +58,13 @@ class StrictModel(BaseModel):
             for name in _cached_properties(type(self)):
                 copied.__dict__.pop(name, None)
         return copied
+
+
+@functools.cache  # asked at every validation of every model
+def _fields_by_key(model: type[BaseModel]) -> dict[str, Any]:
+    """A model's fields by the key a file writes: the field's alias where it has one (a
+    vehicle's ``actuators:`` list, whose field name the actuator set already uses)."""
+    return {field.alias or name: field for name, field in model.model_fields.items()}
 
 
 def _numbers_as_numbers(field: str, value: Any, annotation: Any) -> None:

@@ -14,7 +14,7 @@ from enum import StrEnum
 from typing import Any, get_args
 
 from pydantic import BaseModel, TypeAdapter
-from pydantic_core import to_jsonable_python
+from pydantic_core import PydanticUndefined, to_jsonable_python
 
 __all__ = ["SchemaKind", "json_schema", "reference_markdown"]
 
@@ -171,6 +171,8 @@ def _default_text(model: type[BaseModel] | None, field: str, spec: dict[str, Any
     if model is None or field not in model.model_fields:
         return ""
     value = model.model_fields[field].get_default(call_default_factory=True)
+    if value is PydanticUndefined:  # required unless another field is given (the schema's)
+        return "*required* unless the model says (above)"
     if isinstance(value, BaseModel):
         return "its defaults"
     return _code(to_jsonable_python(value))

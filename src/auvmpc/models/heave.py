@@ -54,6 +54,7 @@ def heave_damping_force(heave: HeaveParams, w, absolute=abs):
 
 def resolve_heave(vehicle: VehicleParams, scale: dict[str, float]) -> HeaveParams:
     """The heave parameters of a vehicle, with the plant's scale factors applied."""
+    vehicle.fixed_thrusters("the depth (heave) model")
     if vehicle.heave is None:
         raise FieldError("vehicle", vehicle.name, "has no heave section (needed for depth control)")
     changes = {}

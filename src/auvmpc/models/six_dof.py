@@ -40,6 +40,7 @@ from collections.abc import Callable
 import casadi as ca
 import numpy as np
 
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.integrators import rk4, rk4_step_time_varying
 from auvmpc.models.layout import HORIZONTAL, Layout
 from auvmpc.models.six_dof_params import SixDofParams, skew
@@ -67,6 +68,9 @@ __all__ = [
     "plant_step_length",
     "restoring_forces",
     "six_dof_model",
+    "top_surge_speed",
+    "without_munk_moments",
+    "wrench_authority",
 ]
 
 SIX_DOF = Layout(names=("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r"))
@@ -148,6 +152,19 @@ def coriolis_added_mass(added_mass: np.ndarray, nu_r):
     return ca.vertcat(ca.horzcat(ca.DM.zeros(3, 3), -linear), ca.horzcat(-linear, -angular))
 
 
+# C_A's entries MSS remus100.m (l. 202-206) sets to zero, in pairs (i, j) and (j, i) so that
+# C_A stays skew-symmetric: pitch with heave and surge, yaw with surge and sway.
+MUNK_ENTRIES = ((4, 2), (2, 4), (4, 0), (0, 4), (5, 0), (0, 5), (5, 1), (1, 5))
+
+
+def without_munk_moments(C_A):
+    """C_A(nu_r) without its Munk-moment entries (:data:`MUNK_ENTRIES`); a CasADi matrix."""
+    kept = ca.DM.ones(6, 6)
+    for row, column in MUNK_ENTRIES:
+        kept[row, column] = 0.0
+    return C_A * kept
+
+
 def restoring_forces(weight: float, buoyancy: float, r_g, r_b, phi, theta):
     """g(eta) from weight, buoyancy and their centres (eq. 4.6)."""
     W, B = weight, buoyancy
@@ -218,6 +235,8 @@ def _expression(params: VehicleParams, state, thrust, current_world, current_rat
     M = six.mass_matrix(params.mass)
     C_RB = coriolis_rigid_body(params.mass, six.inertia_matrix, r_g, omega)
     C_A = coriolis_added_mass(M_A, nu_r)
+    if six.without_munk_moments:
+        C_A = without_munk_moments(C_A)
     damping = (
         -ca.DM(np.array(six.linear_damping)) * nu_r
         - ca.DM(np.array(six.quadratic_damping)) * ca.fabs(nu_r) * nu_r
@@ -260,7 +279,7 @@ class SixDofModel:
     def __init__(self, params: VehicleParams) -> None:
         six_dof_section(params)
         self.params = params
-        self.n_thrusters = params.six_dof_actuators.size
+        self.n_thrusters = params.six_dof_actuators.size  # inputs: thrusts, or rpm and angles
         state, thrust = ca.SX.sym("x", NX), ca.SX.sym("F", self.n_thrusters)
         current, current_rate = ca.SX.sym("v_c", 3), ca.SX.sym("v_c_rate", 3)
         derivative = _expression(params, state, thrust, current, current_rate)
@@ -328,27 +347,94 @@ ACCURATE_RATE_STEP = 0.1
 
 
 def plant_step_length(params: VehicleParams, longest: float) -> float:
-    """The longest RK4 step (at most ``longest``, and no longer than the 3-DOF plant's
-    :func:`auvmpc.models.vehicle.stable_plant_step`) with h |lambda| <= ACCURATE_RATE_STEP for the
-    6-DOF model's fastest rate: the modes at rest (roll and pitch oscillations, linear
-    damping) and the damping of surge, sway, heave and yaw at the speed their full thrust
-    authority reaches. (Roll and pitch never reach theirs: the restoring moment holds them.)"""
+    """The longest RK4 step (at most ``longest``) with h |lambda| <= ACCURATE_RATE_STEP for
+    the 6-DOF model's fastest rate: the modes at rest (roll and pitch oscillations, linear
+    damping) and the damping of surge, sway, heave and yaw at the speed their full authority
+    reaches. (Roll and pitch never reach theirs: the restoring moment holds them.)
+
+    Fixed thrusters: each axis's authority is every thruster at whichever limit helps, and
+    the step is no longer than the 3-DOF plant's :func:`auvmpc.models.vehicle.stable_plant_step`.
+    Actuators whose wrench depends on the flow (a propeller and fins): the same, at the top
+    surge speed the actuators reach (:func:`top_surge_speed`), and also the modes about that
+    cruise (the fins' lift damps sway, heave, pitch and yaw in proportion to the speed)."""
     six = six_dof_section(params)
     model = six_dof_model(params)
     x = ca.SX.sym("x", NX)
-    jacobian = ca.Function(
-        "A", [x], [ca.jacobian(model.derivative(x, np.zeros(model.n_thrusters), 0, 0), x)]
-    )
-    rates = [float(np.max(np.abs(np.linalg.eigvals(np.asarray(jacobian(np.zeros(NX)))))))]
-    low, high = params.thrust_limits
-    authority = np.maximum(six.T * high, six.T * low).sum(axis=1)
+    u = ca.SX.sym("u", model.n_thrusters)
+    jacobian = ca.Function("A", [x, u], [ca.jacobian(model.derivative(x, u, 0, 0), x)])
+
+    def fastest_mode(state: np.ndarray, command: np.ndarray) -> float:
+        return float(np.max(np.abs(np.linalg.eigvals(np.asarray(jacobian(state, command))))))
+
+    inputs = params.six_dof_actuators
+    rates = [fastest_mode(np.zeros(NX), np.zeros(model.n_thrusters))]
     inertia = np.diag(six.mass_matrix(params.mass))
+    if inputs.linear:
+        low, high = params.thrust_limits
+        authority = np.maximum(six.T * high, six.T * low).sum(axis=1)
+        longest = stable_plant_step(params, longest)
+    else:
+        cruise = np.zeros(NX)
+        cruise[SIX_DOF.index("u")] = top_surge_speed(params)
+        nu_r = cruise[SIX_DOF.nu]
+        authority = wrench_authority(inputs, nu_r)
+        for command in (inputs.limits.lower, inputs.limits.upper):
+            rates.append(fastest_mode(cruise, np.asarray(command, dtype=float)))
     for axis in (0, 1, 2, 5):
         linear, quadratic = six.linear_damping[axis], six.quadratic_damping[axis]
         top = steady_speed(linear, quadratic, float(authority[axis]))
         if math.isfinite(top):
             rates.append(abs(linear + 2.0 * quadratic * top) / inertia[axis])
-    return min(stable_plant_step(params, longest), ACCURATE_RATE_STEP / max(rates))
+    return min(longest, ACCURATE_RATE_STEP / max(rates))
+
+
+def wrench_authority(inputs: ActuatorSet, nu_r: np.ndarray) -> np.ndarray:
+    """The largest [X, Y, Z, K, M, N] (6,) each axis gets on its own at relative velocity
+    ``nu_r`` (6,), each actuator at whichever end of its command box, or at zero, helps that
+    axis most (a fin's drag is least at zero angle; the set's wrench is the sum of its
+    actuators')."""
+    limits = inputs.limits
+    best = [
+        np.max(
+            [
+                actuator.wrench(nu_r, float(command))
+                for command in (low, np.clip(0.0, low, high), high)
+            ],
+            axis=0,
+        )
+        for actuator, low, high in zip(inputs.actuators, limits.lower, limits.upper, strict=True)
+    ]
+    return np.sum(best, axis=0)
+
+
+def top_surge_speed(params: VehicleParams) -> float:
+    """The surge speed through the water (m/s) where the 6-DOF inputs' largest forward
+    force, at that speed, equals the surge damping: a propeller's thrust falls as the
+    advance ratio grows, so the speed is found by bisection on the force balance."""
+    six = six_dof_section(params)
+    inputs = params.six_dof_actuators
+    linear, quadratic = six.linear_damping[0], six.quadratic_damping[0]
+
+    def surplus(speed: float) -> float:
+        nu_r = np.array([speed, 0.0, 0.0, 0.0, 0.0, 0.0])
+        return float(wrench_authority(inputs, nu_r)[0]) + linear * speed + quadratic * speed**2
+
+    if surplus(0.0) <= 0.0:
+        return 0.0
+    high = 1.0
+    while surplus(high) > 0.0:
+        if high > _FASTEST_VEHICLE_M_S:
+            return math.inf  # no damping holds it: no finite top speed
+        high *= 2.0
+    low = 0.0
+    for _ in range(60):  # to round-off
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if surplus(middle) > 0.0 else (low, middle)
+    return 0.5 * (low + high)
+
+
+# Beyond this (m/s) a vehicle's top speed is taken as unbounded (no surge damping).
+_FASTEST_VEHICLE_M_S = 1e3
 
 
 def stable_substeps(params: VehicleParams, sample_time: float) -> int:

@@ -12,7 +12,8 @@ section adds what the 3-DOF and heave models do not need:
 - ``linear_damping`` [X_u, Y_v, Z_w, K_p, M_q, N_r] and ``quadratic_damping``
   [X_uu, Y_vv, Z_ww, K_pp, M_qq, N_rr],
 - ``thrusters``: every thruster's position and direction; the 6-DOF plant's input is one
-  force per entry, in this order.
+  force per entry, in this order (none for a vehicle whose ``actuators:`` list is its
+  inputs: a propeller and fins).
 
 The section stands alone: the 6-DOF plant reads only it (and ``mass``); the 3-DOF fields
 stay the horizontal model's. :func:`horizontal_equivalent` says which 3-DOF values a
@@ -26,7 +27,13 @@ from functools import cached_property
 from typing import Annotated
 
 import numpy as np
-from pydantic import AfterValidator, Field, model_validator
+from pydantic import (
+    AfterValidator,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from auvmpc.config import Positive, StrictModel
 from auvmpc.errors import FieldError
@@ -139,10 +146,27 @@ class SixDofParams(StrictModel):
         "moving fast needs it, a box-shaped ROV does not)",
     )
     thrusters: tuple[Thruster3D, ...] = Field(
-        min_length=1,
+        default=(),
         description="every thruster (horizontal and vertical); the 6-DOF plant takes one "
-        "force per entry, in this order",
+        "force per entry, in this order; empty for a vehicle with ``actuators`` (a propeller "
+        "and fins), whose inputs those are",
     )
+
+    without_munk_moments: bool = Field(
+        default=False,
+        description="leave out C_A(nu_r)'s pitch and yaw terms in surge, heave and sway (the "
+        "Munk moments; C_A stays skew-symmetric), as Fossen's MSS remus100.m does where a "
+        "torpedo's small strip-theory rotational damping could not hold them",
+    )
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict:
+        """``without_munk_moments`` only when set: a section's dump (run.json, the compiled
+        model's cache key) is as it was before the field existed."""
+        data = handler(self)
+        if not data.get("without_munk_moments"):
+            data.pop("without_munk_moments", None)
+        return data
 
     @model_validator(mode="after")
     def _physical(self) -> SixDofParams:

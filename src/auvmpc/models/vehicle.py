@@ -28,14 +28,23 @@ from typing import Annotated, Any, Protocol
 
 import casadi as ca
 import numpy as np
-from pydantic import AfterValidator, Field, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    ValidationError,
+    model_serializer,
+    model_validator,
+)
 
 from auvmpc.config import StrictModel
 from auvmpc.errors import ConfigError, FieldError, format_validation_error
 from auvmpc.models.actuators import WRENCH, ActuatorSet, FixedThruster
+from auvmpc.models.actuators.entries import ActuatorEntry
 from auvmpc.models.actuators.thruster import planar_direction, thrust_column
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
-from auvmpc.models.six_dof_params import SixDofParams
+from auvmpc.models.six_dof_params import SixDofParams, horizontal_equivalent
 from auvmpc.safe_yaml import read_text_file, read_yaml_mapping
 
 __all__ = [
@@ -53,6 +62,7 @@ __all__ = [
     "preset_names",
     "scaled",
     "steady_speed",
+    "thruster_preset_names",
     "top_yaw_rate",
     "heading_turn_time",
     "turn_up_time",
@@ -133,10 +143,26 @@ class VehicleSize(StrictModel):
 
 
 class VehicleParams(StrictModel):
-    """Everything the 3-DOF model needs, validated and immutable.
+    """Everything the 3-DOF model needs, validated and immutable; with ``actuators`` (a
+    propeller and fins) the 3-DOF coefficients m11 ... Nrr may be omitted: they are read off
+    ``six_dof``.
 
-    Field names follow ``shared/spec/interfaces.md`` (the vehicle file contract).
+    Field names follow ``shared/spec/interfaces.md`` (the vehicle file contract). A vehicle
+    is driven either by fixed ``thrusters`` (with ``thrust_limits``, ``thrust_rate_limit`` and,
+    for depth, ``heave``) or by an ``actuators:`` list of kinds (a propeller and fins: a
+    torpedo AUV), which only the 6-DOF model flies: its 3-DOF coefficients may then be
+    omitted, read off ``six_dof`` (:func:`horizontal_equivalent`), and everything made of
+    fixed thrusters (``T``, ``actuators``, ``n_thrusters``, ...) refuses it in one line.
     """
+
+    # The 3-DOF coefficients are required unless ``actuators`` is given (then read off
+    # six_dof, _horizontal_from_six_dof): a JSON schema cannot say "unless", so it lists them
+    # as optional and the loader says which is missing.
+    model_config = ConfigDict(
+        json_schema_extra=lambda schema: schema.update(
+            required=[n for n in schema.get("required", []) if n not in HORIZONTAL_MODEL_FIELDS]
+        )
+    )
 
     name: str = Field(description="short identifier")
     description: str = Field(default="", description="one line for humans")
@@ -163,19 +189,89 @@ class VehicleParams(StrictModel):
     Yvv: Damping = Field(description="quadratic sway damping (N s2/m2)")
     Nr: Damping = Field(description="linear yaw damping (N m s)")
     Nrr: Damping = Field(description="quadratic yaw damping (N m s2)")
-    thrusters: tuple[Thruster, ...] = Field(
+    thrusters: tuple[Thruster, ...] | None = Field(
+        default=None,
         min_length=2,
         description="horizontal thrusters; fewer than three independent directions make the "
-        "vehicle underactuated (``underactuated``)",
+        "vehicle underactuated (``underactuated``); required unless ``actuators`` is given",
     )
-    thrust_limits: ThrustLimits = Field(description="per thruster [min, max] (N)")
-    thrust_rate_limit: PositiveFloat = Field(description="per thruster |dF/dt| bound (N/s)")
+    thrust_limits: ThrustLimits | None = Field(
+        default=None, description="per thruster [min, max], required with ``thrusters`` (N)"
+    )
+    thrust_rate_limit: PositiveFloat | None = Field(
+        default=None, description="per thruster |dF/dt| bound, required with ``thrusters`` (N/s)"
+    )
     heave: HeaveParams | None = Field(default=None, description="depth model, if any")
     six_dof: SixDofParams | None = Field(
         default=None,
         description="6-DOF model (3-D thruster poses, hydrodynamics), if any; not needed "
-        "for 3-DOF and depth scenarios",
+        "for 3-DOF and depth scenarios; required with ``actuators``",
     )
+    # The file's key is ``actuators``; the attribute of that name is the 3-DOF input set.
+    actuator_entries: tuple[ActuatorEntry, ...] | None = Field(
+        default=None,
+        alias="actuators",
+        min_length=1,
+        description="the 6-DOF inputs as actuators of several kinds (propeller, "
+        "control_surface: auvmpc.models.actuators.entries), in input order, instead of "
+        "thrusters; each input named by its ``name`` and in its own units (rpm, deg)",
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _horizontal_from_six_dof(cls, data: Any) -> Any:
+        """A vehicle with ``actuators`` flies only the 6-DOF model: its omitted 3-DOF
+        coefficients are those the six_dof section implies (they feed only what reads a
+        vehicle's scale, e.g. the default sample time)."""
+        if not isinstance(data, Mapping) or data.get("actuators") is None:
+            return data
+        if data.get("six_dof") is None:
+            raise FieldError("six_dof", None,
+                             "missing: a vehicle with actuators (a propeller, fins) is flown "
+                             "by its 6-DOF model, which needs the six_dof section")  # fmt: skip
+        mass = data.get("mass")
+        if not isinstance(mass, int | float) or isinstance(mass, bool) or not mass > 0:
+            return data  # the field's own check names it
+        try:
+            six = SixDofParams.model_validate(data["six_dof"])
+        except ValidationError as error:
+            problem = format_validation_error(error, "six_dof")
+            raise FieldError(problem.field, problem.value, problem.reason) from None
+        implied = horizontal_equivalent(float(mass), six)
+        return {**{name: implied[name] for name in HORIZONTAL_MODEL_FIELDS}, **data}
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """The fields under the file's keys; ``actuators`` only when given, so a thruster
+        vehicle's dump (run.json's ``model``, the compiled-model cache key) is as before."""
+        data = handler(self)
+        entries = data.pop("actuator_entries", None)
+        if entries is not None:
+            data["actuators"] = entries
+        return data
+
+    @model_validator(mode="after")
+    def _driven(self) -> VehicleParams:
+        """Thrusters or actuators, never both, and what each needs."""
+        if self.actuator_entries is None:
+            for field in ("thrusters", "thrust_limits", "thrust_rate_limit"):
+                if getattr(self, field) is None:
+                    raise FieldError(field, None, "field required (or give actuators: a "
+                                     "propeller and fins)")  # fmt: skip
+            if self.six_dof is not None and not self.six_dof.thrusters:
+                raise FieldError("six_dof.thrusters", [], "need at least 1 thruster")
+            return self
+        for field in ("thrusters", "thrust_limits", "thrust_rate_limit", "heave"):
+            if getattr(self, field) is not None:
+                raise FieldError(field, "given", "not used with actuators: the vehicle's "
+                                 "inputs are its actuators (remove one or the other)")  # fmt: skip
+        if self.six_dof is not None and self.six_dof.thrusters:
+            raise FieldError("six_dof.thrusters", len(self.six_dof.thrusters),
+                             "not used with actuators: they are the 6-DOF inputs")  # fmt: skip
+        names = [entry.name for entry in self.actuator_entries]
+        if len(set(names)) != len(names):
+            raise FieldError("actuators", names, "input names must differ")
+        return self
 
     @model_validator(mode="after")
     def _rigid_body(self) -> VehicleParams:
@@ -194,6 +290,8 @@ class VehicleParams(StrictModel):
 
     @model_validator(mode="after")
     def _steerable(self) -> VehicleParams:
+        if self.thrusters is None:
+            return self  # actuators instead (_driven)
         rank = allocation_rank(allocation_matrix(self.thrusters))
         if rank < 2:
             raise FieldError(
@@ -214,7 +312,7 @@ class VehicleParams(StrictModel):
         six = self.six_dof
         if six is None:
             return
-        n = len(self.thrusters)
+        n = len(self.fixed_thrusters("the split into horizontal and depth controllers"))
         planar = six.T[np.ix_(_PLANAR_INDEX, range(min(n, six.n_thrusters)))]
         if six.n_thrusters < n or not np.allclose(
             planar, allocation_matrix(self.thrusters), atol=THRUSTER_LAYOUT_TOL
@@ -280,17 +378,37 @@ class VehicleParams(StrictModel):
         return self.Iz_rb + self.Iz_added
 
     @property
+    def has_thrusters(self) -> bool:
+        """Whether fixed thrusters drive it (else an ``actuators:`` list of kinds)."""
+        return self.actuator_entries is None
+
+    def fixed_thrusters(self, needed_by: str) -> tuple[Thruster, ...]:
+        """The horizontal thrusters; ConfigError (one line, exit 2) naming the vehicle if
+        it has actuators of other kinds instead, ``needed_by`` saying what needed them."""
+        if self.thrusters is None or self.thrust_limits is None:
+            kinds = ", ".join(f"{e.name} ({e.kind})" for e in self.actuator_entries or ())
+            raise ConfigError(
+                "vehicle",
+                self.name,
+                f"has a propeller and fins, not fixed thrusters (actuators: {kinds}); "
+                f"{needed_by} needs thrusters: only a six-dof scenario with a whole-vehicle "
+                "controller flies it",
+            )
+        return self.thrusters
+
+    @property
     def n_thrusters(self) -> int:
-        return len(self.thrusters)
+        return len(self.fixed_thrusters("a thruster count"))
 
     @cached_property
     def actuators(self) -> ActuatorSet:
         """The horizontal thrusters ``F1..Fn`` (the 3-DOF model's inputs) with their limits."""
+        thrusters = self.fixed_thrusters("the 3-DOF model (its inputs)")
         lower, upper = self.thrust_limits
         return ActuatorSet(tuple(
             FixedThruster.planar(f"F{i + 1}", t.position, t.angle_deg, lower=lower, upper=upper,
                                  rate=self.thrust_rate_limit)
-            for i, t in enumerate(self.thrusters)
+            for i, t in enumerate(thrusters)
         ))  # fmt: skip
 
     def with_actuators(self, actuators: ActuatorSet) -> VehicleParams:
@@ -306,10 +424,12 @@ class VehicleParams(StrictModel):
 
     @cached_property
     def six_dof_actuators(self) -> ActuatorSet:
-        """The 6-DOF model's inputs ``F1..Fn``: the ``six_dof`` thrusters, the horizontal ones
-        first with the horizontal limits, then the vertical ones with the heave section's
-        (check_six_dof_layout)."""
+        """The 6-DOF model's inputs: the ``actuators`` entries as they are, or ``F1..Fn``, the
+        ``six_dof`` thrusters, the horizontal ones first with the horizontal limits, then the
+        vertical ones with the heave section's (check_six_dof_layout)."""
         six = self.six_dof
+        if six is not None and self.actuator_entries is not None:
+            return ActuatorSet(tuple(entry.build() for entry in self.actuator_entries))
         if six is None or self.heave is None:
             raise FieldError("vehicle", self.name, "needs six_dof and heave sections")
         limits = [self.actuators.actuators[0], self.heave.actuators.actuators[0]]
@@ -344,10 +464,12 @@ class VehicleParams(StrictModel):
 
     @property
     def thrust_min(self) -> float:
+        self.fixed_thrusters("a thrust limit")
         return self.thrust_limits[0]
 
     @property
     def thrust_max(self) -> float:
+        self.fixed_thrusters("a thrust limit")
         return self.thrust_limits[1]
 
 
@@ -564,10 +686,16 @@ def _sin(angle):
     return ca.sin(angle) if isinstance(angle, ca.SX | ca.MX) else np.sin(angle)
 
 
-# Fields a scenario's ``plant.scale`` may multiply (scalars; thrust_limits scales both ends).
+# What the simulated 6-DOF plant reads from a vehicle's six_dof section that a model error
+# scales (each entry of the vector or matrix by the factor); ``mass`` also sets the weight
+# (a 20 % heavier vehicle would sink), so the 6-DOF plant's mass is not scaled.
+SIX_DOF_MODEL_FIELDS = ("inertia", "added_mass", "linear_damping", "quadratic_damping")
+
+# Fields a scenario's ``plant.scale`` may multiply (scalars; thrust_limits scales both ends;
+# the six_dof section's every entry).
 SCALABLE_FIELDS = (
     "mass", "m11", "m22", "Iz_rb", "Iz_added", "Xu", "Xuu", "Yv", "Yvv", "Nr", "Nrr",
-    "thrust_limits", "thrust_rate_limit",
+    "thrust_limits", "thrust_rate_limit", *SIX_DOF_MODEL_FIELDS,
 )  # fmt: skip
 
 
@@ -579,12 +707,23 @@ HEAVE_MODEL_FIELDS = ("m_heave", "Zw", "Zww", "net_buoyancy_N", "thrust_rate_lim
 
 def check_plant_scale(scale: Mapping[str, float], kind: str = "horizontal") -> None:
     """A ``plant.scale`` factor on a field the simulated model does not use has no effect,
-    so it is an error that says which model uses what."""
-    used = HORIZONTAL_MODEL_FIELDS if kind == "horizontal" else HEAVE_MODEL_FIELDS
+    so it is an error that says which model uses what (``kind``: the plant's, "horizontal",
+    "depth" or "six-dof")."""
+    used = {"horizontal": HORIZONTAL_MODEL_FIELDS, "six-dof": SIX_DOF_MODEL_FIELDS}.get(
+        kind, HEAVE_MODEL_FIELDS
+    )
     for field, factor in scale.items():
         if field in used:
             continue
-        if kind == "horizontal" and field in ("thrust_limits", "thrust_rate_limit"):
+        if kind == "six-dof":
+            reason = (
+                f"the 6-DOF plant simulates the vehicle's six_dof section: scale one of "
+                f"{list(SIX_DOF_MODEL_FIELDS)} (each entry; mass also sets the weight, which "
+                "would sink or float the vehicle)"
+            )
+        elif field in SIX_DOF_MODEL_FIELDS:
+            reason = f"a six_dof section field: only the 6-DOF plant (kind: six-dof) uses {field}"
+        elif kind == "horizontal" and field in ("thrust_limits", "thrust_rate_limit"):
             reason = (
                 f"{field} is the controller's limit, not the plant's (the simulated thrusters "
                 f"apply each command as given); change vehicle.{field} instead"
@@ -620,18 +759,36 @@ def scaled(params: VehicleParams, scale: Mapping[str, float]) -> VehicleParams:
             )
         if not (math.isfinite(factor) and factor > 0):
             raise ConfigError(f"plant.scale.{field}", factor, "factor must be finite and > 0")
+        if field in SIX_DOF_MODEL_FIELDS:
+            continue  # inside the section, below
         value = getattr(params, field)
         changes[field] = (
             tuple(v * factor for v in value) if isinstance(value, tuple) else value * factor
         )
-    if not changes:
+    section = {field: factor for field, factor in scale.items() if field in SIX_DOF_MODEL_FIELDS}
+    if not changes and not section:
         return params
     data = params.model_dump()
     data.update(changes)
+    if section:
+        if params.six_dof is None:
+            raise ConfigError(f"plant.scale.{next(iter(section))}", params.name,
+                              "the vehicle has no six_dof section")  # fmt: skip
+        data["six_dof"] = {
+            **data["six_dof"],
+            **{field: _times(data["six_dof"][field], factor) for field, factor in section.items()},
+        }
     try:
         return VehicleParams.model_validate(data)
     except ValidationError as error:
         raise format_validation_error(error, "plant") from None
+
+
+def _times(value: Any, factor: float) -> Any:
+    """Every number of a vector or matrix (nested tuples) times ``factor``."""
+    if isinstance(value, tuple | list):
+        return tuple(_times(entry, factor) for entry in value)
+    return value * factor
 
 
 def preset_names() -> list[str]:
@@ -640,6 +797,13 @@ def preset_names() -> list[str]:
     return sorted(
         p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml")
     )
+
+
+def thruster_preset_names() -> list[str]:
+    """The presets fixed thrusters drive: what the 3-DOF and depth models and their
+    controllers fly (a preset with ``actuators:``, a propeller and fins, flies only the 6-DOF
+    model)."""
+    return [name for name in preset_names() if load_vehicle(name).has_thrusters]
 
 
 def vehicle_data(

@@ -59,7 +59,9 @@ class PlantConfig(StrictModel):
     )
     scale: dict[str, Annotated[float, Field(gt=0)]] = Field(
         default_factory=dict,
-        description="factor per vehicle field, e.g. {Iz_rb: 0.75}, on the plant's vehicle",
+        description="factor per vehicle field, e.g. {Iz_rb: 0.75}, on the plant's vehicle; "
+        "six-dof scenarios scale the six_dof section's inertia, added_mass, linear_damping "
+        "and quadratic_damping (each entry), e.g. {added_mass: 1.2}",
     )
     max_step: Annotated[float, Field(gt=0, le=0.5)] | None = Field(
         default=None,

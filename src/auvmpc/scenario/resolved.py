@@ -53,6 +53,7 @@ class ResolvedScenario:
     controlled_layout: Layout = HORIZONTAL
     has_horizontal_path = True
     follows_depth = False  # whether a reference's depth is followed (a 6-DOF run's is)
+    plant_model = "horizontal"  # the simulated model, for what plant.scale may scale
 
     @property
     def controlled_inputs(self) -> ActuatorSet:
@@ -69,8 +70,9 @@ class ResolvedScenario:
         self.scenario = scenario  # below: with what the vehicle decides filled in
         self.base_dir = base_dir
         self.model: VehicleParams = load_vehicle_relative(scenario.vehicle, base_dir)
+        self.model.fixed_thrusters(f"a {scenario.kind} scenario's controller")
         n = self.model.n_thrusters
-        check_plant_scale(scenario.plant.scale)
+        check_plant_scale(scenario.plant.scale, self.plant_model)
         self.plant: VehicleParams = scaled(_plant_vehicle(self.model, scenario, base_dir),
                                            scenario.plant.scale)  # fmt: skip
         weights = getattr(scenario.controller, "R", None)  # the optimising controllers'
@@ -132,19 +134,13 @@ class ResolvedSixDofScenario(ResolvedScenario):
 
     scenario: SixDofScenario
     follows_depth = True
+    plant_model = "six-dof"
 
     @property
     def plant_inputs(self) -> ActuatorSet:
         return self.plant.six_dof_actuators
 
     def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
-        if scenario.plant.scale:
-            raise ConfigError(
-                "plant.scale",
-                dict(scenario.plant.scale),
-                "not supported on the 6-DOF plant (it simulates the vehicle's six_dof section "
-                "as given; give a vehicle file with other values instead)",
-            )
         if scenario.plant.vehicle is not None:
             raise ConfigError(
                 "plant.vehicle",

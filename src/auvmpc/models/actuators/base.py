@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -18,6 +19,7 @@ __all__ = [
     "Actuator",
     "ActuatorLimits",
     "check_fields",
+    "described",
     "cross",
     "elementwise",
     "wrench_of",
@@ -58,6 +60,12 @@ def wrench_of(force: Any, position: Any, maths: Any, moment: Any = (0.0, 0.0, 0.
     if maths is ca:
         return ca.vertcat(*entries)
     return np.array(np.broadcast_arrays(*entries), dtype=float)
+
+
+def described(meaning: str, default: Any = dataclasses.MISSING) -> Any:
+    """A kind's dataclass field with its ``meaning`` and unit: what a vehicle file's
+    ``actuators:`` entry says of it (models/actuators/entries.py, the scenario reference)."""
+    return dataclasses.field(default=default, metadata={"description": meaning})
 
 
 def check_fields(actuator: Any, positive: tuple[str, ...], unit: str) -> None:

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from auvmpc.errors import FieldError
-from auvmpc.models.actuators.base import check_fields, cross, elementwise, wrench_of
+from auvmpc.models.actuators.base import check_fields, cross, described, elementwise, wrench_of
 
 __all__ = ["ControlSurface"]
 
@@ -52,18 +52,18 @@ _CHORD = (1.0, 0.0, 0.0)  # the fins' chord at zero angle: the body's x axis
 class ControlSurface:
     """Fins at ``position`` turning about the unit ``axis``; the command is their angle (deg)."""
 
-    name: str  # e.g. "rudder_deg"
-    position: tuple[float, float, float]  # m, the fins' centre of pressure
-    axis: tuple[float, float, float]  # unit length, at right angles to x
-    area: float  # m2, planform area of all the fins the input turns
-    lift_slope: float  # C_La, per rad
-    stall_angle: float  # rad: |alpha| beyond it gives no more lift
-    density: float  # kg/m3
-    lower: float  # deg
-    upper: float  # deg
-    rate: float  # deg/s
-    drag_coefficient: float = 0.0  # C_D0 at zero lift (0: counted in the hull's drag)
-    induced_drag_factor: float = 0.0  # K in C_D = C_D0 + K C_L^2
+    name: str = described("the input's name, e.g. rudder_deg")
+    position: tuple[float, float, float] = described("the fins' centre of pressure (m)")
+    axis: tuple[float, float, float] = described("unit stock axis, at right angles to x")
+    area: float = described("planform area of all the fins the input turns (m2)")
+    lift_slope: float = described("C_La, per rad")
+    stall_angle: float = described("|alpha| beyond it gives no more lift (rad)")
+    density: float = described("water density (kg/m3)")
+    lower: float = described("deg")
+    upper: float = described("deg")
+    rate: float = described("deg/s")
+    drag_coefficient: float = described("C_D0 at zero lift (0: in the hull's drag)", 0.0)
+    induced_drag_factor: float = described("K in C_D = C_D0 + K C_L^2", 0.0)
 
     linear = False
 

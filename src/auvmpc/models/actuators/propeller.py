@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from auvmpc.models.actuators.base import check_fields, elementwise, wrench_of
+from auvmpc.models.actuators.base import check_fields, described, elementwise, wrench_of
 
 __all__ = ["Propeller"]
 
@@ -40,20 +40,20 @@ class Propeller:
     """A propeller at ``position`` (m, body axes, z down) whose shaft points along the unit
     ``direction``; its command is the shaft speed (rpm)."""
 
-    name: str  # e.g. "propeller_rpm"
-    position: tuple[float, float, float]
-    direction: tuple[float, float, float]  # unit length
-    diameter: float  # m
-    thrust_coefficient: float  # K_T0, K_T at J = 0
-    torque_coefficient: float  # K_Q0, signed: the hull's roll moment about d is Q
-    density: float  # kg/m3
-    lower: float  # rpm
-    upper: float  # rpm
-    rate: float  # rpm/s
-    thrust_slope: float = 0.0  # dK_T/dJ for forward shaft speed (0: the pure n|n| law)
-    torque_slope: float = 0.0  # dK_Q/dJ for forward shaft speed
-    wake_fraction: float = 0.0  # w: V_a = (1 - w) u_r
-    thrust_deduction: float = 0.0  # t: the hull feels (1 - t) T
+    name: str = described("the input's name, e.g. propeller_rpm")
+    position: tuple[float, float, float] = described("body axes, z down (m)")
+    direction: tuple[float, float, float] = described("the shaft's unit direction")
+    diameter: float = described("m")
+    thrust_coefficient: float = described("K_T0, K_T at J = 0")
+    torque_coefficient: float = described("K_Q0, signed: the hull's roll moment about d is Q")
+    density: float = described("water density (kg/m3)")
+    lower: float = described("rpm")
+    upper: float = described("rpm")
+    rate: float = described("rpm/s")
+    thrust_slope: float = described("dK_T/dJ for forward shaft speed (0: the pure n|n| law)", 0.0)
+    torque_slope: float = described("dK_Q/dJ for forward shaft speed", 0.0)
+    wake_fraction: float = described("w: V_a = (1 - w) u_r", 0.0)
+    thrust_deduction: float = described("t: the hull feels (1 - t) T", 0.0)
 
     linear = False
 
