@@ -391,8 +391,8 @@ class VehicleParams(StrictModel):
                 "vehicle",
                 self.name,
                 f"has a propeller and fins, not fixed thrusters (actuators: {kinds}); "
-                f"{needed_by} needs thrusters: only a six-dof scenario with a whole-vehicle "
-                "controller flies it",
+                f"{needed_by} needs thrusters; its controller is six-dof-nmpc on the 6-DOF "
+                "model, and no scenario kind flies it yet (docs/remus100.md)",
             )
         return self.thrusters
 
