@@ -177,7 +177,7 @@ def test_its_dump_round_trips_and_a_thruster_vehicle_dumps_as_before(remus):
     ],
 )
 def test_what_needs_fixed_thrusters_refuses_it_in_one_line(remus, needs):
-    with pytest.raises(ConfigError, match="^vehicle: has a propeller and fins.*whole-vehicle"):
+    with pytest.raises(ConfigError, match="^vehicle: has a propeller and fins.*six-dof-nmpc"):
         needs(remus)
 
 
@@ -187,7 +187,7 @@ def test_a_scenario_of_fixed_thrusters_refuses_it_with_exit_2(monkeypatch, capsy
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "has a propeller and fins" in lines[0]
-    assert "'remus100'" in lines[0] and "whole-vehicle controller" in lines[0]
+    assert "'remus100'" in lines[0] and "six-dof-nmpc" in lines[0]
 
 
 def with_entry(index, **changes):
