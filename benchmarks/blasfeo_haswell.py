@@ -14,11 +14,10 @@ casadi of its own that must not replace auvmpc's) and unpacks only ``libblasfeo.
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
-import tempfile
-import zipfile
 from pathlib import Path
+
+from pinned_wheel import empty_folder_or_exit, unpack_members
 
 WHEEL = "comma-deps-acados==0.2.2.post92"  # its BLASFEO: TARGET_X64_INTEL_HASWELL
 # pip checks the download against this (the wheel measured on 2026-11-24), so a replaced
@@ -34,26 +33,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="folder to unpack into")
     out = parser.parse_args().out
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        print(f"error: --out: {out} exists and is not an empty folder", file=sys.stderr)
-        return 2
-    with tempfile.TemporaryDirectory() as scratch:
-        requirement = Path(scratch) / "requirement.txt"
-        requirement.write_text(f"{WHEEL} --hash=sha256:{WHEEL_SHA256}\n")
-        subprocess.run(
-            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-             "--require-hashes", "--only-binary", ":all:", "--platform",
-             "manylinux_2_28_x86_64", "-d", scratch, "-r", str(requirement)],
-            check=True,
-        )  # fmt: skip
-        (wheel,) = Path(scratch).glob("*.whl")
-        out.mkdir(parents=True, exist_ok=True)
-        with zipfile.ZipFile(wheel) as archive:
-            for name in archive.namelist():
-                for suffix, target in MEMBERS.items():
-                    if name.endswith(suffix):
-                        (out / target).write_bytes(archive.read(name))
-    missing = [target for target in MEMBERS.values() if not (out / target).is_file()]
+    empty_folder_or_exit(out)
+    missing = unpack_members(WHEEL, WHEEL_SHA256, "manylinux_2_28_x86_64", MEMBERS, out)
     if missing:
         print(f"error: {WHEEL} no longer holds {missing}", file=sys.stderr)
         return 1
