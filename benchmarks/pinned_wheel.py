@@ -1,5 +1,5 @@
 """Unpack a few files of a wheel fetched from the package registry by a pinned version and
-sha256, without installing it: the setup steps ``make blasfeo`` (blasfeo_haswell.py) and
+sha256, without installing it: the setup steps ``make blasfeo`` (blasfeo_tuned.py) and
 ``make hpipm-aarch64`` (hpipm_aarch64.py) use it; nothing is fetched at run time."""
 
 from __future__ import annotations

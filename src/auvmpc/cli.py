@@ -990,11 +990,12 @@ def export_c(
     ] = None,
     overwrite: Overwrite = False,
     blasfeo: Annotated[
-        Path | None,
+        list[Path] | None,
         typer.Option(
             "--blasfeo",
             help="folder with a libblasfeo.so built for one CPU: also the target x86-64-tuned "
-            "(or aarch64-tuned) under the wheel's HPIPM (docs/onboard.md)",
+            "(or aarch64-tuned) under the wheel's HPIPM; once per instruction set "
+            "(docs/onboard.md)",
         ),
     ] = None,
     aarch64: Annotated[
@@ -1012,7 +1013,9 @@ def export_c(
     from auvmpc.scenario import load_scenario
 
     resolved = load_scenario(scenario, set_ or [])
-    written = write_export(resolved, out, overwrite=overwrite, blasfeo=blasfeo, aarch64=aarch64)
+    written = write_export(
+        resolved, out, overwrite=overwrite, blasfeo=blasfeo or (), aarch64=aarch64
+    )
     console.print(f"wrote {written}")
 
 

@@ -56,6 +56,7 @@ from auvmpc.export.c_targets import (
     Target,
     aarch64_target,
     host_machine,
+    hwcaps_level,
     makefile_table,
     tuned_target,
     wheel_target,
@@ -233,7 +234,7 @@ def export_c(
     out: Path | str,
     *,
     overwrite: bool = False,
-    blasfeo: Path | str | None = None,
+    blasfeo: Path | str | Sequence[Path | str] = (),
     aarch64: Path | str | None = None,
 ) -> Path:
     """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
@@ -242,9 +243,10 @@ def export_c(
     It builds for this computer's instruction set from the installed casadi wheel's HPIPM
     and BLASFEO (``x86-64-generic`` on an x86-64), and also for: ``aarch64``, the aarch64
     HPIPM and BLASFEO in the folder ``aarch64`` (``make hpipm-aarch64``); ``x86-64-tuned`` or
-    ``aarch64-tuned``, a folder ``blasfeo`` with a ``libblasfeo.so`` built for one CPU, under
-    the portable HPIPM of its instruction set (solvers/blasfeo_target.py). Their libraries,
-    headers and licences are copied in (export/c_targets.py).
+    ``aarch64-tuned``, each folder in ``blasfeo`` (one per instruction set) with a
+    ``libblasfeo.so`` built for one CPU, under the portable HPIPM of its instruction set
+    (solvers/blasfeo_target.py). Their libraries, headers and licences are copied in
+    (export/c_targets.py).
     """
     config, slots = _check_supported(resolved)
     hpipm = _casadi_hpipm()
@@ -254,9 +256,12 @@ def export_c(
     targets = [wheel_target(libraries, include)]
     if aarch64 is not None:
         targets.append(aarch64_target(aarch64, ca.__version__, include))
-    if blasfeo is not None:
-        folder = blasfeo_folder(blasfeo, include)
-        targets.append(tuned_target(folder, {t.machine: t for t in targets}))
+    portable = {t.machine: t for t in targets}
+    for given in [blasfeo] if isinstance(blasfeo, str | Path) else blasfeo:
+        tuned = tuned_target(blasfeo_folder(given, include), portable)
+        if any(t.name == tuned.name for t in targets):
+            raise ConfigError("--blasfeo", str(given), f"a second BLASFEO for {tuned.machine}")
+        targets.append(tuned)
     check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     model = resolved.model
     program = MultipleShootingProgram(model, config, slots)
@@ -286,6 +291,9 @@ def export_c(
             "model": json.loads(model.model_dump_json()),
             "casadi": ca.__version__,
             "targets": {t.name: t.record() for t in targets},
+            # the tuned BLASFEO glibc's loader takes for the generic x86-64 build on a CPU of
+            # that level (export/c_targets.py)
+            "hwcaps": {level: t.blasfeo_target for t in targets if (level := hwcaps_level(t))},
             "default_targets": defaults,
             "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
             "hpipm_arena_bytes": arena,

@@ -12,6 +12,12 @@ BLASFEO are BSD-2-Clause: redistributable with their licence.
 Targets: ``x86-64-generic`` and ``aarch64`` (the wheels' portable builds, GENERIC BLASFEO, no
 instruction beyond the base instruction set), and ``x86-64-tuned`` or ``aarch64-tuned``: the
 wheel's HPIPM over the ``--blasfeo`` library, compiled for that BLASFEO's CPU.
+
+The generic x86-64 build also carries a tuned x86-64 BLASFEO where there is one, in
+``lib/x86-64-generic/glibc-hwcaps/x86-64-vN/``: glibc's loader (2.33 on) takes a library from
+there instead on a CPU of that level (x86-64-v3: AVX2 and FMA, Haswell on), and the GENERIC
+one elsewhere, so the one portable program steps at about the tuned build's speed where the
+CPU allows (docs/onboard.md, measured).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ __all__ = [
     "Target",
     "aarch64_target",
     "host_machine",
+    "hwcaps_level",
     "makefile_table",
     "tuned_target",
     "wheel_target",
@@ -51,6 +58,8 @@ _TUNED_FLAGS = {
     "ARMV8A_APPLE_M1": "-mcpu=apple-m1",
 }
 _LICENCES = {"hpipm": "HPIPM-LICENSE.txt", "blasfeo": "BLASFEO-LICENSE.txt"}
+# BLASFEO's x86 feature names -> the x86-64 microarchitecture level that has them
+_X86_LEVELS = {"SSE3": 2, "AVX": 3, "AVX2": 3, "FMA": 3, "AVX512F": 4}
 
 
 @dataclass(frozen=True)
@@ -137,14 +146,33 @@ def tuned_target(folder: Path, portable: dict[str, Target]) -> Target:
     return Target(name, machine, flags, base.hpipm, library, target, required_features(folder))
 
 
+def hwcaps_level(target: Target) -> str | None:
+    """The glibc-hwcaps folder (``x86-64-vN``) a tuned x86-64 BLASFEO can go into beside the
+    generic one: the level that has every feature it needs; None for another target."""
+    if target.machine != "x86_64" or not target.name.endswith("-tuned"):
+        return None
+    levels = [_X86_LEVELS.get(feature) for feature in target.blasfeo_features]
+    if not levels or None in levels:
+        return None
+    return f"x86-64-v{max(levels)}"
+
+
 def write_solver_files(targets: list[Target], include: Path, folder: Path) -> None:
-    """HPIPM and BLASFEO into the export: each target's libraries, the headers, the
-    licences."""
+    """HPIPM and BLASFEO into the export: each target's libraries (a tuned x86-64 BLASFEO
+    also under the generic one's glibc-hwcaps), the headers, the licences."""
     for target in targets:
         lib = folder / "lib" / target.name
         lib.mkdir(parents=True)
         shutil.copyfile(target.hpipm, lib / _HPIPM)
         shutil.copyfile(target.blasfeo, lib / _BLASFEO)
+    generic = _PORTABLE["x86_64"][0]
+    if any(t.name == generic for t in targets):
+        for target in targets:
+            level = hwcaps_level(target)
+            if level is not None:
+                hwcaps = folder / "lib" / generic / "glibc-hwcaps" / level
+                hwcaps.mkdir(parents=True)
+                shutil.copyfile(target.blasfeo, hwcaps / _BLASFEO)
     headers = folder / "include"
     headers.mkdir()
     for header in (*include.glob("hpipm_*.h"), *include.glob("blasfeo*.h")):
