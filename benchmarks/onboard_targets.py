@@ -1,15 +1,19 @@
 """The exported controller on each target, in one run: the generic x86-64 build against the
-tuned one (median step time), and the instructions per step on x86-64 and aarch64 (docs/onboard.md).
+tuned one (median step time), and the instructions per step on x86-64 and aarch64
+(docs/onboard.md).
 
     python benchmarks/onboard_targets.py --aarch64 .venv/hpipm-aarch64 \\
-        --blasfeo .venv/blasfeo-x64-haswell [--scenario paper-obstacles] [--repeats 5]
+        --blasfeo .venv/blasfeo-x64-haswell --blasfeo-aarch64 .venv/blasfeo-armv8a-a57 \\
+        [--scenario paper-obstacles] [--repeats 5]
 
-Runs the scenario with the exported controller (nmpc, every move free), exports it with the
-aarch64 and the tuned BLASFEO, and verifies every target (auvmpc verify-c): the generic and
-the tuned x86-64 build ``--repeats`` times each, alternately, for their median step (the
-median of the replays' medians: the machine is shared); then each target once with the
-instructions counted (callgrind natively, a QEMU plugin for aarch64). Prints the machine
-(lscpu's model name, load average) and one table row per target.
+Runs the scenario with the exported controller (nmpc, every move free) and exports it twice:
+with the aarch64 HPIPM and both tuned BLASFEOs, and with none of them (the generic x86-64
+build alone, whose BLASFEO is then the wheel's GENERIC one everywhere; with the tuned x86-64
+BLASFEO exported, the generic build carries it for glibc's loader to take on a CPU with AVX2
+and FMA). Each x86-64 build is replayed ``--repeats`` times, the builds in turn, for its
+median step (the median of the replays' medians: the machine is shared); then every build
+once with its instructions counted (callgrind natively, a QEMU plugin for aarch64). Prints
+the machine (lscpu's model name, load average) and one table row per build.
 """
 
 from __future__ import annotations
@@ -45,40 +49,52 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--aarch64", type=Path, required=True, help="make hpipm-aarch64's folder")
     parser.add_argument("--blasfeo", type=Path, required=True, help="a tuned x86-64 BLASFEO")
+    parser.add_argument("--blasfeo-aarch64", type=Path, required=True, help="a tuned aarch64 one")
     parser.add_argument("--scenario", default="paper-obstacles")
     parser.add_argument("--repeats", type=int, default=5)
     arguments = parser.parse_args()
     print(f"machine: {_machine()}")
     with tempfile.TemporaryDirectory(prefix="auvmpc-onboard-") as scratch:
-        run_dir, export = Path(scratch) / "run", Path(scratch) / "export"
+        run_dir = Path(scratch) / "run"
+        full, plain = Path(scratch) / "export", Path(scratch) / "generic-only"
         write_run(simulate(load_scenario(arguments.scenario, _FREE)), run_dir, figures=False)
-        export_c(
-            load_scenario(arguments.scenario, []), export,
-            blasfeo=arguments.blasfeo, aarch64=arguments.aarch64,
-        )  # fmt: skip
-        timed = {"x86-64-generic": [], "x86-64-tuned": []}
+        scenario = load_scenario(arguments.scenario, [])
+        export_c(scenario, full, aarch64=arguments.aarch64,
+                 blasfeo=[arguments.blasfeo, arguments.blasfeo_aarch64])  # fmt: skip
+        export_c(scenario, plain)
+        builds = {  # label -> (export, target, timed)
+            "x86-64-generic, GENERIC BLASFEO": (plain, "x86-64-generic", True),
+            "x86-64-generic, tuned BLASFEO by glibc-hwcaps": (full, "x86-64-generic", True),
+            "x86-64-tuned": (full, "x86-64-tuned", True),
+            "aarch64 (qemu)": (full, "aarch64", False),
+            "aarch64-tuned (qemu)": (full, "aarch64-tuned", False),
+        }
+        timed = {label: [] for label, (_, _, on) in builds.items() if on}
         for _ in range(arguments.repeats):
-            for target, medians in timed.items():
+            for label, medians in timed.items():
+                export, target, _ = builds[label]
                 medians.append(verify_c(export, run_dir, target=target).step_us_median)
         counted = {
-            target: verify_c(export, run_dir, target=target, instructions=True)
-            for target in ("x86-64-generic", "x86-64-tuned", "aarch64")
+            label: verify_c(export, run_dir, target=target, instructions=True)
+            for label, (export, target, _) in builds.items()
         }
-    print(f"{arguments.scenario}: {counted['aarch64'].steps} steps, {arguments.repeats} "
-          "timed replays per x86-64 build")  # fmt: skip
-    header = ("target", "max |dF| N", "status diffs", "heap calls", "max iterations (bound)",
+    steps = next(iter(counted.values())).steps
+    repeats = arguments.repeats
+    print(f"{arguments.scenario}: {steps} steps, {repeats} timed replays per x86-64 build")
+    header = ("build", "max |dF| N", "status diffs", "heap calls", "max iterations (bound)",
               "median step us", "instructions median", "instructions max")  # fmt: skip
     print(" | ".join(header))
-    for target, result in counted.items():
-        medians = timed.get(target)
+    for label, result in counted.items():
+        medians = timed.get(label)
         step = f"{statistics.median(medians):.0f}" if medians else "(emulated)"
         print(" | ".join([
-            target, f"{result.max_difference_n:.2g}", str(result.status_differences),
+            label, f"{result.max_difference_n:.2g}", str(result.status_differences),
             str(result.heap_calls), f"{result.max_iterations} ({result.iteration_bound})", step,
             f"{statistics.median(result.instructions):,.0f}", f"{max(result.instructions):,}",
         ]))  # fmt: skip
-    generic, tuned = (statistics.median(timed[t]) for t in ("x86-64-generic", "x86-64-tuned"))
-    print(f"generic / tuned median step: {generic / tuned:.2f}")
+    tuned = statistics.median(timed["x86-64-tuned"])
+    for label in list(timed)[:2]:
+        print(f"{label} / x86-64-tuned median step: {statistics.median(timed[label]) / tuned:.2f}")
 
 
 if __name__ == "__main__":
