@@ -23,11 +23,14 @@ from __future__ import annotations
 import argparse
 import collections
 import csv
+import json
 import re
 import statistics
 import subprocess
 import tempfile
 from pathlib import Path
+
+from auvmpc.export.c_targets import host_machine
 
 # The parts of a step, as the functions callgrind attributes them to (inclusive counts).
 _HPIPM_SOLVE = "d_ocp_qp_ipm_solve"
@@ -51,11 +54,17 @@ def _callgrind(export: Path, run: Path, folder: Path, steps: int | None, instruc
     ]
     if instructions:
         command += ["--dump-instr=yes", "--compress-pos=no", "--compress-strings=no"]
-    command += [str(export / "replay"), str(run / "log.csv"), str(export / "replay_data.txt")]
+    command += [str(_replay(export)), str(run / "log.csv"), str(export / "replay_data.txt")]
     if steps is not None:
         command.append(str(steps))
     result = subprocess.run(command, capture_output=True, text=True, check=True)
     return list(csv.reader(result.stdout.splitlines()))[1:]
+
+
+def _replay(export: Path) -> Path:
+    """The replay ``make`` builds for this computer (export.json's default target)."""
+    defaults = json.loads((export / "export.json").read_text())["default_targets"]
+    return export / "build" / defaults[host_machine()] / "replay"
 
 
 def _total(dump: Path) -> int:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +16,7 @@ import auvmpc
 from auvmpc.errors import ConfigError, RunFailed
 from auvmpc.experiments.run import run_plant, simulate, write_run
 from auvmpc.experiments.run_folder import read_run_folder
-from auvmpc.export.c_library import export_c, verify_c
+from auvmpc.export.c_library import COMMAND_TOLERANCE_N, export_c, verify_c
 from auvmpc.native import compiler
 from auvmpc.scenario import load_scenario
 from auvmpc.sim.loop import run_session
@@ -44,15 +46,38 @@ def _run(tmp_path, scenario: str, overrides: list[str]):
     return resolved, run_dir
 
 
+def _paths_of_this_machine(export: Path) -> list[str]:
+    """The folders of this machine an export must not name: the project, the Python
+    environment and its casadi, the home folder, the export's own folder."""
+    _, wheel = _casadi_hpipm()
+    return [str(Path(auvmpc.__file__).parents[2]), sys.prefix, str(wheel), str(Path.home()),
+            str(export.resolve())]  # fmt: skip
+
+
 @needs_cc
 def test_the_documented_flow_verifies(tmp_path):
     """docs/onboard.md: export the preset as it is (its controller is the paper's mpc), run
     it with the exported controller by overrides, verify. The run's configuration has nmpc's
-    defaults filled in, the export's record not: compared filled in for the vehicle."""
-    export_c(load_scenario("paper-obstacles", ["duration=5"]), tmp_path / "export")
+    defaults filled in, the export's record not: compared filled in for the vehicle. The
+    folder names no path of this machine and verifies, example main included, when copied
+    alone elsewhere: HPIPM and BLASFEO travel with it."""
+    export = tmp_path / "export"
+    export_c(load_scenario("paper-obstacles", ["duration=5"]), export)
+    forbidden = _paths_of_this_machine(export)
+    for file in export.rglob("*"):
+        if file.is_file():
+            data = file.read_bytes()
+            assert not [p for p in forbidden if p.encode() in data], file
+    assert {"libhpipm.so", "libblasfeo.so.0"} <= {f.name for f in export.glob("lib/*/*")}
+    assert (export / "licenses" / "HPIPM-LICENSE.txt").is_file()
+    alone = tmp_path / "elsewhere" / "controller"
+    shutil.copytree(export, alone)
+    shutil.rmtree(export)
     _, run_dir = _run(tmp_path, "paper-obstacles", _FREE)
-    result = verify_c(tmp_path / "export", run_dir)
+    result = verify_c(alone, run_dir)
     assert result.steps == 10 and result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
+    assert result.target == "x86-64-generic" and result.heap_calls == 0
+    assert 0 < result.max_iterations <= result.iteration_bound
 
 
 @needs_cc
@@ -159,20 +184,25 @@ def _blasfeo_folder(tmp_path, features: tuple[str, ...], target: str = "GENERIC"
 
 @needs_cc
 def test_export_links_the_blasfeo_it_is_given(tmp_path):
-    """--blasfeo DIR: the export links DIR's libblasfeo.so under the wheel's HPIPM (here a copy
-    of the wheel's own, so the commands are the same to the bound), and records it; a file
-    there that is no library makes the build fail, which shows it is the one linked."""
+    """--blasfeo DIR: the export carries DIR's libblasfeo.so as the target x86-64-tuned under
+    the wheel's HPIPM (here a copy of the wheel's own, so the commands are the same to the
+    bound), which make builds by default; a file there that is no library makes the build
+    fail, which shows it is the one linked."""
     resolved, run_dir = _run(tmp_path, "paper-obstacles", _FREE)
     folder = _blasfeo_folder(tmp_path, ())
-    export_c(resolved, tmp_path / "export", blasfeo=folder)
-    record = json.loads((tmp_path / "export" / "export.json").read_text())
-    assert record["blasfeo"] == str(folder.resolve())
-    assert f"BLASFEO_DIR ?= {folder.resolve()}" in (tmp_path / "export" / "Makefile").read_text()
-    result = verify_c(tmp_path / "export", run_dir)
+    export = tmp_path / "export"
+    export_c(resolved, export, blasfeo=folder)
+    record = json.loads((export / "export.json").read_text())
+    assert record["default_targets"]["x86_64"] == "x86-64-tuned"
+    assert record["targets"]["x86-64-tuned"]["blasfeo_target"] == "GENERIC"
+    carried = export / "lib" / "x86-64-tuned" / "libblasfeo.so.0"
+    assert carried.read_bytes() == (folder / "libblasfeo.so").read_bytes()
+    result = verify_c(export, run_dir)
+    assert result.target == "x86-64-tuned"
     assert result.max_difference_n <= C_EXPORT_COMMAND_TOL_N
-    (folder / "libblasfeo.so").write_bytes(b"not a shared library")
+    carried.write_bytes(b"not a shared library")
     with pytest.raises(RunFailed, match="did not build"):
-        verify_c(tmp_path / "export", run_dir)
+        verify_c(export, run_dir)
 
 
 @needs_cc
@@ -284,3 +314,27 @@ def test_the_effectiveness_setter_changes_the_c_command_as_python_does(tmp_path)
     log = read_run_folder(tmp_path / "run").log()
     assert not log.column(log.input_names[2]).any()
     assert log.column(log.input_names[0]).any()
+
+
+# The aarch64 HPIPM and BLASFEO that make hpipm-aarch64 fetches into the environment.
+_AARCH64_LIBS = Path(os.environ.get("AUVMPC_AARCH64_LIBS", Path(sys.prefix) / "hpipm-aarch64"))
+needs_aarch64 = pytest.mark.skipif(
+    shutil.which("aarch64-linux-gnu-gcc") is None or shutil.which("qemu-aarch64") is None
+    or not (_AARCH64_LIBS / "libhpipm.so").is_file(),
+    reason="no aarch64 cross compiler, qemu-aarch64, or aarch64 HPIPM (make hpipm-aarch64)",
+)  # fmt: skip
+
+
+@needs_cc
+@needs_aarch64
+def test_the_aarch64_build_reproduces_python_under_qemu(tmp_path):
+    """make TARGET=aarch64 with Debian's cross compiler, the replay under qemu-aarch64: the
+    commands within verify-c's bound (the aarch64 HPIPM's round-off), the statuses the
+    run's, no heap call in a step. paper-ideal: the quickest to emulate."""
+    overrides = [*_FREE, "controller.offset_free=false", "duration=2"]
+    resolved, run_dir = _run(tmp_path, "paper-ideal", overrides)
+    export_c(resolved, tmp_path / "export", aarch64=_AARCH64_LIBS)
+    result = verify_c(tmp_path / "export", run_dir, target="aarch64")
+    assert result.target == "aarch64" and result.steps == 4
+    assert result.max_difference_n <= COMMAND_TOLERANCE_N
+    assert result.status_differences == 0 and result.heap_calls == 0

@@ -9,8 +9,9 @@ other line must be an ``auvmpc`` command.
 
 Left out, by one rule: the commands that take minutes and that the rest of the suite
 covers on smaller inputs (``reproduce``, ``bench``, ``campaign``, ``campaign-report``,
-``identify``, ``run --from-campaign``), ``export-c --blasfeo DIR``, whose DIR is a BLASFEO
-build the reader makes first (``make blasfeo``), and the lines that take 5-11 s each
+``identify``, ``run --from-campaign``), ``export-c --blasfeo DIR`` and ``--aarch64 DIR``,
+whose DIR the reader fetches first (``make blasfeo``, ``make hpipm-aarch64``), ``verify-c
+--target`` of such an export, and the lines that take 5-11 s each
 and that another test runs exactly (``animate``: tests/test_animation.py;
 ``run bluerov2-helix`` and ``run paper-6dof``: tests/test_six_dof_loop.py). ``export-c``
 and ``verify-c`` are left out where there is no C compiler, make or HPIPM (as in
@@ -34,7 +35,9 @@ pytestmark = pytest.mark.slow
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 LONG_COMMANDS = {"reproduce", "bench", "campaign", "campaign-report", "identify", "animate"}
-LONG_OPTIONS = {"--from-campaign", "--blasfeo"}
+# --blasfeo and --aarch64 name folders the reader fetches first (make blasfeo, make
+# hpipm-aarch64); --target aarch64 needs the export made with --aarch64 (tests/test_export_c.py)
+LONG_OPTIONS = {"--from-campaign", "--blasfeo", "--aarch64", "--target"}
 # Scenarios tests/test_six_dof_loop.py runs exactly (test_bluerov2_helix,
 # test_paper_6dof_within_twice_the_planar_error_with_depth_and_attitude_bounded).
 RUN_ELSEWHERE = {"bluerov2-helix", "paper-6dof"}

@@ -993,20 +993,32 @@ def export_c(
     ] = None,
     overwrite: Overwrite = False,
     blasfeo: Annotated[
-        Path | None,
+        list[Path] | None,
         typer.Option(
             "--blasfeo",
-            help="folder with a libblasfeo.so built for the target CPU, linked under HPIPM "
-            "instead of the casadi wheel's portable one (docs/onboard.md)",
+            help="folder with a libblasfeo.so built for one CPU: also the target x86-64-tuned "
+            "(or aarch64-tuned) under the wheel's HPIPM; once per instruction set "
+            "(docs/onboard.md)",
+        ),
+    ] = None,
+    aarch64: Annotated[
+        Path | None,
+        typer.Option(
+            "--aarch64",
+            help="folder with the aarch64 HPIPM and BLASFEO (make hpipm-aarch64): also the "
+            "target aarch64",
         ),
     ] = None,
 ) -> None:
-    """Write the scenario's real-time controller (nmpc, every move free) as a C99 library."""
+    """Write the scenario's real-time controller (nmpc, every move free) as a self-contained
+    C99 library that builds with `make` (`make TARGET=aarch64`) anywhere."""
     from auvmpc.export.c_library import export_c as write_export
     from auvmpc.scenario import load_scenario
 
     resolved = load_scenario(scenario, set_ or [])
-    written = write_export(resolved, out, overwrite=overwrite, blasfeo=blasfeo)
+    written = write_export(
+        resolved, out, overwrite=overwrite, blasfeo=blasfeo or (), aarch64=aarch64
+    )
     console.print(f"wrote {written}")
 
 
@@ -1020,18 +1032,43 @@ def verify_c(
             "controller.control_horizon=null"
         ),
     ],
+    target: Annotated[
+        str | None,
+        typer.Option(
+            "--target",
+            help="the export's make TARGET to build and replay (aarch64: cross-built, run "
+            "under qemu-aarch64); default: this computer's",
+        ),
+    ] = None,
+    instructions: Annotated[
+        bool,
+        typer.Option(
+            "--instructions",
+            help="also count each step's instructions (valgrind; a QEMU plugin emulated)",
+        ),
+    ] = False,
 ) -> None:
     """Build an export, replay a run through it, compare with the run's Python commands."""
+    from auvmpc.export.c_library import median_instructions
     from auvmpc.export.c_library import verify_c as replay_and_compare
 
-    result = replay_and_compare(folder, run_dir)
+    result = replay_and_compare(folder, run_dir, target=target, instructions=instructions)
+    counted = median_instructions(result)
     console.print(
+        f"target {result.target}  "
         f"steps {result.steps}  max |F_C - F_Python| {result.max_difference_n:.3g} N "
         f"(step {result.worst_step})  fallbacks {result.fallbacks}  "
         f"recoveries {result.recoveries}  status differences {result.status_differences}  "
         f"step median {result.step_us_median:.0f} us  max {result.step_us_max:.0f} us "
         f"({result.step_us_max_after_first:.0f} us after the cold first step)  "
-        f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM"
+        f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM  "
+        f"heap calls in steps {result.heap_calls}  iterations max {result.max_iterations} "
+        f"(bound {result.iteration_bound})"
+        + (
+            ""
+            if counted is None
+            else f"  instructions per step: median {counted:.0f}, max {max(result.instructions)}"
+        )  # fmt: skip
     )
     if result.failures:
         errors.print(

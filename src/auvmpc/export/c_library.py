@@ -5,12 +5,15 @@ builds and runs where it is compiled (controllers/c_sources.py: the controller a
 shell ``auvmpc_controller.c`` with its header, auvmpc's HPIPM driver ``hpipm_ocp_step.c``,
 CasADi's C code of the functions the Python evaluates, ``rti_qp_data.c`` and ``ekf_data.c``,
 and the scenario's sizes and settings, ``auvmpc_config.h``), a replay harness (``replay.c``)
-with the scenario's reference preview and obstacles per sample (``replay_data.txt``), a
-Makefile and a README. HPIPM and BLASFEO are linked from the casadi wheel; nothing of theirs
-is copied.
+with the scenario's reference preview and obstacles per sample (``replay_data.txt``), an
+example main (``example.c``), a Makefile and a README; and HPIPM's and BLASFEO's shared
+libraries for each target, with their headers and licences (export/c_targets.py), so that
+the folder builds anywhere with a C compiler alone.
 
-:func:`verify_c` builds the export in a temporary folder, replays a run folder's states
-through it and compares its commands with the run's (``auvmpc verify-c``).
+:func:`verify_c` builds the export for a target in a temporary folder, replays a run
+folder's states through it (under QEMU for an emulated target) and compares its commands
+with the run's (``auvmpc verify-c``), with the step's real-time facts: heap calls inside the
+step, iterations against their bound, and optionally the instructions per step.
 
 Supported: a horizontal scenario, a fully actuated vehicle, the real-time iteration with every
 move free (what the bench label ``nmpc`` runs), with or without the offset-free estimator, no
@@ -22,6 +25,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+import statistics
 import subprocess
 import tempfile
 from collections.abc import Sequence
@@ -43,11 +47,22 @@ from auvmpc.controllers.config import (
     QpStructure,
     TightenedConstraints,
 )
-from auvmpc.controllers.nmpc import NmpcConfig
+from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS, NmpcConfig
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.experiments.run_folder import RunFolder, read_run_folder
+from auvmpc.export.c_targets import (
+    Target,
+    aarch64_target,
+    host_machine,
+    hwcaps_level,
+    makefile_table,
+    tuned_target,
+    wheel_target,
+    write_solver_files,
+)
+from auvmpc.export.instruction_counts import emulator_command, step_instructions
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
@@ -60,12 +75,7 @@ from auvmpc.ocp.multiple_shooting import (
 from auvmpc.ocp.stage_qp import stage_qp
 from auvmpc.references import make_reference
 from auvmpc.safe_yaml import read_text_file
-from auvmpc.solvers.blasfeo_target import (
-    LIBRARY,
-    blasfeo_folder,
-    missing_features,
-    required_features,
-)
+from auvmpc.solvers.blasfeo_target import blasfeo_folder, missing_features
 from auvmpc.solvers.compiled_qp_step import _casadi_hpipm, compiled_qp_step
 from auvmpc.solvers.hpipm import hpipm_settings
 
@@ -75,6 +85,7 @@ __all__ = [
     "VerifyResult",
     "export_c",
     "exported_config",
+    "iteration_bound",
     "verify_c",
 ]
 
@@ -86,7 +97,7 @@ STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
 COMMAND_TOLERANCE_N = 1e-6
 
 _TEMPLATES = Path(__file__).with_name("c")
-_COPIED = ("replay.c", "README.md")
+_COPIED = ("replay.c", "example.c", "README.md")
 _DATA = "replay_data.txt"
 _RECORD = "export.json"
 _NX = HORIZONTAL.size
@@ -122,6 +133,18 @@ def static_bytes(horizon: int, thrusters: int, slots: int) -> int:
     estimator = (_NX + ND) * (1 + _NX + ND)  # estimate, covariance
     doubles = iterates + shell + sample + step + estimator
     return 8 * doubles
+
+
+def iteration_bound(config: NmpcConfig) -> int:
+    """The most HPIPM interior-point iterations one exported step can take: the cold start's
+    SQP steps and both retries from the reference (auvmpc_controller.c, auvmpc_step), each QP
+    through every pass at its iteration limit after its hot-started try
+    (hpipm_ocp_step.c)."""
+    settings = hpipm_settings(config.qp_iteration_limit)
+    passes = [settings[2 + 6 * p : 8 + 6 * p] for p in range(int(settings[1]))]
+    per_qp = sum(int(limit) + int(hot) for _, limit, _, _, _, hot in passes)
+    sqp_steps = max(config.linearisation_iterations, _COLD_START_ITERATIONS)
+    return 3 * sqp_steps * per_qp
 
 
 def _check_supported(resolved) -> tuple[NmpcConfig, int]:
@@ -207,20 +230,38 @@ def _row(values) -> str:
 
 
 def export_c(
-    resolved, out: Path | str, *, overwrite: bool = False, blasfeo: Path | str | None = None
+    resolved,
+    out: Path | str,
+    *,
+    overwrite: bool = False,
+    blasfeo: Path | str | Sequence[Path | str] = (),
+    aarch64: Path | str | None = None,
 ) -> Path:
     """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
     rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it.
 
-    ``blasfeo``: a folder with a ``libblasfeo.so`` built for the target CPU, linked under
-    the casadi wheel's HPIPM instead of the wheel's portable one (export/blasfeo_target.py).
+    It builds for this computer's instruction set from the installed casadi wheel's HPIPM
+    and BLASFEO (``x86-64-generic`` on an x86-64), and also for: ``aarch64``, the aarch64
+    HPIPM and BLASFEO in the folder ``aarch64`` (``make hpipm-aarch64``); ``x86-64-tuned`` or
+    ``aarch64-tuned``, each folder in ``blasfeo`` (one per instruction set) with a
+    ``libblasfeo.so`` built for one CPU, under the portable HPIPM of its instruction set
+    (solvers/blasfeo_target.py). Their libraries, headers and licences are copied in
+    (export/c_targets.py).
     """
     config, slots = _check_supported(resolved)
     hpipm = _casadi_hpipm()
     if hpipm is None:
         raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
     include, libraries = hpipm
-    tuned = None if blasfeo is None else blasfeo_folder(blasfeo, include)
+    targets = [wheel_target(libraries, include)]
+    if aarch64 is not None:
+        targets.append(aarch64_target(aarch64, ca.__version__, include))
+    portable = {t.machine: t for t in targets}
+    for given in [blasfeo] if isinstance(blasfeo, str | Path) else blasfeo:
+        tuned = tuned_target(blasfeo_folder(given, include), portable)
+        if any(t.name == tuned.name for t in targets):
+            raise ConfigError("--blasfeo", str(given), f"a second BLASFEO for {tuned.machine}")
+        targets.append(tuned)
     check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     model = resolved.model
     program = MultipleShootingProgram(model, config, slots)
@@ -229,14 +270,19 @@ def export_c(
         write_sources(program, qp, config, folder)
         for name in _COPIED:
             shutil.copyfile(_TEMPLATES / name, folder / name)
-        makefile = (_TEMPLATES / "Makefile.in").read_text()
-        makefile = makefile.replace("@CASADI_DIR@", str(libraries))
-        makefile = makefile.replace("@CASADI_VERSION@", ca.__version__)
-        makefile = makefile.replace("@BLASFEO_DIR@", str(tuned or libraries))
+        write_solver_files(targets, include, folder)
         arena = _arena_bytes(qp, program, config)
-        makefile = makefile.replace(
-            "@ARENA_DEFINE@", "" if arena is None else f"-DAUVMPC_ARENA_BYTES={arena}"
-        )
+        defaults = {machine: _default_target(targets, machine) for machine in _MACHINES}
+        fills = {
+            "@TARGET_TABLE@": makefile_table(targets),
+            "@TARGETS@": " ".join(t.name for t in targets),
+            "@X86_DEFAULT@": defaults["x86_64"] or "none",
+            "@ARM_DEFAULT@": defaults["aarch64"] or "none",
+            "@ARENA_DEFINE@": "" if arena is None else f"-DAUVMPC_ARENA_BYTES={arena}",
+        }
+        makefile = (_TEMPLATES / "Makefile.in").read_text()
+        for key, value in fills.items():
+            makefile = makefile.replace(key, value)
         (folder / "Makefile").write_text(makefile)
         (folder / _DATA).write_text(_replay_data(resolved, program.horizon, program.sample_time))
         record = {
@@ -244,32 +290,48 @@ def export_c(
             "controller": json.loads(config.model_dump_json()),
             "model": json.loads(model.model_dump_json()),
             "casadi": ca.__version__,
-            "hpipm_include": str(include),
-            "hpipm_libraries": str(libraries),
-            "blasfeo": None if tuned is None else str(tuned),
-            "blasfeo_features": [] if tuned is None else list(required_features(tuned)),
+            "targets": {t.name: t.record() for t in targets},
+            # the tuned BLASFEO glibc's loader takes for the generic x86-64 build on a CPU of
+            # that level (export/c_targets.py)
+            "hwcaps": {level: t.blasfeo_target for t in targets if (level := hwcaps_level(t))},
+            "default_targets": defaults,
             "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
             "hpipm_arena_bytes": arena,
+            "iteration_bound": iteration_bound(config),
         }
         (folder / _RECORD).write_text(json.dumps(record, indent=2) + "\n")
     return Path(out)
+
+
+_MACHINES = ("x86_64", "aarch64")
+
+
+def _default_target(targets: list[Target], machine: str) -> str | None:
+    """What ``make`` builds on a ``machine`` computer: the tuned target where there is one."""
+    names = [t.name for t in targets if t.machine == machine]
+    return next((n for n in names if n.endswith("-tuned")), names[0] if names else None)
 
 
 @dataclass(frozen=True)
 class VerifyResult:
     """What ``verify-c`` measured."""
 
+    target: str  # the make TARGET that was built and replayed
     steps: int
     max_difference_n: float  # largest |F_C - F_Python| over every step and thruster (N)
     worst_step: int
-    step_us_median: float
+    step_us_median: float  # on an emulated target: the emulator's time, not the target's
     step_us_max: float
     step_us_max_after_first: float  # the first step starts cold: 10 SQP steps
     static_bytes: int  # the controller's static structure
     workspace_bytes: int  # HPIPM's workspace and the driver's buffers: the static arena
+    heap_calls: int  # malloc, calloc, realloc, free inside auvmpc_step (-1: not counted)
+    max_iterations: int  # the most HPIPM iterations of one step
+    iteration_bound: int  # the most one step can take (iteration_bound)
     fallbacks: int
     recoveries: int  # steps the shell's stabilising feedback commanded
     status_differences: int  # steps whose C status is not the Python run's
+    instructions: tuple[int, ...] = ()  # per step, where counted (--instructions)
 
     @property
     def failures(self) -> list[str]:
@@ -281,6 +343,12 @@ class VerifyResult:
             found.append(
                 f"{self.status_differences} steps with another status than the run's (the C "
                 "has neither the IPOPT rescue nor the estimator's restart: docs/onboard.md)"
+            )
+        if self.heap_calls > 0:
+            found.append(f"{self.heap_calls} heap calls inside the steps")
+        if self.max_iterations > self.iteration_bound:
+            found.append(
+                f"{self.max_iterations} iterations in a step, over the bound {self.iteration_bound}"
             )
         return found
 
@@ -296,8 +364,8 @@ class _ExportRecord:
     model: VehicleParams
     model_data: dict  # as written: a run's run.json ``model`` is compared with it
     controller: NmpcConfig
-    blasfeo: str | None
-    blasfeo_features: tuple[str, ...]
+    targets: dict[str, dict]  # name -> machine, flags, blasfeo_target, blasfeo_features
+    default_targets: dict[str, str | None]  # machine -> what make builds there
 
 
 def _export_record(export: Path) -> _ExportRecord:
@@ -315,21 +383,27 @@ def _export_record(export: Path) -> _ExportRecord:
         raise ConfigError("DIR", str(file), "export.json nests too deep to be one") from None
     if not isinstance(record, dict):
         raise ConfigError("DIR", str(file), f"export.json holds a {type(record).__name__}")
-    for key in ("model", "controller"):
+    for key in ("model", "controller", "targets", "default_targets"):
         if key not in record:
             raise ConfigError("DIR", str(file), f"export.json has no {key!r}")
-    features = record.get("blasfeo_features") or []
-    blasfeo = record.get("blasfeo")
-    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
-        raise ConfigError("DIR", str(file), "export.json's blasfeo_features is not a list of names")
-    if blasfeo is not None and not isinstance(blasfeo, str):
-        raise ConfigError("DIR", str(file), "export.json's blasfeo is not a folder's name")
+    targets, defaults = record["targets"], record["default_targets"]
+    if not isinstance(targets, dict) or not all(
+        isinstance(t, dict) and isinstance(t.get("machine"), str)
+        and isinstance(t.get("blasfeo_features"), list)
+        and all(isinstance(f, str) for f in t["blasfeo_features"])
+        for t in targets.values()
+    ):  # fmt: skip
+        raise ConfigError("DIR", str(file), "export.json's targets are not the ones it writes")
+    if not isinstance(defaults, dict) or not all(
+        d is None or d in targets for d in defaults.values()
+    ):
+        raise ConfigError("DIR", str(file), "export.json's default_targets name no target")
     try:
         model = VehicleParams.model_validate(record["model"])
         controller = NmpcConfig.model_validate(record["controller"], context={SAVED_RUN: True})
     except ValidationError as error:
         raise format_validation_error(error, "export.json", str(file)) from None
-    return _ExportRecord(model, record["model"], controller, blasfeo, tuple(features))
+    return _ExportRecord(model, record["model"], controller, targets, defaults)
 
 
 def _check_run(record: _ExportRecord, run: RunFolder) -> None:
@@ -359,25 +433,45 @@ def _check_run(record: _ExportRecord, run: RunFolder) -> None:
         raise ConfigError("RUN_DIR", str(run.path), "its vehicle model is not the exported one")
 
 
-def _check_blasfeo(export: Path, record: _ExportRecord) -> None:
-    """Refuse to replay an export whose BLASFEO needs CPU features this machine lacks."""
-    missing = missing_features(record.blasfeo_features)
-    if missing:
-        raise ConfigError(
-            "DIR", str(export),
-            f"links {record.blasfeo}/{LIBRARY}, built for CPU features this machine lacks "
-            f"({', '.join(missing)}): its replay would stop on an illegal instruction",
-        )  # fmt: skip
+def _chosen_target(export: Path, record: _ExportRecord, target: str | None) -> str:
+    """``target``, or what ``make`` builds on this computer; one line where the export has
+    no such target or this computer cannot run it."""
+    names = sorted(record.targets)
+    if target is None:
+        target = record.default_targets.get(host_machine())
+        if target is None:
+            raise ConfigError("DIR", str(export), f"has no target for this computer: {names}")
+    if target not in record.targets:
+        raise ConfigError("--target", target, f"one of the export's targets {names}")
+    described = record.targets[target]
+    if described["machine"] == host_machine():
+        missing = missing_features(tuple(described["blasfeo_features"]))
+        if missing:
+            raise ConfigError(
+                "--target", target,
+                f"its BLASFEO ({described.get('blasfeo_target')}) needs CPU features this "
+                f"machine lacks ({', '.join(missing)}): its replay would stop on an illegal "
+                "instruction",
+            )  # fmt: skip
+    return target
 
 
 def verify_c(
-    export: Path | str, run_dir: Path | str, effectiveness: Sequence[float] | None = None
+    export: Path | str,
+    run_dir: Path | str,
+    effectiveness: Sequence[float] | None = None,
+    *,
+    target: str | None = None,
+    instructions: bool = False,
 ) -> VerifyResult:
-    """Build ``export`` with the system C compiler (in a temporary folder), replay
-    ``run_dir``'s log.csv through it and compare its commands with the logged ones.
-    ``effectiveness``: the thrusters' effectiveness the run's controller was told from its
-    first sample (``Session.effectiveness``), which the replay sets by
-    ``auvmpc_set_effectiveness``; None: all healthy.
+    """Build ``export`` for ``target`` (None: this computer's; a temporary copy, with the
+    system C compiler or, for another machine, Debian's cross compiler), replay
+    ``run_dir``'s log.csv through it (another machine's under QEMU's user-mode emulator) and
+    compare its commands with the logged ones. ``effectiveness``: the thrusters'
+    effectiveness the run's controller was told from its first sample
+    (``Session.effectiveness``), which the replay sets by ``auvmpc_set_effectiveness``;
+    None: all healthy. ``instructions``: also count each step's instructions
+    (export/instruction_counts.py; valgrind natively, a QEMU plugin emulated).
 
     The run folder is read by the one reader (:mod:`auvmpc.experiments.run_folder`): a log
     that is not whole (cut mid-row or at a row boundary, edited) is refused in one line
@@ -389,28 +483,40 @@ def verify_c(
     run = read_run_folder(run_dir, ("scenario", "model"))
     log = run.log()
     _check_run(record, run)
-    _check_blasfeo(export, record)
-    cc = compiler()
+    target = _chosen_target(export, record, target)
+    machine = record.targets[target]["machine"]
+    emulated = None if machine == host_machine() else machine
+    prefix = [] if emulated is None else emulator_command(machine)
+    cc = compiler() if emulated is None else shutil.which(f"{machine}-linux-gnu-gcc")
     if cc is None or shutil.which("make") is None:
-        raise ConfigError("DIR", str(export), "needs a C compiler and make on the PATH")
+        raise ConfigError(
+            "--target", target,
+            "needs make and a C compiler for it on the PATH"
+            + ("" if emulated is None else f" ({machine}-linux-gnu-gcc)"),
+        )  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="auvmpc-verify-c-") as scratch:
         build = Path(scratch) / "build"
         shutil.copytree(export, build)
         made = subprocess.run(
-            ["make", "-s", "-C", str(build), f"CC={cc}"], capture_output=True, text=True
-        )
+            ["make", "-s", "-C", str(build), f"TARGET={target}", f"CC={cc}"],
+            capture_output=True, text=True,
+        )  # fmt: skip
         if made.returncode:
             lines = made.stderr.strip().splitlines()
             first = next((line for line in lines if "error" in line), "make failed")
             raise RunFailed(f"the export did not build: {first}")
         told = [] if effectiveness is None else [",".join(f"{e:.17g}" for e in effectiveness)]
-        replay = subprocess.run(
-            [str(build / "replay"), str(run_dir / "log.csv"), str(build / _DATA), str(log.steps),
-             *told],
-            capture_output=True, text=True,
-        )  # fmt: skip
+        program = [str(build / "build" / target / "replay"), str(run_dir / "log.csv"),
+                   str(build / _DATA), str(log.steps), *told]  # fmt: skip
+        replay = subprocess.run([*prefix, *program], capture_output=True, text=True)
         if replay.returncode:
             raise RunFailed(f"replay failed: {replay.stderr.strip()}")
+        example = subprocess.run(  # the template for a vehicle's main (example.c) runs too
+            [*prefix, str(build / "build" / target / "example")], capture_output=True, text=True
+        )
+        if example.returncode:
+            raise RunFailed(f"the example main failed: {example.stderr.strip()}")
+        counted = step_instructions(program, emulated, Path(scratch)) if instructions else []
     commands = list(csv.DictReader(replay.stdout.splitlines()))
     stats = dict(zip(*[iter(replay.stderr.split())] * 2, strict=True))
     inputs = log.input_names  # the replay's columns too: the export's AUVMPC_INPUT_NAMES
@@ -428,6 +534,7 @@ def verify_c(
         raise RunFailed(f"replay wrote a status auvmpc does not know: {sorted(set(codes))}")
     c_status = [C_STATUS[code] for code in codes]
     return VerifyResult(
+        target=target,
         steps=len(commands),
         max_difference_n=float(difference.max()),
         worst_step=int(difference.argmax()),
@@ -436,12 +543,21 @@ def verify_c(
         step_us_max_after_first=float(stats["step_us_max_after_first"]),
         static_bytes=int(stats["static_bytes"]),
         workspace_bytes=int(stats["workspace_bytes"]),
+        heap_calls=int(stats["heap_calls_in_steps"]),
+        max_iterations=int(stats["max_iterations"]),
+        iteration_bound=iteration_bound(record.controller),
         fallbacks=c_status.count(ControlStatus.FALLBACK),
         recoveries=c_status.count(ControlStatus.RECOVERY),
         status_differences=sum(
             mine != logged for mine, logged in zip(c_status, log.status, strict=True)
         ),
+        instructions=tuple(counted),
     )
+
+
+def median_instructions(result: VerifyResult) -> float | None:
+    """The median step's instructions, where they were counted."""
+    return statistics.median(result.instructions) if result.instructions else None
 
 
 def own_export(folder: Path) -> bool:

@@ -25,6 +25,7 @@ __all__ = [
     "BLASFEO_ENV",
     "LIBRARY",
     "blasfeo_folder",
+    "blasfeo_target",
     "missing_features",
     "required_features",
     "runtime_blasfeo",
@@ -96,6 +97,13 @@ def required_features(folder: Path) -> tuple[str, ...]:
     """The CPU features the BLASFEO in ``folder`` was built to need (its target header)."""
     header = _target_header(folder)
     return () if header is None else tuple(_FEATURE.findall(header.read_text()))
+
+
+def blasfeo_target(folder: Path) -> str:
+    """The TARGET_... the BLASFEO in ``folder`` was built for (its target header), e.g.
+    ``GENERIC`` or ``X64_INTEL_HASWELL``; "unknown" without a header."""
+    header = _target_header(folder)
+    return "unknown" if header is None else _target(header)
 
 
 def _target_header(folder: Path) -> Path | None:

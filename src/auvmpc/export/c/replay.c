@@ -8,7 +8,8 @@
  * the obstacles at every sample, computed as the Python closed loop computes them. stdout:
  * k, the command per input (AUVMPC_INPUT_NAMES, %.17g), the status and HPIPM's iterations
  * per sample; stderr: the step time (median, max, max after the cold-started first step, in
- * microseconds) and the controller's memory (static, and HPIPM's workspace allocated at init).
+ * microseconds), the controller's memory (static, and HPIPM's workspace allocated at init)
+ * and the heap calls made inside auvmpc_step (-1: not counted on this C library).
  * E1,E2,...: each thruster's effectiveness, set by auvmpc_set_effectiveness after auvmpc_init
  * (a run whose controller was told it from its first sample: Session.effectiveness).
  */
@@ -19,6 +20,39 @@
 #include <time.h>
 
 #include "auvmpc_controller.h"
+
+/* The heap calls inside auvmpc_step, counted: this program's malloc, calloc, realloc and
+ * free replace the C library's for the whole process (HPIPM's and BLASFEO's shared libraries
+ * included: glibc's documented way to replace malloc) and hand on to glibc's own allocator.
+ * On another C library nothing is replaced and the count reads -1. */
+static long heap_calls = -1;
+static int counting;
+#ifdef __GLIBC__
+extern void *__libc_malloc(size_t size);
+extern void *__libc_calloc(size_t count, size_t size);
+extern void *__libc_realloc(void *pointer, size_t size);
+extern void __libc_free(void *pointer);
+
+void *malloc(size_t size) {
+    heap_calls += counting;
+    return __libc_malloc(size);
+}
+void *calloc(size_t count, size_t size) {
+    heap_calls += counting;
+    return __libc_calloc(count, size);
+}
+void *realloc(void *pointer, size_t size) {
+    heap_calls += counting;
+    return __libc_realloc(pointer, size);
+}
+void free(void *pointer) {
+    heap_calls += counting && pointer;
+    __libc_free(pointer);
+}
+#define HEAP_COUNTED 1
+#else
+#define HEAP_COUNTED 0
+#endif
 
 #define MAX_LINE 65536
 #define MAX_OBSTACLES 256
@@ -113,6 +147,7 @@ int main(int argc, char **argv) {
     printf("k");
     for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",%s", inputs[i]);
     printf(",status,iterations\n");
+    int max_iterations = 0;
     for (int k = 0; k < steps; ++k) {
         int count;
         if (!fgets(line, MAX_LINE, log) || read_state(line, columns, state)) {
@@ -138,13 +173,20 @@ int main(int argc, char **argv) {
         }
         double command[AUVMPC_THRUSTERS];
         struct timespec start, stop;
+        if (k == 0 && HEAP_COUNTED) heap_calls = 0;
+        /* Only these two clock readings per step: verify-c's instruction counter on an
+         * emulated target (qemu_step_counter.c) counts between them. */
         clock_gettime(CLOCK_MONOTONIC, &start);
+        counting = 1;
         auvmpc_status status = auvmpc_step(state, reference, obstacles, count, command);
+        counting = 0;
         clock_gettime(CLOCK_MONOTONIC, &stop);
         times[k] = 1e6 * (double) (stop.tv_sec - start.tv_sec) + 1e-3 * (double) (stop.tv_nsec - start.tv_nsec);
         printf("%d", k);
         for (int i = 0; i < AUVMPC_THRUSTERS; ++i) printf(",%.17g", command[i]);
-        printf(",%d,%d\n", (int) status, auvmpc_last_iterations());
+        int iterations = auvmpc_last_iterations();
+        if (iterations > max_iterations) max_iterations = iterations;
+        printf(",%d,%d\n", (int) status, iterations);
     }
     double warm_max = 0.0; /* after the first step, which starts cold (10 SQP steps) */
     for (int k = 1; k < steps; ++k)
@@ -153,9 +195,9 @@ int main(int argc, char **argv) {
     double median = steps % 2 ? times[steps / 2] : 0.5 * (times[steps / 2 - 1] + times[steps / 2]);
     fprintf(stderr,
             "steps %d step_us_median %.1f step_us_max %.1f step_us_max_after_first %.1f "
-            "static_bytes %ld workspace_bytes %ld\n",
+            "static_bytes %ld workspace_bytes %ld heap_calls_in_steps %ld max_iterations %d\n",
             steps, median, times[steps - 1], warm_max, auvmpc_static_bytes(),
-            auvmpc_workspace_bytes());
+            auvmpc_workspace_bytes(), heap_calls, max_iterations);
     free(times);
     fclose(log);
     fclose(data);

@@ -1,0 +1,43 @@
+"""Unpack a few files of a wheel fetched from the package registry by a pinned version and
+sha256, without installing it: the setup steps ``make blasfeo`` (blasfeo_tuned.py) and
+``make hpipm-aarch64`` (hpipm_aarch64.py) use it; nothing is fetched at run time."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+
+def unpack_members(
+    requirement: str, sha256: str, platform: str, members: dict[str, str], out: Path
+) -> list[str]:
+    """Download ``requirement`` (``name==version``) for ``platform``, checked by pip against
+    ``sha256``, and write each archive member whose name ends with a key of ``members`` into
+    ``out`` under that key's value. Returns the values not found in the wheel."""
+    with tempfile.TemporaryDirectory() as scratch:
+        pinned = Path(scratch) / "requirement.txt"
+        pinned.write_text(f"{requirement} --hash=sha256:{sha256}\n")
+        subprocess.run(
+            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+             "--require-hashes", "--only-binary", ":all:", "--platform", platform,
+             "-d", scratch, "-r", str(pinned)],
+            check=True,
+        )  # fmt: skip
+        (wheel,) = Path(scratch).glob("*.whl")
+        out.mkdir(parents=True, exist_ok=True)
+        with zipfile.ZipFile(wheel) as archive:
+            for name in archive.namelist():
+                for suffix, target in members.items():
+                    if name.endswith(suffix):
+                        (out / target).write_bytes(archive.read(name))
+    return [target for target in members.values() if not (out / target).is_file()]
+
+
+def empty_folder_or_exit(out: Path) -> None:
+    """Refuse (exit 2, one line) an ``--out`` that exists and is not an empty folder."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        print(f"error: --out: {out} exists and is not an empty folder", file=sys.stderr)
+        raise SystemExit(2)
