@@ -15,6 +15,7 @@ from auvmpc.experiments.run import read_run
 from auvmpc.models.vehicle import load_vehicle, vehicle_data
 from auvmpc.plots import figure_actuators
 from auvmpc.references import LineConfig, make_reference
+from auvmpc.scenario import load_scenario
 from auvmpc.sim.metrics import cross_track_error, reference_path
 from auvmpc.sim.verdict import characteristic_length_m
 from tests.test_cli import run_cli
@@ -43,6 +44,7 @@ def test_auvmpc_run_flies_remus100_with_its_default_controller(monkeypatch, caps
     info = json.loads((out / "run.json").read_text())
     assert info["scenario"]["controller"]["type"] == "six-dof-nmpc"
     assert info["choices"]["type"]["value"] == "six-dof-nmpc"
+    assert not any("depth_controller" in note for note in info["warnings"])  # none given
     header = (out / "log.csv").read_text().splitlines()[0].split(",")
     assert header[header.index("r_ref") + 1 : header.index("solve_ms")] == INPUTS
     metrics = info["metrics"]
@@ -84,6 +86,11 @@ def test_a_torpedo_without_a_size_is_as_long_as_its_actuators_reach():
     vehicle = load_vehicle(data)
     reach = max(math.hypot(*a.position) for a in vehicle.six_dof_actuators.actuators)
     assert characteristic_length_m(vehicle) == pytest.approx(2.0 * reach)
+
+
+def test_a_depth_controller_given_beside_it_is_a_note_not_an_error():
+    resolved = load_scenario(SHORT, ["depth_controller.prediction_horizon=20"])
+    assert any(note.startswith("depth_controller: unused") for note in resolved.notes)
 
 
 @pytest.mark.parametrize(

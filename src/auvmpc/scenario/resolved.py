@@ -243,7 +243,7 @@ class ResolvedSixDofScenario(ResolvedScenario):
         elif not whole:
             check_one_sample_time(depth_controller.sample_time, sample_time)
         # (the schema fills in ``preview`` itself: a field beyond it is the user's)
-        if whole and depth_controller.model_fields_set - {"preview"}:
+        if whole and given.depth_controller.model_fields_set - {"preview"}:
             # Said, not refused: a scenario written for the pair (bluerov2-helix) flies with
             # --controller six-dof-nmpc or another vehicle as it is.
             self.notes.append(
