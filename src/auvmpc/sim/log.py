@@ -436,11 +436,12 @@ class SimLog:
                 f"has {len(table.rows)} rows after its header; a run logs at least two samples"
             )
         prefix = format.input_prefix
-        inputs = input_names or [
+        numbered = [
             name
             for name in table.header
             if name.startswith(prefix) and name[len(prefix) :].isdigit()
-        ] or _named_inputs(table.header, format)
+        ]
+        inputs = input_names or numbered or _named_inputs(table.header, format)
         steps = len(table.rows) - 1
         log = cls.allocate(steps, inputs, 0.0, format, horizontal_inputs)
         blocks = [
