@@ -209,6 +209,12 @@ class ResolvedSixDofScenario(ResolvedScenario):
         model = self.model
         if not whole:
             _check_depth_channel(model)
+        if scenario.fault_detection and not model.has_thrusters:
+            raise ConfigError(
+                "fault_detection", True,
+                f"watches horizontal thrusters on the 3-DOF model; {model.name} has a "
+                "propeller and fins (declare its faults in faults: instead)",
+            )  # fmt: skip
         self.reference: Reference = make_reference(scenario.reference, base_dir)
         if not self.reference.has_depth:
             raise ConfigError(
