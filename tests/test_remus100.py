@@ -181,7 +181,7 @@ def test_what_needs_fixed_thrusters_refuses_it_in_one_line(remus, needs):
         needs(remus)
 
 
-@pytest.mark.parametrize("scenario", ["paper-ideal", "paper-depth-calm", "bluerov2-helix"])
+@pytest.mark.parametrize("scenario", ["paper-ideal", "paper-depth-calm"])
 def test_a_scenario_of_fixed_thrusters_refuses_it_with_exit_2(monkeypatch, capsys, scenario):
     code, _, err = run_cli(monkeypatch, capsys, "run", scenario, "--set", "vehicle=remus100")
     assert code == 2

@@ -1,7 +1,8 @@
 """A run as a moving picture (``auvmpc animate``): GIF through Pillow, MP4 through ffmpeg.
 
 Each frame shows the vehicle's outline and heading, one arrow per thruster (its force,
-in the thruster colours of the figures), the path so far, the reference with the part
+in the thruster colours of the figures; a propeller's or fin's: its command along the force
+it makes), the path so far, the reference with the part
 the controller previews over its prediction horizon, the obstacles where they are at
 that moment (moving and appearing ones too), the current and a clock.
 
@@ -19,6 +20,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -215,6 +217,38 @@ def _write_mp4(frames: Iterator[np.ndarray], path: Path, fps: float, ffmpeg: str
                 raise RuntimeError(f"ffmpeg failed: {error.splitlines()[-1] if error else '?'}")
 
 
+def _arrows(model: VehicleParams) -> tuple[np.ndarray, np.ndarray, Any, str]:
+    """Where each input's arrow starts (n, 2) (m, body x, y), its direction (n, 2), the
+    command drawn at full length (a value, or one per input) and what the legend calls it.
+    Thrusters push along their direction, the largest thrust limit at full length; a
+    propeller or fins (``actuators:``) along the horizontal force their largest command
+    makes at 1 m/s ahead (none for stern planes, whose lift is vertical), at full length at
+    that command."""
+    if model.has_thrusters:
+        angles = np.radians([t.angle_deg for t in model.thrusters])
+        largest = max(abs(v) for v in model.thrust_limits) or 1.0
+        return (
+            np.array([t.position for t in model.thrusters]),
+            np.column_stack([np.cos(angles), np.sin(angles)]),
+            largest,
+            f"{largest:g} N",
+        )
+    inputs = model.six_dof_actuators
+    ahead = np.array([1.0, 0, 0, 0, 0, 0])
+    largest = np.maximum(np.abs(inputs.limits.lower), np.abs(inputs.limits.upper))
+    largest = np.where(largest > 0, largest, 1.0)
+    directions = []
+    for actuator, command in zip(inputs.actuators, largest, strict=True):
+        force = np.asarray(actuator.wrench(ahead, command), dtype=float)[:2]
+        norm = float(np.hypot(*force))
+        directions.append(force / norm if norm > 1e-9 else np.zeros(2))
+    units = ", ".join(
+        f"{value:g} {unit}" for value, unit in zip(largest, inputs.units, strict=True)
+    )
+    positions = np.array([actuator.position[:2] for actuator in inputs.actuators])
+    return positions, np.array(directions), largest, units
+
+
 class _Scene:
     """The figure and the artists that move: the whole run on the left, a close-up of the
     vehicle (its outline, envelope and thrust arrows at true scale) on the right."""
@@ -226,12 +260,9 @@ class _Scene:
         self.obstacles: tuple[ObstacleConfig, ...] = scenario.obstacles
         controller = scenario.controller
         self.preview_rows = controller.prediction_horizon
-        self.thruster_xy = np.array([t.position for t in model.thrusters])
-        angles = np.radians([t.angle_deg for t in model.thrusters])
-        self.thruster_dir = np.column_stack([np.cos(angles), np.sin(angles)])
+        self.thruster_xy, self.thruster_dir, self.full_scale, self.scale_label = _arrows(model)
         # The world force on the vehicle (N), by its log.csv columns.
         self.force = np.column_stack([log.column(name) for name in ("dist_X", "dist_Y")])
-        self.max_thrust = max(abs(v) for v in model.thrust_limits) or 1.0
         self.radius = controller.vehicle_radius
         half_length = max(float(np.abs(self.thruster_xy[:, 0]).max()) * 1.25, self.radius, 0.3)
         half_width = max(float(np.abs(self.thruster_xy[:, 1]).max()) * 1.25, 0.45 * half_length)
@@ -335,11 +366,12 @@ class _Scene:
         )  # fmt: skip
         if main:
             lengths = self.arrow_length
+            prefix = "thrust " if self.scale_label.endswith(" N") else ""
             for name, color in zip(log.input_names, colors, strict=True):
-                ax.plot([], [], color=color, linewidth=2, label=f"thrust {name}")
+                ax.plot([], [], color=color, linewidth=2, label=f"{prefix}{name}")
             ax.plot(
                 [], [], color="none",
-                label=f"arrow at {self.max_thrust:g} N: {lengths['main']:.2g} m here, "
+                label=f"arrow at {self.scale_label}: {lengths['main']:.2g} m here, "
                 f"{lengths['zoom']:.2g} m in the close-up",
             )  # fmt: skip
         return parts
@@ -387,7 +419,7 @@ class _Scene:
             parts["trail"].set_data(*log.state[: k + 1, _POSITION].T)
             parts["target"].set_data([target_x], [target_y])
             parts["preview"].set_data(*log.reference[k:end, _POSITION].T)
-            scale = thrust / self.max_thrust * self.arrow_length[name]
+            scale = thrust / self.full_scale * self.arrow_length[name]
             world = (self.thruster_dir * scale[:, None]) @ rotation.T
             parts["quiver"].set_offsets(origins)
             parts["quiver"].set_UVC(world[:, 0], world[:, 1])

@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 from auvmpc.atomic_write import atomic_file
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.environment.obstacles import ObstacleConfig
+from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import VehicleParams
@@ -33,6 +34,7 @@ from auvmpc.sim.metrics import LIMIT_TOLERANCE_N, heading_error, position_error,
 
 __all__ = [
     "figure_depth",
+    "figure_actuators",
     "figure_compare_errors",
     "figure_compare_thrusts",
     "figure_compare_trajectory",
@@ -279,6 +281,52 @@ def figure_thrusts(log: SimLog, limits: VehicleParams, title: str = "") -> Figur
     return figure
 
 
+def figure_actuators(log: SimLog, inputs: ActuatorSet, title: str = "") -> Figure:
+    """Each input in its own panel and units (a propeller's rpm, a fin's angle in deg), held
+    over [t_k, t_k+1), with its hard limits; commands beyond a limit, or that changed faster
+    than its rate limit, marked with a red x (the metrics' ``actuator_*_violations``).
+
+    Parameters
+    ----------
+    log : SimLog
+        The run, ``thrust`` (N, n): the commands of ``inputs``, in order.
+    inputs : ActuatorSet
+        The vehicle's inputs (``six_dof_actuators``): names, units and limits.
+    """
+    figure, axes = _time_panels(inputs.size, title, height_in=1.8)
+    limits = inputs.limits
+    lower, upper, rate = (
+        np.broadcast_to(value, (inputs.size,))
+        for value in (limits.lower, limits.upper, limits.rate)
+    )
+    sample_time = log.sample_time if log.steps else 1.0
+    change = np.abs(thrust_increments(log))
+    starts = log.t[:-1]
+    beyond = [0, 0]
+    for i, ax in enumerate(axes):
+        values = log.thrust[:, i]
+        color = THRUSTER_COLORS[i % len(THRUSTER_COLORS)]
+        ax.stairs(values, log.t, color=color, linewidth=1.2, label=log.input_names[i])
+        ax.axhline(upper[i], **LIMIT_STYLE, label="hard limits")
+        ax.axhline(lower[i], **LIMIT_STYLE)
+        outside = (values < lower[i] - LIMIT_TOLERANCE_N) | (values > upper[i] + LIMIT_TOLERANCE_N)
+        too_fast = change[:, i] > rate[i] * sample_time + LIMIT_TOLERANCE_N
+        beyond[0] += int(outside.sum())
+        beyond[1] += int(too_fast.sum())
+        marked = outside | too_fast
+        if marked.any():
+            ax.plot(starts[marked], values[marked], **BEYOND_STYLE)
+        unit = inputs.units[i]
+        ax.set_ylabel(f"{log.input_names[i]} ({unit})\nrate limit {rate[i]:g} {unit}/s")
+    if any(beyond):
+        axes[0].plot(
+            [], [], **BEYOND_STYLE, label=f"beyond limit ({beyond[0]} box, {beyond[1]} rate)"
+        )
+    _figure_legend(figure, axes)
+    _finish_time_axes(log, axes)
+    return figure
+
+
 def figure_solve_times(log: SimLog, title: str = "") -> Figure:
     """Wall time of each controller call (ms) with its median and 99th percentile.
 
@@ -379,13 +427,19 @@ def run_figures(
     Returns
     -------
     dict of str to Figure
-        ``trajectory``, ``errors``, ``velocities``, ``thrusts``, ``solve_times``.
+        ``trajectory``, ``errors``, ``velocities``, ``thrusts`` (a vehicle with
+        ``actuators:``: ``actuators``, each input in its units), ``solve_times``.
     """
+    inputs = (
+        {"thrusts": figure_thrusts(log, limits, title)}
+        if limits.has_thrusters
+        else {"actuators": figure_actuators(log, limits.six_dof_actuators, title)}
+    )
     return {
         "trajectory": figure_trajectory(log, obstacles, vehicle_radius, title),
         "errors": figure_errors(log, title),
         "velocities": figure_velocities(log, title),
-        "thrusts": figure_thrusts(log, limits, title),
+        **inputs,
         "solve_times": figure_solve_times(log, title),
     }
 
@@ -583,9 +637,11 @@ def figure_tracking_errors(log, title: str = "") -> Figure:
 
 
 def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure:
-    """Depth and its reference, roll and pitch, and the vertical thrusters' forces."""
-    figure, axes = _time_panels(4, title)
-    depth_ax, roll_ax, pitch_ax, thrust_ax = axes
+    """Depth and its reference, roll and pitch, and the vertical thrusters' forces (a
+    vehicle with ``actuators:`` has none apart: its fins are in the ``actuators`` figure)."""
+    vertical = log.horizontal_inputs < log.n_thrusters
+    figure, axes = _time_panels(4 if vertical else 3, title)
+    depth_ax, roll_ax, pitch_ax = axes[:3]
     depth_ax.plot(log.t, log.column("z_ref"), label="reference", **REFERENCE_STYLE)
     depth_ax.plot(log.t, log.column("z"), label="true", **ACTUAL_STYLE)
     depth_ax.invert_yaxis()
@@ -594,6 +650,11 @@ def figure_depth_attitude(log, limits: VehicleParams, title: str = "") -> Figure
     roll_ax.set_ylabel("roll phi (deg)")
     pitch_ax.plot(log.t, np.degrees(log.state[:, SIX_DOF.index("theta")]), **ACTUAL_STYLE)
     pitch_ax.set_ylabel("pitch theta (deg)")
+    if not vertical:
+        _figure_legend(figure, axes)
+        _finish_time_axes(log, axes)
+        return figure
+    thrust_ax = axes[3]
     n, steps = log.horizontal_inputs, log.steps
     for i in range(n, log.n_thrusters):
         thrust_ax.step(
@@ -902,7 +963,8 @@ def figure_compare_errors(runs: Sequence[tuple[str, SimLog]], title: str = "") -
 def figure_compare_thrusts(
     runs: Sequence[tuple[str, SimLog]], limits: VehicleParams | None = None, title: str = ""
 ) -> Figure:
-    """Each thruster's force in its own panel, one line per run, with the thrust limits.
+    """Each thruster's force in its own panel, one line per run, with the thrust limits (a
+    vehicle with ``actuators:``: each input in its own units and limits).
 
     Runs of vehicles with fewer thrusters leave the extra panels to the others.
     """
@@ -914,6 +976,20 @@ def figure_compare_thrusts(
             axes[j].stairs(log.thrust[:, j], log.t, color=_series_color(i), linewidth=1.1,
                            label=label)  # fmt: skip
     widest = max((log for _, log in runs), key=lambda log: log.n_thrusters)
+    if limits is not None and not limits.has_thrusters:  # each input in its units and limits
+        inputs = limits.six_dof_actuators
+        lower, upper = (
+            np.broadcast_to(v, (inputs.size,)) for v in (inputs.limits.lower, inputs.limits.upper)
+        )
+        # (runs of another vehicle may add panels: those keep no unit)
+        labelled = zip(axes, inputs.layout.names, inputs.units, lower, upper, strict=False)
+        for ax, name, unit, low, high in labelled:
+            ax.set_ylabel(f"{name} ({unit})")
+            ax.axhline(high, **LIMIT_STYLE, label="hard limits")
+            ax.axhline(low, **LIMIT_STYLE)
+        _figure_legend(figure, axes)
+        _finish_compared_time_axes(runs, axes)
+        return figure
     for name, ax in zip(widest.input_names, axes, strict=True):
         ax.set_ylabel(f"{name} (N)")
     if limits is not None:

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Literal
+from typing import Any, Literal
 
 import casadi as ca
 import numpy as np
@@ -143,6 +143,35 @@ class SixDofNmpcConfig(HorizontalControllerConfig):
         if self.vehicle_radius is None:
             update["vehicle_radius"] = default_vehicle_radius(model)
         return self.model_copy(update=update) if update else self
+
+    def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
+        """What :meth:`for_vehicle` chose, by its own rules (not the horizontal controllers':
+        those read the 3-DOF model's thrusters, which a torpedo has not)."""
+        filled, given = self.for_vehicle(model), self.model_fields_set
+        chosen: dict[str, dict[str, Any]] = {}
+        if self.sample_time is None:
+            chosen["sample_time"] = {
+                "value": filled.sample_time,
+                "why": f"{SIX_DOF_NMPC}'s default {DEFAULT_SAMPLE_TIME_S:g} s",
+            }
+        if self.model_substeps is None and model.six_dof is not None:
+            chosen["model_substeps"] = {
+                "value": filled.model_substeps,
+                "why": "fewest RK4 steps per sample stable on the 6-DOF model's fastest mode "
+                "(models/six_dof.py, stable_substeps)",
+            }
+        if self.vehicle_radius is None:
+            chosen["vehicle_radius"] = {
+                "value": filled.vehicle_radius,
+                "why": "half the diagonal of its planform (size), or the default without one",
+            }
+        if "prediction_horizon" not in given:
+            chosen["prediction_horizon"] = {
+                "value": filled.prediction_horizon,
+                "why": f"the default {filled.prediction_horizon} samples "
+                f"({filled.prediction_horizon * filled.sample_time:g} s ahead)",
+            }
+        return chosen
 
 
 DEFAULT_SAMPLE_TIME_S = 0.2

@@ -52,6 +52,7 @@ from auvmpc.sim.metrics import (
     compute_metrics,
     compute_six_dof_metrics,
     fault_metrics,
+    reference_path,
 )
 from auvmpc.sim.plant import (
     HeavePlant,
@@ -328,10 +329,15 @@ class HorizontalKind(RunKind):
             controller.obstacle_margin,
             scenario.obstacles,
             controller.vehicle_radius,
+            **self._path(resolved, log),
         )
         if scenario.faults:
             metrics |= fault_metrics(log, scenario.transient_s, scenario.faults)
         return metrics
+
+    def _path(self, resolved, log: SimLog) -> dict[str, Any]:
+        """What :attr:`measure` is told of the reference path beyond the log (none here)."""
+        return {}
 
     def figures(self, log, scenario, model: VehicleParams, plant: VehicleParams) -> dict:
         from auvmpc.plots import run_figures, run_title
@@ -391,11 +397,11 @@ class SixDofKind(HorizontalKind):
             ReferenceWithDepth(resolved.reference),
             SimLog(
                 model.six_dof_actuators.layout.names, _sample_time(scenario), log_format,
-                horizontal_inputs=model.n_thrusters,
+                horizontal_inputs=horizontal_input_count(model),
             ),
             _steps(scenario),
             [x, y, scenario.initial_depth_m, 0, 0, psi, u, v, 0, 0, 0, r],
-            padded(scenario.initial_thrust, model.six_dof.n_thrusters),
+            padded(scenario.initial_thrust, model.six_dof_actuators.size),
             fault_detector=self._fault_detector(resolved),
             **self._surroundings(scenario),
         )  # fmt: skip
@@ -418,6 +424,10 @@ class SixDofKind(HorizontalKind):
         )  # fmt: skip
         return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
 
+    def _path(self, resolved, log: SimLog) -> dict[str, Any]:
+        """The reference's horizontal path over the run, densely (the cross-track metric)."""
+        return {"path": reference_path(resolved.reference, log.t[-1], log.sample_time)}
+
     def libraries(self, scenario) -> tuple[str, ...]:
         """The horizontal controller's, then the depth MPC's (none beside a controller of
         the whole vehicle)."""
@@ -435,8 +445,12 @@ class SixDofKind(HorizontalKind):
 
     def read_log(self, table: LogTable, info: dict[str, Any]) -> SimLog:
         model = VehicleParams.model_validate(info["model"])
-        initial = padded(info["scenario"].get("initial_thrust"), model.six_dof.n_thrusters)
-        return SimLog.from_table(table, initial, self.log_format, model.n_thrusters)
+        inputs = model.six_dof_actuators
+        initial = padded(info["scenario"].get("initial_thrust"), inputs.size)
+        return SimLog.from_table(
+            table, initial, self.log_format, horizontal_input_count(model),
+            input_names=inputs.layout.names,
+        )  # fmt: skip
 
 
 class DepthKind(RunKind):
@@ -508,9 +522,17 @@ def kind_of(scenario) -> RunKind:
     return KINDS[name]
 
 
+def horizontal_input_count(model: VehicleParams) -> int:
+    """How many of a 6-DOF log's inputs, from the first, its horizontal view keeps: the
+    horizontal thrusters, or every input of a vehicle with ``actuators:`` (a propeller and
+    fins act in the horizontal plane and the vertical one alike)."""
+    return model.n_thrusters if model.has_thrusters else model.six_dof_actuators.size
+
+
 def padded(given, count: int) -> np.ndarray:
-    """F(-1) of ``count`` thrusters from a scenario's ``initial_thrust`` (the horizontal
-    thrusters'; the others, a 6-DOF vehicle's vertical ones, start at 0)."""
+    """The command before t = 0 of ``count`` inputs from a scenario's ``initial_thrust`` (the
+    horizontal thrusters', or every actuator's; the others, a 6-DOF vehicle's vertical
+    thrusters, start at 0)."""
     total = np.zeros(count)
     if given is not None:
         total[: len(given)] = given

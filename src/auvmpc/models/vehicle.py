@@ -392,7 +392,7 @@ class VehicleParams(StrictModel):
                 self.name,
                 f"has a propeller and fins, not fixed thrusters (actuators: {kinds}); "
                 f"{needed_by} needs thrusters; its controller is six-dof-nmpc on the 6-DOF "
-                "model, and no scenario kind flies it yet (docs/remus100.md)",
+                "model, in a kind: six-dof scenario (docs/remus100.md)",
             )
         return self.thrusters
 

@@ -170,7 +170,9 @@ class SixDofSensingConfig(SensorNoiseConfig):
 class SixDofScenario(Scenario):
     """The paper's architecture on the 6-DOF plant (paper section 4.2): the horizontal
     controller (any ``controller.type``) on [x, y, psi, u, v, r] of the measured 6-DOF state,
-    the depth controller on depth and its rate, roll and pitch left to passive stability.
+    the depth controller on depth and its rate, roll and pitch left to passive stability; or
+    one controller of the whole vehicle (``six-dof-nmpc``) on the whole measured state, which
+    flies any actuators (a torpedo's propeller and fins) and is a torpedo's default.
     Every field of a horizontal scenario means the same here; ``plant.scale`` is refused (the
     plant is the vehicle's ``six_dof`` section as given)."""
 
@@ -181,10 +183,24 @@ class SixDofScenario(Scenario):
         default_factory=SixDofDisturbanceConfig
     )
     sensing: SixDofSensingConfig = Field(default_factory=SixDofSensingConfig)  # type: ignore[assignment]
+    initial_thrust: tuple[float, ...] | None = Field(
+        default=None,
+        description="the command before t = 0: per horizontal thruster (N; the vertical ones "
+        "start at 0), or for a vehicle with actuators: per actuator in its own units (rpm, "
+        "deg), each within its limits; zeros if omitted",
+    )
+    controller: ControllerChoice = Field(
+        default_factory=NmpcConfig,
+        description="controller choice and tuning: the knobs of the controller type it names. "
+        "Without a type: nmpc with the depth MPC for a vehicle with thrusters, six-dof-nmpc "
+        "(every input on the 6-DOF model) for a vehicle with actuators: (a propeller and "
+        "fins), which only a controller of the whole vehicle flies",
+    )
     depth_controller: DepthControllerChoice = Field(
         default_factory=DepthControllerConfig,
         description="the depth MPC (controllers/depth_mpc.py); sample_time is the horizontal "
-        "controller's and preview true unless given",
+        "controller's and preview true unless given; unused beside a controller of the whole "
+        "vehicle (six-dof-nmpc: a note says so if given)",
     )
     water_depth_m: Annotated[float, Field(gt=0)] = Field(
         default=100.0, description="depth of the bottom below the surface (m)"

@@ -4,16 +4,19 @@ settings chosen for the vehicle, and the checks that need the vehicle.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from auvmpc.controllers.config import ControllerType
+from auvmpc.controllers.registry import REGISTRY, retyped, whole_vehicle
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import resolve_heave
 from auvmpc.models.layout import DEPTH, DEPTH_PROFILE, HORIZONTAL, Layout
-from auvmpc.models.six_dof import plant_step_length
+from auvmpc.models.six_dof import SIX_DOF, plant_step_length
 from auvmpc.models.vehicle import (
     VehicleParams,
     check_plant_scale,
@@ -65,25 +68,40 @@ class ResolvedScenario:
         """The inputs the simulated plant takes (the log's thrust columns)."""
         return self.plant.actuators
 
+    @property
+    def initial_inputs(self) -> ActuatorSet:
+        """The inputs ``initial_thrust`` gives one value each, within their limits: the
+        horizontal thrusters (a 6-DOF vehicle's vertical ones start at 0)."""
+        return self.model.actuators
+
+    def _check_vehicle(self, scenario: Scenario) -> None:
+        """Refuse a vehicle the scenario's controller cannot command (one line)."""
+        self.model.fixed_thrusters(f"a {scenario.kind} scenario's controller")
+
+    def _default_plant_step(self) -> float:
+        """The plant's longest RK4 step when the scenario gives none (``plant.max_step``)."""
+        return stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
+
     def __init__(self, scenario: Scenario, base_dir: Path) -> None:
         self.given = scenario  # as written: what overrides apply to
         self.scenario = scenario  # below: with what the vehicle decides filled in
         self.base_dir = base_dir
         self.model: VehicleParams = load_vehicle_relative(scenario.vehicle, base_dir)
-        self.model.fixed_thrusters(f"a {scenario.kind} scenario's controller")
-        n = self.model.n_thrusters
+        self._check_vehicle(scenario)
         check_plant_scale(scenario.plant.scale, self.plant_model)
         self.plant: VehicleParams = scaled(_plant_vehicle(self.model, scenario, base_dir),
                                            scenario.plant.scale)  # fmt: skip
         weights = getattr(scenario.controller, "R", None)  # the optimising controllers'
-        if weights is not None and len(weights) not in (1, n):
-            raise ConfigError(
-                "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
-            )
+        if weights is not None:
+            n = self.model.n_thrusters
+            if len(weights) not in (1, n):
+                raise ConfigError(
+                    "controller.R", list(weights), f"need 1 or {n} weights (one per thruster)"
+                )
         # What the scenario left out is filled in for its vehicle here, so the run's record
         # (run.json's scenario) holds every value the controller used. Overrides apply to
         # ``given``: a filled-in value must not outlive a change of vehicle or sample time.
-        plant_step = scenario.plant.max_step or stable_plant_step(self.plant, DEFAULT_PLANT_STEP_S)
+        plant_step = scenario.plant.max_step or self._default_plant_step()
         # What was chosen for the vehicle, and why (run.json ``choices``, ``auvmpc explain``).
         self.choices = scenario.controller.choices(self.model)
         controller = with_table_found(scenario.controller.for_vehicle(self.model), base_dir)
@@ -113,13 +131,7 @@ class ResolvedScenario:
         self.scenario = scenario
         initial = scenario.initial_thrust
         if initial is not None:
-            if len(initial) != n:
-                raise ConfigError("initial_thrust", list(initial), f"need {n} values")
-            low, high = self.model.thrust_limits
-            if not all(low <= value <= high for value in initial):
-                raise ConfigError(
-                    "initial_thrust", list(initial), f"outside the thrust limits [{low}, {high}]"
-                )
+            _check_initial_command(initial, self.initial_inputs)
         #: Its actuator faults on the plant's inputs (None: none).
         self.faults = (
             FaultSchedule(scenario.faults, self.plant_inputs, scenario.duration)
@@ -129,8 +141,12 @@ class ResolvedScenario:
 
 
 class ResolvedSixDofScenario(ResolvedScenario):
-    """A 6-DOF scenario, its vehicle (which must have ``six_dof`` and ``heave`` sections and
-    vertical thrusters after the horizontal ones) and its 3-D reference."""
+    """A 6-DOF scenario, its vehicle (which must have a ``six_dof`` section) and its 3-D
+    reference. The horizontal controller and the depth MPC need fixed thrusters, a ``heave``
+    section and vertical thrusters after the horizontal ones; a controller of the whole
+    vehicle (``registry.whole_vehicle``) needs none of these and flies any actuators (a
+    propeller and fins). Without a ``controller.type``, a vehicle with ``actuators:`` gets
+    ``six-dof-nmpc``: the default controller must fly the vehicle."""
 
     scenario: SixDofScenario
     follows_depth = True
@@ -139,6 +155,31 @@ class ResolvedSixDofScenario(ResolvedScenario):
     @property
     def plant_inputs(self) -> ActuatorSet:
         return self.plant.six_dof_actuators
+
+    @property
+    def controlled_inputs(self) -> ActuatorSet:
+        """A controller of the whole vehicle's: every 6-DOF input; else the horizontal ones."""
+        if whole_vehicle(self.scenario.controller):
+            return self.model.six_dof_actuators
+        return super().controlled_inputs
+
+    @property
+    def controlled_layout(self) -> Layout:  # type: ignore[override]
+        return SIX_DOF if whole_vehicle(self.scenario.controller) else HORIZONTAL
+
+    @property
+    def initial_inputs(self) -> ActuatorSet:
+        """A vehicle with ``actuators:``: every one (rpm, deg); else the horizontal thrusters."""
+        if self.model.has_thrusters:
+            return super().initial_inputs
+        return self.model.six_dof_actuators
+
+    def _check_vehicle(self, scenario: Scenario) -> None:
+        if not whole_vehicle(scenario.controller):  # the pair: fixed thrusters, checked below
+            super()._check_vehicle(scenario)
+
+    def _default_plant_step(self) -> float:
+        return plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
 
     def __init__(self, scenario: SixDofScenario, base_dir: Path) -> None:
         if scenario.plant.vehicle is not None:
@@ -157,26 +198,23 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 vehicle.name,
                 "missing: the 6-DOF plant needs the vehicle's six_dof section (docs/six-dof.md)",
             )
-        try:
-            vehicle.check_six_dof_layout()
-        except FieldError as error:
-            raise ConfigError(f"vehicle.{error.field}", error.value, error.reason) from None
-        super().__init__(scenario, base_dir)
+        given, typed = scenario, _typed_for(scenario, vehicle)
+        whole = whole_vehicle(typed.controller)
+        if not whole:
+            _check_channel_pair(typed, vehicle)
+        super().__init__(typed, base_dir)
+        self.given = given  # as written (a default type is the vehicle's: not an override)
+        if typed is not scenario:
+            self.choices = {"type": _default_type_choice(vehicle), **self.choices}
         model = self.model
-        six = model.six_dof
-        if model.heave is None:
+        if not whole:
+            _check_depth_channel(model)
+        if scenario.fault_detection and not model.has_thrusters:
             raise ConfigError(
-                "vehicle.heave", model.name, "missing: the depth controller needs a heave section"
-            )
-        n = model.n_thrusters
-        vertical = np.asarray(six.T)[2, n:]
-        if vertical.size == 0 or not np.any(np.abs(vertical) > 1e-9):
-            raise ConfigError(
-                "vehicle.six_dof.thrusters",
-                six.n_thrusters,
-                f"no vertical thrusters after the {n} horizontal ones: the depth reference "
-                "needs thrusters with a heave (z) component",
-            )
+                "fault_detection", True,
+                f"watches horizontal thrusters on the 3-DOF model; {model.name} has a "
+                "propeller and fins (declare its faults in faults: instead)",
+            )  # fmt: skip
         self.reference: Reference = make_reference(scenario.reference, base_dir)
         if not self.reference.has_depth:
             raise ConfigError(
@@ -204,20 +242,107 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 [round(float(path_depths.min()), 3), round(float(path_depths.max()), 3)],
                 f"the reference leaves the water (0 to water_depth_m {bottom} m below)",
             )
-        plant_step = given.plant.max_step or plant_step_length(self.plant, DEFAULT_PLANT_STEP_S)
         sample_time = self.scenario.controller.sample_time  # chosen for the vehicle if omitted
         depth_controller = given.depth_controller
-        if "sample_time" in depth_controller.model_fields_set:
-            check_one_sample_time(depth_controller.sample_time, sample_time)
-        else:
+        if "sample_time" not in depth_controller.model_fields_set:
             depth_controller = depth_controller.model_copy(update={"sample_time": sample_time})
+        elif not whole:
+            check_one_sample_time(depth_controller.sample_time, sample_time)
+        # (the schema fills in ``preview`` itself: a field beyond it is the user's)
+        if whole and given.depth_controller.model_fields_set - {"preview"}:
+            # Said, not refused: a scenario written for the pair (bluerov2-helix) flies with
+            # --controller six-dof-nmpc or another vehicle as it is.
+            self.notes.append(
+                f"depth_controller: unused: {self.scenario.controller.type} commands every "
+                "input of the vehicle itself (no depth channel)"
+            )
         self.scenario = self.scenario.model_copy(
-            update={
-                "depth_controller": depth_controller,
-                "initial_depth_m": initial_depth,
-                "plant": self.scenario.plant.model_copy(update={"max_step": plant_step}),
-            }
+            update={"depth_controller": depth_controller, "initial_depth_m": initial_depth}
         )
+
+
+def _typed_for(scenario: SixDofScenario, vehicle: VehicleParams) -> SixDofScenario:
+    """``scenario`` with ``controller.type: six-dof-nmpc`` if it names no type and its vehicle
+    has ``actuators:`` (the default nmpc, a horizontal controller on thrusters, cannot fly a
+    propeller and fins); else as it is. A knob of the mapping that six-dof-nmpc has not is
+    one line naming it."""
+    config = scenario.controller
+    if vehicle.has_thrusters or "type" in config.model_fields_set:
+        return scenario
+    target = REGISTRY[ControllerType.SIX_DOF_NMPC].config
+    for knob in sorted(config.model_fields_set):
+        if knob not in target.model_fields:
+            raise ConfigError(
+                f"controller.{knob}", getattr(config, knob),
+                f"not a knob of {ControllerType.SIX_DOF_NMPC}, the default controller of "
+                f"{vehicle.name} (a vehicle with actuators:); name controller.type to use it",
+            )  # fmt: skip
+    typed = retyped(config, ControllerType.SIX_DOF_NMPC)
+    return scenario.model_copy(update={"controller": typed})
+
+
+def _default_type_choice(vehicle: VehicleParams) -> dict[str, Any]:
+    """run.json's ``choices`` entry for the type :func:`_typed_for` gave."""
+    kinds = ", ".join(f"{e.name} ({e.kind})" for e in vehicle.actuator_entries or ())
+    return {
+        "value": str(ControllerType.SIX_DOF_NMPC),
+        "why": f"the default for a vehicle with actuators: ({kinds}): it predicts through "
+        "them on the 6-DOF model; the horizontal controllers and the depth MPC need fixed "
+        "thrusters",
+    }
+
+
+def _check_channel_pair(scenario: SixDofScenario, vehicle: VehicleParams) -> None:
+    """Refuse (one line) a vehicle the horizontal controller and the depth MPC cannot fly:
+    one without fixed thrusters, or whose 6-DOF thrusters do not follow the layout."""
+    if not vehicle.has_thrusters:
+        raise ConfigError(
+            "controller.type", str(scenario.controller.type),
+            f"commands fixed thrusters (a horizontal controller with the depth MPC, or a "
+            f"thrust table); {vehicle.name} has a propeller and fins: six-dof-nmpc flies it "
+            "(its default without a controller.type)",
+        )  # fmt: skip
+    try:
+        vehicle.check_six_dof_layout()
+    except FieldError as error:
+        raise ConfigError(f"vehicle.{error.field}", error.value, error.reason) from None
+
+
+def _check_depth_channel(model: VehicleParams) -> None:
+    """Refuse (one line) a vehicle without what the depth MPC commands: a ``heave`` section
+    and thrusters with a heave component after the horizontal ones."""
+    if model.heave is None:
+        raise ConfigError(
+            "vehicle.heave", model.name, "missing: the depth controller needs a heave section"
+        )
+    six, n = model.six_dof, model.n_thrusters
+    vertical = np.asarray(six.T)[2, n:]
+    if vertical.size == 0 or not np.any(np.abs(vertical) > 1e-9):
+        raise ConfigError(
+            "vehicle.six_dof.thrusters",
+            six.n_thrusters,
+            f"no vertical thrusters after the {n} horizontal ones: the depth reference "
+            "needs thrusters with a heave (z) component",
+        )
+
+
+def _check_initial_command(initial: Sequence[float], inputs: ActuatorSet) -> None:
+    """Refuse (one line) an ``initial_thrust`` without one value per input of ``inputs`` or
+    with one outside that input's limits (in its own units: N, rpm, deg)."""
+    n = inputs.size
+    if len(initial) != n:
+        raise ConfigError("initial_thrust", list(initial), f"need {n} values")
+    limits = inputs.limits
+    lower = np.broadcast_to(limits.lower, (n,))
+    upper = np.broadcast_to(limits.upper, (n,))
+    for name, unit, value, low, high in zip(
+        inputs.layout.names, inputs.units, initial, lower, upper, strict=True
+    ):
+        if not low <= value <= high:
+            raise ConfigError(
+                "initial_thrust", list(initial),
+                f"{name} {value:g} outside its limits [{low:g}, {high:g}] {unit}",
+            )  # fmt: skip
 
 
 def _plant_vehicle(model: VehicleParams, scenario: Scenario, base_dir: Path) -> VehicleParams:

@@ -212,6 +212,8 @@ def _check_sample_time(resolved: ResolvedScenario) -> list[str]:
     linearised controller one over LINEARISED_TURN_UP_SAMPLES turn-up times."""
     config = resolved.scenario.controller
     model = resolved.model
+    if not model.has_thrusters:  # a propeller and fins make no yaw moment at rest
+        return []
     warnings = []
     spin = heading_turn_time(model, HEADING_PER_SAMPLE_RAD)
     if resolved.given.controller.sample_time is not None and config.sample_time > spin:
@@ -425,6 +427,8 @@ def _check_reference(resolved: ResolvedScenario) -> list[str]:
                 "but a horizontal-plane scenario tracks only its horizontal path; give "
                 "kind: six-dof to follow the depth too"
             )
+    if not plant.has_thrusters:  # what follows weighs the reference against thrust (N)
+        return warnings
     speed = np.hypot(*states[:, HORIZONTAL.body_velocity].T)
     top = steady_top_speed(plant)
     fastest = int(np.argmax(speed))

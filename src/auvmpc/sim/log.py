@@ -422,7 +422,8 @@ class SimLog:
     ) -> SimLog:
         """The log of a log.csv's ``table`` (:func:`read_log_table`), of a horizontal run
         unless ``format`` says otherwise; its inputs are ``input_names`` or, without them, the
-        columns named by the format's prefix and a number.
+        columns named by the format's prefix and a number, or without any, the columns where the
+        format has its inputs (named ones: ``propeller_rpm, rudder_deg, ...``).
 
         What the writer cannot have written is a one-line :class:`~auvmpc.errors.ConfigError`
         naming the file and the first damage: a column of the format missing, a cell that is
@@ -435,11 +436,12 @@ class SimLog:
                 f"has {len(table.rows)} rows after its header; a run logs at least two samples"
             )
         prefix = format.input_prefix
-        inputs = input_names or [
+        numbered = [
             name
             for name in table.header
             if name.startswith(prefix) and name[len(prefix) :].isdigit()
         ]
+        inputs = input_names or numbered or _named_inputs(table.header, format)
         steps = len(table.rows) - 1
         log = cls.allocate(steps, inputs, 0.0, format, horizontal_inputs)
         blocks = [
@@ -473,6 +475,17 @@ class SimLog:
         if initial_thrust is not None:
             log.initial_thrust = np.asarray(initial_thrust, dtype=float)
         return log
+
+
+def _named_inputs(header: Sequence[str], format: LogFormat) -> list[str]:
+    """The inputs of a log.csv whose inputs are named, not numbered (a propeller's and fins':
+    ``propeller_rpm, rudder_deg, ...``): the header's columns where ``INPUTS`` stands in the
+    format's, between the block before it and the block after (none if either is missing)."""
+    slot = [column.names for column in format.columns].index(INPUTS)
+    before, after = format.columns[slot - 1].names[-1], format.columns[slot + 1].names[0]
+    if before not in header or after not in header:
+        return []
+    return list(header[header.index(before) + 1 : header.index(after)])
 
 
 # What the shell declares a log keeps of every result (controllers/shell.py, LOGGED_INFO).

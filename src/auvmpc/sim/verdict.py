@@ -22,8 +22,10 @@ degraded, if not lost and any of
       vehicles only: an underactuated one steers sideways with its heading);
     * after the transient, a yaw rate above both ``YAW_RATE_REFERENCE_FACTOR`` times the
       reference's largest and ``YAW_RATE_CAPABILITY_FRACTION`` of the vehicle's own
-      top yaw rate: a yaw-rate excursion;
-    * a thrust or thrust-rate limit violated, or an obstacle touched.
+      top yaw rate: a yaw-rate excursion (thruster vehicles only: a propeller and fins
+      have no top yaw rate, their turn rate grows with the speed);
+    * a thrust or thrust-rate limit violated (a vehicle with ``actuators:``: any input's
+      limits, in its own units), or an obstacle touched.
 
 ok otherwise.
 """
@@ -35,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from auvmpc.controllers.six_dof_nmpc import pushes_sideways
 from auvmpc.models.vehicle import VehicleParams, top_yaw_rate
 
 __all__ = [
@@ -79,7 +82,11 @@ def characteristic_length_m(params: VehicleParams) -> float:
     """
     if params.size is not None:
         return params.size.length
-    span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
+    if params.has_thrusters:
+        span = 2.0 * max(math.hypot(*thruster.position) for thruster in params.thrusters)
+    else:  # its propeller and fins (their 3-D positions: the fins sit at the tail)
+        inputs = params.six_dof_actuators.actuators
+        span = 2.0 * max(math.hypot(*actuator.position) for actuator in inputs)
     cube = (params.mass / SEA_WATER_DENSITY) ** (1.0 / 3.0)
     return max(span, cube)
 
@@ -157,14 +164,20 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
     if facts.relaxed_steps:
         degraded.append(f"{facts.relaxed_steps} steps with obstacle constraints relaxed")
     heading = facts.max_heading_error_after_transient_rad
-    if not params.underactuated and heading is not None and heading > DEGRADED_HEADING_RAD:
+    if not _underactuated(params) and heading is not None and heading > DEGRADED_HEADING_RAD:
         degraded.append(
             f"heading error {heading:.2f} rad after the transient (limit {DEGRADED_HEADING_RAD})"
         )
     yaw_rate = facts.max_abs_yaw_rate_after_transient
-    yaw_limit = max(
-        YAW_RATE_REFERENCE_FACTOR * facts.max_abs_reference_yaw_rate,
-        YAW_RATE_CAPABILITY_FRACTION * top_yaw_rate(params),
+    # A vehicle with actuators: (fins) turns faster the faster it goes: no top yaw rate to
+    # scale by, and no excursion rule (a spin is still lost, above).
+    yaw_limit = (
+        max(
+            YAW_RATE_REFERENCE_FACTOR * facts.max_abs_reference_yaw_rate,
+            YAW_RATE_CAPABILITY_FRACTION * top_yaw_rate(params),
+        )
+        if params.has_thrusters
+        else math.inf
     )
     if yaw_rate is not None and yaw_rate > yaw_limit:
         degraded.append(
@@ -194,6 +207,14 @@ def judge(facts: RunFacts, params: VehicleParams) -> tuple[str, str]:
             f"(clearance {facts.min_obstacle_clearance_m:.3g} m)"
         )
     return Verdict.OK, reason
+
+
+def _underactuated(params: VehicleParams) -> bool:
+    """Whether it cannot push sideways: thrusters of allocation rank < 3, or actuators that
+    make no sway force at rest (a propeller and fins: a torpedo crabs into a current)."""
+    if params.has_thrusters:
+        return params.underactuated
+    return not pushes_sideways(params.six_dof_actuators)
 
 
 def _capped(distance: float, fraction: float, extent: float) -> float:

@@ -92,6 +92,7 @@ class Actuator(Protocol):
     lower: float  # command box, the actuator's own units
     upper: float
     rate: float  # largest command change per second
+    unit: str  # the command's unit, e.g. "N", "rpm", "deg" (plot labels; optional: "")
 
     @property
     def linear(self) -> bool:

@@ -66,6 +66,7 @@ class ControlSurface:
     induced_drag_factor: float = described("K in C_D = C_D0 + K C_L^2", 0.0)
 
     linear = False
+    unit = "deg"  # its command's unit (plots, docs)
 
     def __post_init__(self) -> None:
         check_fields(self, ("area", "lift_slope", "stall_angle", "density", "rate"), unit="axis")

@@ -56,6 +56,7 @@ class Propeller:
     thrust_deduction: float = described("t: the hull feels (1 - t) T", 0.0)
 
     linear = False
+    unit = "rpm"  # its command's unit (plots, docs)
 
     def __post_init__(self) -> None:
         check_fields(self, ("diameter", "density", "rate"), unit="direction")

@@ -37,6 +37,11 @@ class ActuatorSet:
         return Layout(names=tuple(actuator.name for actuator in self.actuators))
 
     @cached_property
+    def units(self) -> tuple[str, ...]:
+        """Each input's unit (``Actuator.unit``; "" for a kind that does not say)."""
+        return tuple(getattr(actuator, "unit", "") for actuator in self.actuators)
+
+    @cached_property
     def limits(self) -> ActuatorLimits:
         """Per-input command box and rate."""
         return ActuatorLimits(*(self._per_input(part) for part in ("lower", "upper", "rate")))

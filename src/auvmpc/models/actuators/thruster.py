@@ -42,6 +42,7 @@ class FixedThruster:
     rate: float  # N/s
 
     linear = True
+    unit = "N"  # its command's unit (plots, docs)
 
     @classmethod
     def planar(cls, name: str, position: tuple[float, float], angle_deg: float,
