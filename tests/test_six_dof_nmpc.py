@@ -17,7 +17,12 @@ from tests.test_cli import run_cli
 HEAVY = "bluerov2-heavy"
 # A short helix on the BlueROV2 Heavy with a short horizon: enough samples to see the
 # tracking settle, few enough for a unit test.
-SHORT = ["duration=8", "controller.type=six-dof-nmpc", "controller.prediction_horizon=10"]
+SHORT = [
+    "duration=8",
+    "controller.type=six-dof-nmpc",
+    "controller.prediction_horizon=10",
+    "controller.jit=false",  # the compile (minutes, once per configuration) is benchmarked
+]
 
 
 def test_hull_lift_adds_prestero_body_lift_to_the_model():
@@ -65,7 +70,7 @@ def test_the_observer_finds_a_steady_current():
     converges on the true current: within 2 % after 10 s (the observer's gain 0.2 per sample
     leaves 0.8^50 of the first error; the rest is the model's own prediction error)."""
     vehicle = load_vehicle(HEAVY)
-    controller = SixDofNmpc(vehicle, SixDofNmpcConfig(prediction_horizon=5))
+    controller = SixDofNmpc(vehicle, SixDofNmpcConfig(prediction_horizon=5, jit=False))
     model = six_dof.six_dof_model(vehicle)
     current = np.array([0.2, -0.1, 0.0])
     state = np.zeros(12)
