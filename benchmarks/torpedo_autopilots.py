@@ -4,7 +4,7 @@ a hand-built loop (no scenario kind flies the torpedo yet).
 
     python benchmarks/torpedo_autopilots.py [--cases survey helix depth-change]
                                             [--controllers los-pid six-dof-nmpc]
-                                            [--model-error 1.2]
+                                            [--model-error 1.2] [--set KEY=VALUE ...]
 
 Cases, each in a 0.3 m/s current across the first leg (world +y), no noise, no model error
 unless ``--model-error`` scales the plant's inertia, added mass and damping, the vehicle
@@ -23,6 +23,7 @@ median time of one controller step.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from dataclasses import dataclass
@@ -74,8 +75,8 @@ CASES = {
 # What --model-error scales in the plant (as a scenario's plant.scale would).
 MODEL_ERROR_FIELDS = ("inertia", "added_mass", "linear_damping", "quadratic_damping")
 CONTROLLERS = {
-    "los-pid": lambda vehicle: LosPid(vehicle, LosPidConfig()),
-    "six-dof-nmpc": lambda vehicle: SixDofNmpc(vehicle, SixDofNmpcConfig()),
+    "los-pid": lambda vehicle, knobs: LosPid(vehicle, LosPidConfig(**knobs)),
+    "six-dof-nmpc": lambda vehicle, knobs: SixDofNmpc(vehicle, SixDofNmpcConfig(**knobs)),
 }
 
 
@@ -144,13 +145,13 @@ def violations(vehicle: VehicleParams, flight: Flight, initial: np.ndarray, te: 
 
 
 def measure(vehicle: VehicleParams, name: str, controller_name: str,
-            model_error: float = 1.0) -> dict[str, float]:  # fmt: skip
-    """One case flown by one controller (built on ``vehicle``) on the plant whose inertia,
-    added mass and damping are ``model_error`` times the controller's."""
+            model_error: float = 1.0, knobs: dict | None = None) -> dict[str, float]:  # fmt: skip
+    """One case flown by one controller (built on ``vehicle`` with ``knobs``) on the plant
+    whose inertia, added mass and damping are ``model_error`` times the controller's."""
     config, seconds = CASES[name]
     reference = make_reference(config)
     seconds = seconds or float(reference.end_time)
-    controller = CONTROLLERS[controller_name](vehicle)
+    controller = CONTROLLERS[controller_name](vehicle, knobs or {})
     plant = scaled(vehicle, dict.fromkeys(MODEL_ERROR_FIELDS, model_error))
     flight = fly(plant, controller, reference, seconds)
     path_t = np.arange(0.0, seconds + PATH_SAMPLE_S, PATH_SAMPLE_S)
@@ -180,7 +181,11 @@ def main() -> None:
     parser.add_argument("--model-error", type=float, default=1.0,
                         help="the plant's inertia, added mass and damping over the "
                         "controllers' (e.g. 1.2)")  # fmt: skip
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="knobs of the controllers' configurations (JSON values), e.g. "
+                        "integral_los=true; with one --controllers")  # fmt: skip
     arguments = parser.parse_args()
+    knobs = {key: json.loads(value) for key, _, value in (k.partition("=") for k in arguments.set)}
     vehicle = load_vehicle("remus100")
     print(
         "| case | controller | Te (s) | cross-track RMS after 20 s (m) | max (m) | "
@@ -189,7 +194,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|")
     for name in arguments.cases:
         for controller_name in arguments.controllers:
-            m = measure(vehicle, name, controller_name, arguments.model_error)
+            m = measure(vehicle, name, controller_name, arguments.model_error, knobs)
             print(f"| {name} | {controller_name} | {m['sample_s']:g} | "
                   f"{m['cross_track_rms_m']:.3f} | {m['cross_track_max_m']:.3f} | "
                   f"{m['depth_rms_m']:.4f} | {m['box']} / {m['rate']} | "
