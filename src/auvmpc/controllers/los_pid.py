@@ -457,6 +457,8 @@ class LosPid(Controller):
         return 0.5 * (low + high)
 
     def _design(self, top: float) -> _Schedule:
+        """Every loop's gains and feedforward tables at the schedule's speeds up to ``top``
+        (m/s), each from the model trimmed there (module docstring)."""
         config = self.config
         speeds = _SCHEDULE * top
         rows: dict[str, list] = {key: [] for key in ("heading", "pitch", "turns", "w_yaw",
