@@ -78,6 +78,7 @@ class ControllerType(StrEnum):
     DO_MPC = "do-mpc"  # the same OCP solved by do-mpc (pip install auvmpc[compare]), a yardstick
     THRUST_PLAYBACK = "thrust-playback"  # open loop: a thrust table played sample by sample
     SIX_DOF_NMPC = "six-dof-nmpc"  # every 6-DOF input on the 6-DOF model (kind: six-dof only)
+    LOS_PID = "los-pid"  # a torpedo's LOS guidance and PID autopilots, the yardstick (six-dof)
 
 
 class NmpcMode(StrEnum):

@@ -42,6 +42,7 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.depth_mpc import DepthControllerConfig, DepthMpc
 from auvmpc.controllers.dompc import DoMpcConfig, DoMpcController
+from auvmpc.controllers.los_pid import LosPid, LosPidConfig
 from auvmpc.controllers.ltv import LtvMpc, LtvMpcConfig
 from auvmpc.controllers.mpc import PaperMpc, PaperMpcConfig
 from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
@@ -86,6 +87,7 @@ REGISTRY: dict[str, ControllerEntry] = {
     ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController),
     ControllerType.THRUST_PLAYBACK: ControllerEntry(ThrustPlaybackConfig, ThrustPlayback),
     ControllerType.SIX_DOF_NMPC: ControllerEntry(SixDofNmpcConfig, SixDofNmpc),
+    ControllerType.LOS_PID: ControllerEntry(LosPidConfig, LosPid),
 }
 # The depth kind's (a depth scenario's ``controller``, a 6-DOF scenario's
 # ``depth_controller``, which takes only the depth MPC): thrust-playback's configuration
