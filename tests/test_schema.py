@@ -56,7 +56,7 @@ def test_the_scenario_schema_rejects_what_the_loader_rejects(change, where):
     from auvmpc.errors import ConfigError
     from auvmpc.scenario import validate_scenario
 
-    data = dict(_presets("scenarios")[-1][1])  # a horizontal paper scenario
+    data = dict(dict(_presets("scenarios"))["paper-ideal.yaml"])  # a horizontal scenario
     data.update(change)
     with pytest.raises(ConfigError, match=where):
         validate_scenario(data)

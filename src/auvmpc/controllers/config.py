@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from enum import StrEnum
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -597,6 +597,49 @@ class OptimisingControllerConfig(  # the bases in reverse: the common fields com
             slack_penalty=filled.obstacle_slack_penalty,
             keep_out_extra=filled.vehicle_radius + filled.obstacle_margin,
         )
+
+
+class WholeVehicleConfig(HorizontalControllerConfig):
+    """What a controller of the whole 6-DOF vehicle (``Controller.whole_vehicle``:
+    ``six-dof-nmpc``, ``los-pid``) fills in for a vehicle, by its own rules: the horizontal
+    controllers' rules read the 3-DOF model's thrusters, which a torpedo has not."""
+
+    #: Te (s) when the scenario gives none.
+    default_sample_time_s: ClassVar[float]
+
+    def for_vehicle(self, model: VehicleParams) -> WholeVehicleConfig:
+        """Filled: the sample time, the vehicle radius and what :meth:`_filled` adds."""
+        update: dict[str, Any] = {}
+        if self.sample_time is None:
+            update["sample_time"] = self.default_sample_time_s
+        if self.vehicle_radius is None:
+            update["vehicle_radius"] = default_vehicle_radius(model)
+        update |= self._filled(model, self.sample_time or self.default_sample_time_s)
+        return self.model_copy(update=update) if update else self
+
+    def _filled(self, model: VehicleParams, sample_time: float) -> dict[str, Any]:
+        """A type's own omitted settings, filled for ``model`` at ``sample_time``."""
+        return {}
+
+    def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
+        """What :meth:`for_vehicle` chose, and why (run.json's ``choices``)."""
+        filled = self.for_vehicle(model)
+        chosen: dict[str, dict[str, Any]] = {}
+        if self.sample_time is None:
+            chosen["sample_time"] = {
+                "value": filled.sample_time,
+                "why": f"{self.type}'s default {self.default_sample_time_s:g} s",
+            }
+        if self.vehicle_radius is None:
+            chosen["vehicle_radius"] = {
+                "value": filled.vehicle_radius,
+                "why": "half the diagonal of its planform (size), or the default without one",
+            }
+        return chosen | self._chosen(filled)
+
+    def _chosen(self, filled: WholeVehicleConfig) -> dict[str, dict[str, Any]]:
+        """A type's own choices (``filled``: this configuration filled in)."""
+        return {}
 
 
 def ControllerConfig(**knobs: Any) -> HorizontalControllerConfig:  # noqa: N802 (reads as a class)

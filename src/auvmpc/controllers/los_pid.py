@@ -72,7 +72,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import casadi as ca
 import numpy as np
@@ -83,8 +83,7 @@ from auvmpc.config import Positive
 from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, Observation
 from auvmpc.controllers.config import (
     ControllerType,
-    HorizontalControllerConfig,
-    default_vehicle_radius,
+    WholeVehicleConfig,
     type_field,
 )
 from auvmpc.errors import ConfigError
@@ -129,8 +128,10 @@ _PATH_COLUMNS = [0, 1, 2, 5]
 _PATH_TURN = 3
 
 
-class LosPidConfig(HorizontalControllerConfig):
+class LosPidConfig(WholeVehicleConfig):
     """``los-pid``: LOS guidance and PID autopilots of a torpedo AUV (module docstring)."""
+
+    default_sample_time_s: ClassVar[float] = 0.1  # an autopilot's 10 Hz
 
     type: Literal[ControllerType.LOS_PID] = type_field(LOS_PID)
     sample_time: Annotated[float, Field(gt=0)] | None = Field(
@@ -192,19 +193,6 @@ class LosPidConfig(HorizontalControllerConfig):
         default=1.0, description="the surge PI's bandwidth over the hull's own surge rate "
         "(-du'/du at the trim)",
     )  # fmt: skip
-
-    def for_vehicle(self, model: VehicleParams) -> LosPidConfig:
-        """Filled: the sample time (0.1 s unless given: an autopilot's 10 Hz) and the vehicle
-        radius."""
-        update: dict = {}
-        if self.sample_time is None:
-            update["sample_time"] = DEFAULT_SAMPLE_TIME_S
-        if self.vehicle_radius is None:
-            update["vehicle_radius"] = default_vehicle_radius(model)
-        return self.model_copy(update=update) if update else self
-
-
-DEFAULT_SAMPLE_TIME_S = 0.1
 
 
 # -- guidance -------------------------------------------------------------------------------

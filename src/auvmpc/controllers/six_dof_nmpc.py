@@ -41,7 +41,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import casadi as ca
 import numpy as np
@@ -57,9 +57,8 @@ from auvmpc.controllers.base import (
 )
 from auvmpc.controllers.config import (
     ControllerType,
-    HorizontalControllerConfig,
     PredictionModel,
-    default_vehicle_radius,
+    WholeVehicleConfig,
     type_field,
 )
 from auvmpc.errors import ConfigError
@@ -106,8 +105,10 @@ _NO_FORCE_N = 1e-9
 _STILL_M_PER_S = 1e-3
 
 
-class SixDofNmpcConfig(PredictionModel, HorizontalControllerConfig):
+class SixDofNmpcConfig(PredictionModel, WholeVehicleConfig):
     """``six-dof-nmpc``: the whole vehicle's nonlinear MPC (module docstring)."""
+
+    default_sample_time_s: ClassVar[float] = 0.25
 
     type: Literal[ControllerType.SIX_DOF_NMPC] = type_field(SIX_DOF_NMPC)
     prediction_horizon: int = Field(default=20, ge=2, le=400, description="N (samples)")
@@ -131,50 +132,27 @@ class SixDofNmpcConfig(PredictionModel, HorizontalControllerConfig):
     )  # fmt: skip
     max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
 
-    def for_vehicle(self, model: VehicleParams) -> SixDofNmpcConfig:
-        """Filled: the sample time (0.25 s unless given), the RK4 steps and the vehicle
-        radius."""
-        update: dict = {}
-        sample_time = self.sample_time or DEFAULT_SAMPLE_TIME_S
-        if self.sample_time is None:
-            update["sample_time"] = sample_time
+    def _filled(self, model: VehicleParams, sample_time: float) -> dict[str, Any]:
+        """The RK4 steps per sample, where omitted."""
         if self.model_substeps is None and model.six_dof is not None:
-            update["model_substeps"] = stable_substeps(model, sample_time)
-        if self.vehicle_radius is None:
-            update["vehicle_radius"] = default_vehicle_radius(model)
-        return self.model_copy(update=update) if update else self
+            return {"model_substeps": stable_substeps(model, sample_time)}
+        return {}
 
-    def choices(self, model: VehicleParams) -> dict[str, dict[str, Any]]:
-        """What :meth:`for_vehicle` chose, by its own rules (not the horizontal controllers':
-        those read the 3-DOF model's thrusters, which a torpedo has not)."""
-        filled, given = self.for_vehicle(model), self.model_fields_set
+    def _chosen(self, filled: WholeVehicleConfig) -> dict[str, dict[str, Any]]:
         chosen: dict[str, dict[str, Any]] = {}
-        if self.sample_time is None:
-            chosen["sample_time"] = {
-                "value": filled.sample_time,
-                "why": f"{SIX_DOF_NMPC}'s default {DEFAULT_SAMPLE_TIME_S:g} s",
-            }
-        if self.model_substeps is None and model.six_dof is not None:
+        if self.model_substeps is None and filled.model_substeps is not None:
             chosen["model_substeps"] = {
                 "value": filled.model_substeps,
                 "why": "fewest RK4 steps per sample stable on the 6-DOF model's fastest mode "
                 "(models/six_dof.py, stable_substeps)",
             }
-        if self.vehicle_radius is None:
-            chosen["vehicle_radius"] = {
-                "value": filled.vehicle_radius,
-                "why": "half the diagonal of its planform (size), or the default without one",
-            }
-        if "prediction_horizon" not in given:
+        if "prediction_horizon" not in self.model_fields_set:
             chosen["prediction_horizon"] = {
                 "value": filled.prediction_horizon,
                 "why": f"the default {filled.prediction_horizon} samples "
                 f"({filled.prediction_horizon * filled.sample_time:g} s ahead)",
             }
         return chosen
-
-
-DEFAULT_SAMPLE_TIME_S = 0.25
 
 
 def _compiled(solver: ca.Function, options: dict, config: SixDofNmpcConfig) -> ca.Function:
