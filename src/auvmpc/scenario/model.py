@@ -173,8 +173,8 @@ class SixDofScenario(Scenario):
     the depth controller on depth and its rate, roll and pitch left to passive stability; or
     one controller of the whole vehicle (``six-dof-nmpc``) on the whole measured state, which
     flies any actuators (a torpedo's propeller and fins) and is a torpedo's default.
-    Every field of a horizontal scenario means the same here; ``plant.scale`` is refused (the
-    plant is the vehicle's ``six_dof`` section as given)."""
+    Every field of a horizontal scenario means the same here, but ``plant.scale``, which scales
+    the ``six_dof`` section's inertia, added mass and damping."""
 
     kind: Literal["six-dof"] = Field(  # type: ignore[assignment]
         description="selects this schema: the 6-DOF plant (auvmpc.controllers.channels)"

@@ -209,6 +209,12 @@ class ResolvedSixDofScenario(ResolvedScenario):
         model = self.model
         if not whole:
             _check_depth_channel(model)
+        if whole and scenario.obstacles:
+            raise ConfigError(
+                "obstacles", len(scenario.obstacles),
+                f"{typed.controller.type} has no keep-out constraint yet: it would fly through "
+                "them (the horizontal controllers keep clear, docs/moving-obstacles.md)",
+            )  # fmt: skip
         if scenario.fault_detection and not model.has_thrusters:
             raise ConfigError(
                 "fault_detection", True,

@@ -22,7 +22,8 @@
 #include "auvmpc_controller.h"
 
 /* The heap calls inside auvmpc_step, counted: this program's malloc, calloc, realloc and
- * free replace the C library's for the whole process (HPIPM's and BLASFEO's shared libraries
+ * free (and the aligned posix_memalign, aligned_alloc, memalign) replace the C library's for
+ * the whole process (HPIPM's and BLASFEO's shared libraries
  * included: glibc's documented way to replace malloc) and hand on to glibc's own allocator.
  * On another C library nothing is replaced and the count reads -1. */
 static long heap_calls = -1;
@@ -32,6 +33,7 @@ extern void *__libc_malloc(size_t size);
 extern void *__libc_calloc(size_t count, size_t size);
 extern void *__libc_realloc(void *pointer, size_t size);
 extern void __libc_free(void *pointer);
+extern void *__libc_memalign(size_t alignment, size_t size);
 
 void *malloc(size_t size) {
     heap_calls += counting;
@@ -48,6 +50,20 @@ void *realloc(void *pointer, size_t size) {
 void free(void *pointer) {
     heap_calls += counting && pointer;
     __libc_free(pointer);
+}
+/* The aligned allocators too: BLASFEO's own allocation is aligned (posix_memalign). */
+int posix_memalign(void **pointer, size_t alignment, size_t size) {
+    heap_calls += counting;
+    *pointer = __libc_memalign(alignment, size);
+    return *pointer || !size ? 0 : 12; /* ENOMEM */
+}
+void *aligned_alloc(size_t alignment, size_t size) {
+    heap_calls += counting;
+    return __libc_memalign(alignment, size);
+}
+void *memalign(size_t alignment, size_t size) {
+    heap_calls += counting;
+    return __libc_memalign(alignment, size);
 }
 #define HEAP_COUNTED 1
 #else
