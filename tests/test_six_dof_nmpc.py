@@ -4,9 +4,11 @@ the hull's lift, the prediction's RK4 steps, the current observer, the kind's wi
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig, pushes_sideways
+from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import simulate
 from auvmpc.models import six_dof
 from auvmpc.models.actuators import ActuatorSet, ControlSurface, Propeller
@@ -110,3 +112,19 @@ def test_a_horizontal_scenario_refuses_it_in_one_line(monkeypatch, capsys):
     assert code == 2
     assert "controller.type" in err and "six-dof" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_obstacles_are_refused_with_a_controller_that_cannot_keep_clear():
+    """Neither whole-vehicle controller has a keep-out constraint: flying such a scenario
+    would go through the disc, so it is refused naming the field."""
+    for controller in ("six-dof-nmpc", "los-pid"):
+        with pytest.raises(ConfigError, match="^obstacles: .*keep-out"):
+            load_scenario(
+                "remus100-survey",
+                [f"controller.type={controller}", "obstacles=[{center: [60.0, 0.0], radius: 2.0}]"],
+            )
+
+
+def test_a_thruster_vehicles_dump_has_no_hull_lift_key():
+    """run.json's vehicle and the compiled model's cache key are as before the field."""
+    assert "hull_lift" not in load_vehicle(HEAVY).model_dump()["six_dof"]
