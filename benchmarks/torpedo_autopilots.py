@@ -29,7 +29,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from auvmpc.controllers.base import Controller, Observation
 from auvmpc.controllers.channels import ReferenceWithDepth
@@ -45,6 +44,7 @@ from auvmpc.references import (
     LineConfig,
     make_reference,
 )
+from auvmpc.sim.metrics import cross_track_error
 from auvmpc.sim.plant import substeps_for
 
 SPEED_M_PER_S = 1.5
@@ -119,21 +119,6 @@ def fly(vehicle: VehicleParams, controller: Controller, reference, seconds: floa
                   np.array(times))  # fmt: skip
 
 
-def distance_to_path(path: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """Each position's (n, 2) distance to the polyline ``path`` (m, 2): to the nearer of the
-    two segments at its nearest vertex."""
-    _, nearest = cKDTree(path).query(positions)
-    best = np.full(len(positions), np.inf)
-    for first in (nearest - 1, nearest):
-        start = path[np.clip(first, 0, len(path) - 2)]
-        step = path[np.clip(first, 0, len(path) - 2) + 1] - start
-        length2 = np.maximum(np.einsum("ij,ij->i", step, step), 1e-18)
-        along = np.clip(np.einsum("ij,ij->i", positions - start, step) / length2, 0.0, 1.0)
-        gap = start + along[:, None] * step - positions
-        best = np.minimum(best, np.hypot(gap[:, 0], gap[:, 1]))
-    return best
-
-
 def violations(vehicle: VehicleParams, flight: Flight, initial: np.ndarray, te: float):
     """Samples with some command outside its box, and moved beyond its rate."""
     limits = vehicle.six_dof_actuators.limits
@@ -157,7 +142,7 @@ def measure(vehicle: VehicleParams, name: str, controller_name: str,
     path_t = np.arange(0.0, seconds + PATH_SAMPLE_S, PATH_SAMPLE_S)
     path = reference.positions(path_t)
     late = flight.t >= TRANSIENT_S
-    cross = distance_to_path(path, flight.states[late][:, :2])
+    cross = cross_track_error(flight.states[late][:, :2], path)
     depth_error = flight.states[late, 2] - reference.depths(flight.t[late])[:, 0]
     initial = np.zeros(flight.commands.shape[1])
     initial[0] = 900.0

@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike
 from pydantic import Field, field_validator, model_validator
 from scipy.interpolate import CubicSpline
 
+from auvmpc.angles import wrap_angle
 from auvmpc.config import NonNegative, StrictModel
 from auvmpc.errors import ConfigError, shortened
 from auvmpc.models.layout import DEPTH, DEPTH_PROFILE, HORIZONTAL
@@ -357,7 +358,7 @@ def _check_legs(points) -> None:
                 "consecutive waypoints must differ"
             )
     headings = np.arctan2(legs[:, 1], legs[:, 0])
-    for i, turn in enumerate(_wrap(np.diff(headings))):
+    for i, turn in enumerate(wrap_angle(np.diff(headings))):
         if abs(turn) >= math.pi - _REVERSAL_TOLERANCE:
             raise ValueError(
                 f"the path reverses (180 deg turn) at points[{i + 1}] = {list(points[i + 1])}"
@@ -501,11 +502,6 @@ def _as_times(t: ArrayLike) -> np.ndarray:
     return times
 
 
-def _wrap(angle: ArrayLike) -> np.ndarray:
-    """Angle(s) wrapped to (-pi, pi]."""
-    return math.pi - np.mod(math.pi - np.asarray(angle, dtype=float), _TWO_PI)
-
-
 def _assemble(
     x: ArrayLike, y: ArrayLike, psi: ArrayLike, u: ArrayLike, r: ArrayLike, n: int
 ) -> np.ndarray:
@@ -574,7 +570,7 @@ class Circle(Reference):
         self._phase0 = math.radians(config.start_angle_deg)
         self._omega = sign * config.speed / config.radius  # rad/s, signed
         # Tangent direction is the radial angle +/- pi/2; start it in (-pi, pi] and let it run.
-        self._psi0 = float(_wrap(self._phase0 + sign * 0.5 * math.pi))
+        self._psi0 = float(wrap_angle(self._phase0 + sign * 0.5 * math.pi))
 
     def _states(self, t: np.ndarray) -> np.ndarray:
         phase = self._phase0 + self._omega * t
@@ -621,7 +617,7 @@ class Line(Reference):
     def __init__(self, config: LineConfig) -> None:
         self.config = config
         heading = math.radians(config.heading_deg)
-        self._psi = float(_wrap(heading))
+        self._psi = float(wrap_angle(heading))
         self._velocity = config.speed * np.array([math.cos(heading), math.sin(heading)])
 
     def _states(self, t: np.ndarray) -> np.ndarray:
@@ -654,7 +650,7 @@ class WaypointPath(Reference):
         legs = np.diff(pts, axis=0)
         lengths = np.hypot(legs[:, 0], legs[:, 1])
         units = legs / lengths[:, None]
-        turns = _wrap(np.diff(np.arctan2(legs[:, 1], legs[:, 0])))  # (m-2,), each in (-pi, pi)
+        turns = wrap_angle(np.diff(np.arctan2(legs[:, 1], legs[:, 0])))  # (m-2,), each in (-pi, pi)
         leg_heading = math.atan2(legs[0, 1], legs[0, 0]) + np.concatenate(([0.0], np.cumsum(turns)))
 
         n_legs = lengths.size

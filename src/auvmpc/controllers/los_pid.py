@@ -79,6 +79,7 @@ import numpy as np
 from pydantic import Field
 from scipy.optimize import fsolve
 
+from auvmpc.angles import wrap_angle
 from auvmpc.config import Positive
 from auvmpc.controllers.base import Controller, ControlResult, ControlStatus, Observation
 from auvmpc.controllers.config import (
@@ -259,11 +260,6 @@ def ground_velocity(state: np.ndarray) -> np.ndarray:
     north += (spsi * sphi + cpsi * cphi * sth) * w
     east += (spsi * sth * cphi - cpsi * sphi) * w
     return np.array([north, east])
-
-
-def _wrapped(angle: float) -> float:
-    """``angle`` in (-pi, pi]."""
-    return math.pi - (math.pi - angle) % (2.0 * math.pi)
 
 
 # -- the vehicle's loops, from its model ------------------------------------------------------
@@ -542,7 +538,7 @@ class LosPid(Controller):
         along = float(ground @ [math.cos(point.tangent), math.sin(point.tangent)])
         loops = (  # name, its inputs, gains, error, rate error, feedforward
             ("heading", self.rudder, schedule.at(schedule.heading, scheduled),
-             _wrapped(psi_d - float(state[_PSI])), r_d - float(state[_R]),
+             float(wrap_angle(psi_d - float(state[_PSI]))), r_d - float(state[_R]),
              schedule.turn(scheduled, r_d)),
             ("pitch", self.planes, schedule.at(schedule.pitch, scheduled),
              theta_d - float(state[_THETA]), -float(state[_Q]),
@@ -584,7 +580,7 @@ class LosPid(Controller):
             self._crab += self.sample_time * grow * point.normal
         if config.sideslip_compensation and math.hypot(*ground) > _SLOWEST_M_PER_S:
             # steer the course: the heading less the measured angle of the ground track
-            psi_d -= _wrapped(math.atan2(ground[1], ground[0]) - float(state[_PSI]))
+            psi_d -= float(wrap_angle(math.atan2(ground[1], ground[0]) - float(state[_PSI])))
         return psi_d
 
     def _pitch_setpoint(self, state: np.ndarray, row: np.ndarray, speed: float,

@@ -50,6 +50,7 @@ import casadi as ca
 import numpy as np
 from pydantic import Field
 
+from auvmpc.angles import wrap_angle
 from auvmpc.config import NonNegative
 from auvmpc.controllers.base import (
     Controller,
@@ -384,7 +385,7 @@ class SixDofNmpc(Controller):
         crab = np.arctan2(through_water[:, 1], through_water[:, 0])
         heading = np.where(self.crabs & (speed > _STILL_M_PER_S), crab, tangent)
         # unwrap onto the vehicle's turn: the cost's cosine does not mind, the guess does
-        heading = state[_PSI] + np.angle(np.exp(1j * (heading - state[_PSI])))
+        heading = state[_PSI] + wrap_angle(heading - state[_PSI])
         surge = np.hypot(ground[:, 0], ground[:, 1]) * np.cos(
             np.arctan2(ground[:, 1], ground[:, 0]) - heading
         )

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
+from auvmpc.angles import wrap_angle
 from auvmpc.controllers.base import ControlStatus
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.layout import DEPTH, HORIZONTAL
@@ -85,11 +86,6 @@ def position_error(log: SimLog) -> np.ndarray:
 def heading_error(log: SimLog) -> np.ndarray:
     """(N+1,) heading error wrapped to (-pi, pi] (rad)."""
     return wrap_angle(log.state[:, _HEADING] - log.reference[:, _HEADING])
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    """Wrap to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
 
 
 def thrust_increments(log: SimLog) -> np.ndarray:
