@@ -163,9 +163,10 @@ class SixDofNmpcConfig(PredictionModel, WholeVehicleConfig):
 def _compiled(solver: ca.Function, options: dict, config: SixDofNmpcConfig) -> ca.Function:
     """``solver`` with its program's functions (cost, constraints, their derivatives and the
     Lagrangian's Hessian) generated to C and compiled, when ``config.jit`` and there is a C
-    compiler: the same IPOPT, about four times faster per step. The library is cached on
-    disk by its code (native.py), so the compile is paid once per vehicle and configuration
-    (measured: 1-2.5 min for the REMUS 100, whatever the horizon, since the stage is mapped)."""
+    compiler: the same IPOPT on the same numbers, faster per step (REMUS 100 5x, BlueROV2
+    Heavy 2.4x: benchmarks/six_dof_nmpc_speed.py). The library is cached on disk by its code
+    (native.py), so the compile, 1 to 4 minutes, is paid once per vehicle and configuration
+    (the stage is mapped: its size does not grow with the horizon)."""
     if not config.jit or compiler() is None:
         return solver
     with tempfile.TemporaryDirectory(prefix="auvmpc-six-dof-nmpc-") as scratch:
