@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import Observation
-from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig, pushes_sideways
+from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import simulate
 from auvmpc.models import six_dof
@@ -63,8 +63,8 @@ def test_a_torpedo_cannot_push_sideways_a_thruster_vehicle_can():
                           0.0, 1525.0, 1525.0)  # fmt: skip
     rudder = ControlSurface("rudder_deg", (-0.64, 0, 0), (0, 0, 1), 0.0133, 1.41, 0.4, 1026.0,
                             -20.0, 20.0, 100.0)  # fmt: skip
-    assert not pushes_sideways(ActuatorSet((propeller, rudder)))
-    assert pushes_sideways(load_vehicle(HEAVY).six_dof_actuators)
+    assert not ActuatorSet((propeller, rudder)).pushes_sideways
+    assert load_vehicle(HEAVY).six_dof_actuators.pushes_sideways
 
 
 def test_the_observer_finds_a_steady_current():

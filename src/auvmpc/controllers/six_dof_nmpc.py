@@ -66,10 +66,8 @@ from auvmpc.controllers.config import (
     type_field,
 )
 from auvmpc.errors import ConfigError
-from auvmpc.models.actuators import WRENCH, ActuatorSet
 from auvmpc.models.integrators import rk4
 from auvmpc.models.six_dof import (
-    BODY_VELOCITY,
     PITCH_LIMIT_RAD,
     SIX_DOF,
     six_dof_model,
@@ -103,8 +101,6 @@ _NODE = 7
 # (a vehicle feeling no current at all: the estimate then stays where it is).
 _RIDGE = 1e-2
 _RIDGE_FLOOR = 1e-12
-# A force below this (N) is none: round-off of a wrench that should vanish.
-_NO_FORCE_N = 1e-9
 # Below this ground speed (m/s) the path gives no direction: hold the reference's heading.
 _STILL_M_PER_S = 1e-3
 
@@ -181,20 +177,6 @@ def _compiled(solver: ca.Function, options: dict, config: SixDofNmpcConfig) -> c
     return ca.nlpsol("six_dof_nmpc", "ipopt", library._name, options)
 
 
-def pushes_sideways(inputs: ActuatorSet) -> bool:
-    """Whether some command of ``inputs`` makes a sway force with the vehicle at rest (a
-    thruster set does; a propeller and fins, whose forces need the flow, do not)."""
-    at_rest = np.zeros(BODY_VELOCITY.size)
-    sway = WRENCH.index("Y")
-    for command in (inputs.limits.lower, inputs.limits.upper):
-        full = np.broadcast_to(command, (inputs.size,)).astype(float)
-        for i in range(inputs.size):
-            alone = np.where(np.arange(inputs.size) == i, full, 0.0)
-            if abs(float(inputs.force(at_rest, alone)[sway])) > _NO_FORCE_N:
-                return True
-    return False
-
-
 class SixDofNmpc(Controller):
     """The whole vehicle's nonlinear MPC (module docstring)."""
 
@@ -214,7 +196,7 @@ class SixDofNmpc(Controller):
         self.limits = inputs.limits
         self.n_inputs = nu = inputs.size
         self._range = np.asarray(self.limits.upper - self.limits.lower, dtype=float)
-        self.crabs = not pushes_sideways(inputs)
+        self.crabs = not inputs.pushes_sideways
         self._build()
         self.reset(np.zeros(NX), np.zeros(nu))
 
@@ -237,11 +219,12 @@ class SixDofNmpc(Controller):
             "step", [x, u, current, share],
             [rk4(f, x, u, self.sample_time, config.model_substeps)],
         )  # fmt: skip
-        self._step = step
-        # How the predicted state moves with the horizontal current: the observer's map.
-        self._current_sensitivity = ca.Function(
-            "current_sensitivity", [x, u, current, share],
-            [ca.jacobian(step(x, u, current, share), current)[:, 0:2]],
+        # The observer's one-step prediction and how it moves with the horizontal current,
+        # from one evaluation (one call per sample on the controller's step).
+        predicted = step(x, u, current, share)
+        self._prediction = ca.Function(
+            "prediction", [x, u, current, share],
+            [predicted, ca.jacobian(predicted, current)[:, 0:2]],
         )  # fmt: skip
         # One stage, written once and mapped over the horizon: its shooting gap and its cost.
         reached, previous = ca.SX.sym("x_next", NX), ca.SX.sym("u_previous", nu)
@@ -347,12 +330,9 @@ class SixDofNmpc(Controller):
             wanted, self._plan = next_planned_move(self._plan, self._previous)
             command = self.limits.project(wanted, self._previous, self.sample_time)[0]
             self._guess, status = None, ControlStatus.FALLBACK
-        self._predicted = np.asarray(
-            self._step(state, command, self._current, share), dtype=float
-        ).ravel()
-        self._sensitivity = np.asarray(
-            self._current_sensitivity(state, command, self._current, share), dtype=float
-        )
+        predicted, sensitivity = self._prediction(state, command, self._current, share)
+        self._predicted = np.asarray(predicted, dtype=float).ravel()
+        self._sensitivity = np.asarray(sensitivity, dtype=float)
         self._previous = command
         info = {"iterations": float(stats.get("iter_count", 0))}
         return ControlResult(command.copy(), status, solve_time, info=info)
@@ -377,9 +357,9 @@ class SixDofNmpc(Controller):
         """(_NODE, N) targets of nodes 1..N: position, depth, the crab heading through the
         estimated current (continuous with the vehicle's heading), the surge that makes the
         ground speed good along it, the path's turn rate and the pitch of its climb."""
-        rows = np.asarray(reference, dtype=float)[1 : self.horizon + 1]
-        ground = np.diff(np.asarray(reference, dtype=float)[:, _REF_XY], axis=0)[: self.horizon]
-        ground = ground / self.sample_time
+        reference = np.asarray(reference, dtype=float)
+        rows = reference[1 : self.horizon + 1]
+        ground = np.diff(reference[:, _REF_XY], axis=0)[: self.horizon] / self.sample_time
         through_water = ground - self._current[:2]
         speed = np.hypot(through_water[:, 0], through_water[:, 1])
         tangent = rows[:, 2]
@@ -390,7 +370,7 @@ class SixDofNmpc(Controller):
         surge = np.hypot(ground[:, 0], ground[:, 1]) * np.cos(
             np.arctan2(ground[:, 1], ground[:, 0]) - heading
         )
-        climb = np.diff(np.asarray(reference, dtype=float)[:, _REF_Z])[: self.horizon]
+        climb = np.diff(reference[:, _REF_Z])[: self.horizon]
         pitch = np.arctan2(-climb / self.sample_time, np.maximum(speed, _STILL_M_PER_S))
         return np.vstack(
             [rows[:, 0], rows[:, 1], rows[:, _REF_Z], heading, surge, rows[:, _REF_R], pitch]

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auvmpc.controllers.six_dof_nmpc import pushes_sideways
 from auvmpc.models.vehicle import VehicleParams, top_yaw_rate
 
 __all__ = [
@@ -214,7 +213,7 @@ def _underactuated(params: VehicleParams) -> bool:
     make no sway force at rest (a propeller and fins: a torpedo crabs into a current)."""
     if params.has_thrusters:
         return params.underactuated
-    return not pushes_sideways(params.six_dof_actuators)
+    return not params.six_dof_actuators.pushes_sideways
 
 
 def _capped(distance: float, fraction: float, extent: float) -> float:

@@ -15,6 +15,9 @@ from auvmpc.models.layout import Layout
 
 __all__ = ["ActuatorSet"]
 
+# A force below this (N) is none: round-off of a wrench that should vanish.
+_NO_FORCE_N = 1e-9
+
 
 @dataclass(frozen=True, eq=False)
 class ActuatorSet:
@@ -92,6 +95,21 @@ class ActuatorSet:
             total = sum(shares[1:], shares[0])
             return ca.vertcat(*(total[i] for i in index))
         return np.sum(shares, axis=0)[index]
+
+    @cached_property
+    def pushes_sideways(self) -> bool:
+        """Whether some command makes a sway force with the vehicle at rest (a thruster set
+        does; a propeller and fins, whose forces need the flow, do not): whether the vehicle
+        can hold a heading off its track without crabbing."""
+        at_rest = np.zeros(WRENCH.size)  # nu_r, in the wrench's order
+        sway = WRENCH.index("Y")
+        for command in (self.limits.lower, self.limits.upper):
+            full = np.broadcast_to(command, (self.size,)).astype(float)
+            for i in range(self.size):
+                alone = np.where(np.arange(self.size) == i, full, 0.0)
+                if abs(float(self.force(at_rest, alone)[sway])) > _NO_FORCE_N:
+                    return True
+        return False
 
     @cached_property
     def _allocations(self) -> dict[tuple[str, ...], np.ndarray]:
