@@ -81,6 +81,11 @@ LIMIT_ROUND_OFF_N = 1e-12
 # measured 2.0e-11 N for HPIPM (real-time), 2.7e-11 N for IPOPT.
 SAME_SOLUTION_TOL_N = {NmpcMode.REAL_TIME: 1e-9, NmpcMode.FULL: 1e-6}
 
+# The first command's internal thrust against the scalar problem's optimum (3.06 N from 8 N
+# held before): measured 1.1e-11 N (full, IPOPT's tolerance) and 0 N (real-time); without the
+# internal-thrust term both held 8 N, 4.9 N off.
+INTERNAL_THRUST_TOL_N = 1e-8
+
 LINE_REFERENCE = "reference={type: line, start: [0, 0], heading_deg: 0, speed: 0.5}"
 
 
@@ -200,10 +205,45 @@ def test_program_cost_is_linear_mpc_cost(penalty):
     R = np.array(config.R)
     if penalty is ThrustPenalty.ABSOLUTE:
         expected += np.sum(per_step**2 * R)
-    else:
+    else:  # and R on the internal thrust, the part T maps to no force or moment
         expected += np.sum(np.diff(np.vstack([previous, per_step]), axis=0) ** 2 * R)
+        internal = per_step @ _internal_projector(params).T
+        expected += np.sum(internal**2 * R)
     expected += config.obstacle_slack_penalty * slack.sum() + np.sum(slack**2)
     assert cost == pytest.approx(expected, rel=ROUND_OFF)  # the same sums in another order
+
+
+def _internal_projector(params) -> np.ndarray:
+    """I - pinv(T) T: the orthogonal projector onto the thrusts that make no force or moment."""
+    return np.eye(params.n_thrusters) - np.linalg.pinv(params.T) @ params.T
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_internal_thrust_decays_as_the_increment_penalty_says(mode):
+    """At rest on a resting reference, a previous command that pushes BlueROV2 Heavy's four
+    thrusters against each other (c times the allocation's null vector: no force, no moment)
+    is the only thing to optimise. The increment penalty with its internal-thrust term makes
+    that the scalar problem min sum_k (n_k - n_{k-1})^2 + n_k^2, n_{-1} = c, whose optimum is
+    the tridiagonal solve below; without the term the plan would hold c for ever, a direction
+    nothing in the problem decides (ocp/tracking.py)."""
+    params = load_vehicle("bluerov2-heavy")
+    null = np.linalg.svd(params.T)[2][-1]  # unit null vector of T (3, 4)
+    assert np.allclose(params.T @ null, 0.0, atol=ROUND_OFF)
+    # R = 1: the internal thrust's cost well above IPOPT's tolerance (the scalar problem
+    # does not depend on R)
+    config = _config(mode, thrust_penalty=ThrustPenalty.INCREMENT, R=(1.0,), model_substeps=2)
+    c = 8.0  # N along the null vector: 4 N per thruster, inside every limit and rate
+    nmpc = NonlinearMpc(params, config)
+    state = np.zeros(6)
+    nmpc.reset(state, c * null)
+    plan = nmpc.compute(_observation(state, np.zeros((HORIZON + 1, 6))))
+
+    # d/dn_k: 2 (n_k - n_{k-1}) - 2 (n_{k+1} - n_k) [k < N - 1] + 2 n_k = 0
+    hessian = 3.0 * np.eye(HORIZON) - np.eye(HORIZON, k=1) - np.eye(HORIZON, k=-1)
+    hessian[-1, -1] = 2.0
+    expected = np.linalg.solve(hessian, np.r_[c, np.zeros(HORIZON - 1)])
+    assert plan.thrust @ null == pytest.approx(expected[0], abs=INTERNAL_THRUST_TOL_N)
+    assert np.linalg.norm(plan.thrust - (plan.thrust @ null) * null) < INTERNAL_THRUST_TOL_N
 
 
 # --------------------------------------------------------------------------------------------

@@ -594,6 +594,7 @@ class OptimisingControllerConfig(  # the bases in reverse: the common fields com
             filled,
             model.n_thrusters,
             horizontal_limits(model),
+            allocation=model.T,
             slack_penalty=filled.obstacle_slack_penalty,
             keep_out_extra=filled.vehicle_radius + filled.obstacle_margin,
         )

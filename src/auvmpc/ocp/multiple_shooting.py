@@ -172,6 +172,9 @@ class MultipleShootingProgram:
             cost += sum(ca.bilin(R, F, F) for F in thrust_at)
         else:
             cost += sum(ca.bilin(R, dF, dF) for dF in changes)
+            if ocp.internal_weight is not None:  # the internal thrust (ocp/tracking.py)
+                internal = ca.DM(ocp.internal_weight)
+                cost += sum(ca.bilin(internal, F, F) for F in thrust_at)
         cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
         cost += SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)
         return Nlp(w, p, cost, g)

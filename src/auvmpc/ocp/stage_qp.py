@@ -141,6 +141,13 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         r = ca.vertcat(2.0 * R_weight * F, *slack_gradient)
     else:  # R weights the change (F + dF) - (P + dp) = change + w
         r = ca.vertcat(2.0 * R_weight * change, *slack_gradient)
+        if ocp.internal_weight is not None:  # and M the internal thrust Pi (F + dp + w)
+            M = ca.DM(ocp.internal_weight)
+            Q[NX:, NX:] = 2.0 * M
+            S_cross[:n, NX:] = 2.0 * M
+            R[:n, :n] += 2.0 * M
+            q[NX:] = 2.0 * M @ F
+            r[:n] += 2.0 * M @ F
 
     # Dynamics: dX_{k+1} = A dX_k + B (dp_k + w_k) + gap, dp_{k+1} = dp_k + w_k + (F_k - P_{k+1}).
     # The model's thrust that acts is a = e * F: differentiated in a and evaluated there, B's

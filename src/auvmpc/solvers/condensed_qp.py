@@ -127,6 +127,10 @@ class CondensedQp:
         else:
             self._input_hessian = 2.0 * np.diag(np.tile(input_weight, nc))
             self._input_gradient_map = np.zeros((self.n_moves, nu))
+            if ocp.internal_weight is not None:  # |u_i|_M^2, u_i = u(k-1) + E_i moves
+                weighted = np.einsum("ij,njm->nim", ocp.internal_weight, self.move_to_input)
+                self._input_hessian += 2.0 * np.einsum("nim,nik->mk", self.move_to_input, weighted)
+                self._input_gradient_map += 2.0 * weighted.sum(axis=0).T
         self.limits = limits
         self.max_move = ocp.max_move
         self._move_bound = np.tile(self.max_move, nc)  # every move, built once

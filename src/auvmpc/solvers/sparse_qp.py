@@ -58,6 +58,7 @@ class SparseIncrementalQp:
         self.R = ocp.input_weight
         self.nu = ocp.n_inputs
         self.absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
+        self.internal = ocp.internal_weight  # with the increment: the internal thrust's M
         self.lower, self.upper = ocp.input_lower, ocp.input_upper
         self.max_move = ocp.max_move
         self.slack_penalty = ocp.slack_penalty
@@ -124,8 +125,11 @@ class SparseIncrementalQp:
                     H[p_cols, du] += np.diag(2.0 * self.R)
                     H[du, p_cols] += np.diag(2.0 * self.R)
                     H_mask[p_cols, du] = H_mask[du, p_cols] = np.eye(nu, dtype=bool)
-            elif moving:
-                H[du, du] += np.diag(2.0 * self.R)
+            else:
+                if moving:
+                    H[du, du] += np.diag(2.0 * self.R)
+                if self.internal is not None:  # |u_k|_M^2, the internal thrust
+                    self._add_input_weight(H, H_mask, p_cols, du if moving else None)
             if moving:
                 H[du, du] += _HESSIAN_REGULARISATION * np.eye(nu)
                 lbx[du], ubx[du] = -self.max_move, self.max_move
@@ -205,6 +209,15 @@ class SparseIncrementalQp:
         return SparseSolution(
             np.concatenate(moves), slack, states, stats["iter_count"], stats["return_status"]
         )
+
+    def _add_input_weight(self, H, H_mask, p_cols, du) -> None:
+        """|p_k + du_k|_M^2 (M the internal thrust's weight) into H and its pattern; ``du``
+        None where the thrust is held."""
+        M, pattern = 2.0 * self.internal, self.internal != 0.0
+        blocks = [(p_cols, p_cols)] + ([] if du is None else [(du, du), (p_cols, du), (du, p_cols)])
+        for rows, columns in blocks:
+            H[rows, columns] += M
+            H_mask[rows, columns] |= pattern
 
     def _solver(self, H_mask, A_mask, n_inputs, n_rows, nz):
         """HPIPM for this stage structure (it changes only when soft rows come or go), with
