@@ -471,7 +471,8 @@ class TrackingWeights(StrictModel):
     thrust_penalty: ThrustPenalty = Field(
         default=ThrustPenalty.INCREMENT,
         description="R on dF (the default: the steady thrust that drag and currents need "
-        "costs nothing) or on F (the paper's: it trades tracking error for thrust)",
+        "costs nothing; R also on the internal thrust, which makes no force or moment) or on F "
+        "(the paper's: it trades tracking error for thrust)",
     )
 
 

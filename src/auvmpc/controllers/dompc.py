@@ -170,8 +170,8 @@ class DoMpcController(ShelledController):
             + ca.mtimes([penalised.T, ca.diag(ca.DM(ocp.input_weight)), penalised])
             + _HELD_MOVE_WEIGHT * (1 - model.tvp["gate"]) * ca.sumsqr(dF)
         )
-        if ocp.penalty is ThrustPenalty.INCREMENT and ocp.internal_weight is not None:
-            lterm += ca.mtimes([F.T, ca.DM(ocp.internal_weight), F])  # ocp/tracking.py
+        if ocp.weights_internal_thrust:  # the internal thrust (ocp/tracking.py)
+            lterm += ca.mtimes([F.T, ocp.internal_weight(effectiveness), F])
         mterm = ca.mtimes([error.T, ca.diag(ca.DM(ocp.terminal_weight)), error])
         mpc.set_objective(lterm=lterm, mterm=mterm)
         mpc.set_rterm(dF=0.0)  # R weights F (or dF) in lterm already; do-mpc's move term stays 0

@@ -188,6 +188,9 @@ class IncrementalMpc(ShelledController):
     ) -> _Solution:
         """The linearise-and-solve passes from the nominal moves ``moves``."""
         qp = self.qp
+        qp.set_effectiveness(self.effectiveness)  # for the internal thrust's weight
+        if self.sparse_qp is not None:
+            self.sparse_qp.set_effectiveness(self.effectiveness)
         self.linearisation_nodes = (
             self.aligned_reference(state, _shifted(self._predicted))
             if self._predicted is not None

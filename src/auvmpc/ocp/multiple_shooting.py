@@ -172,8 +172,8 @@ class MultipleShootingProgram:
             cost += sum(ca.bilin(R, F, F) for F in thrust_at)
         else:
             cost += sum(ca.bilin(R, dF, dF) for dF in changes)
-            if ocp.internal_weight is not None:  # the internal thrust (ocp/tracking.py)
-                internal = ca.DM(ocp.internal_weight)
+            if ocp.weights_internal_thrust:  # the internal thrust (ocp/tracking.py)
+                internal = ocp.internal_weight(effectiveness)
                 cost += sum(ca.bilin(internal, F, F) for F in thrust_at)
         cost += ocp.slack_penalty * ca.sum1(ca.vec(slack))
         cost += SLACK_QUADRATIC_WEIGHT * ca.sumsqr(slack)

@@ -141,8 +141,8 @@ def _build_stage_qp(program: MultipleShootingProgram) -> StageQp:
         r = ca.vertcat(2.0 * R_weight * F, *slack_gradient)
     else:  # R weights the change (F + dF) - (P + dp) = change + w
         r = ca.vertcat(2.0 * R_weight * change, *slack_gradient)
-        if ocp.internal_weight is not None:  # and M the internal thrust Pi (F + dp + w)
-            M = ca.DM(ocp.internal_weight)
+        if ocp.weights_internal_thrust:  # and M(e) the internal thrust (ocp/tracking.py)
+            M = ocp.internal_weight(effectiveness)
             Q[NX:, NX:] = 2.0 * M
             S_cross[:n, NX:] = 2.0 * M
             R[:n, :n] += 2.0 * M

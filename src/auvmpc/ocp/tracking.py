@@ -31,22 +31,20 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
+import casadi as ca
 import numpy as np
-import scipy.linalg
 
 from auvmpc.models.actuators import ActuatorLimits
 
-__all__ = [
-    "SLACK_QUADRATIC_WEIGHT",
-    "ActuatorLimits",
-    "ThrustPenalty",
-    "TrackingOcp",
-    "internal_thrust_weight",
-]
+__all__ = ["SLACK_QUADRATIC_WEIGHT", "ActuatorLimits", "ThrustPenalty", "TrackingOcp"]
 
 # The soft constraints' cost is penalty * s + SLACK_QUADRATIC_WEIGHT * s^2: the linear part
 # makes the penalty exact, the quadratic part makes every QP definite in the slack.
 SLACK_QUADRATIC_WEIGHT = 1.0
+# The internal thrust's projector is damped by this share of the largest eigenvalue of T T'
+# (TrackingOcp.internal_weight), so that it is defined, and stays a projector to that order,
+# whatever the thrusters' effectiveness.
+_DAMPING = 1e-9
 
 
 class ThrustPenalty(StrEnum):
@@ -70,14 +68,41 @@ class TrackingOcp:
     limits: ActuatorLimits  # force box and rate (N/s, independent of Te)
     slack_penalty: float  # exact-penalty weight of the soft constraints (per m)
     keep_out_extra: float = 0.0  # added to every obstacle radius: vehicle radius + margin (m)
-    # (nu, nu) Pi diag(R) Pi: the weight of the internal thrust with the increment penalty
-    # (module docstring, internal_thrust_weight); None where it has none (no null space, or R
-    # on the thrust itself, which weights it already)
-    internal_weight: np.ndarray | None = None
+    # T (3, nu), tau = T F: where given, with the increment penalty and more thrusters than
+    # T's rank, R weights the internal thrust too (module docstring, internal_weight)
+    allocation: np.ndarray | None = None
 
     @property
     def n_inputs(self) -> int:
         return len(self.input_weight)
+
+    @property
+    def weights_internal_thrust(self) -> bool:
+        """Whether R weights the internal thrust too (module docstring): the increment
+        penalty, on thrusters some of whose thrust makes no force or moment when healthy."""
+        return (
+            self.penalty is ThrustPenalty.INCREMENT
+            and self.allocation is not None
+            and np.linalg.matrix_rank(self.allocation) < self.n_inputs
+        )
+
+    def internal_weight(self, effectiveness):
+        """M(e) = Pi' diag(R) Pi (nu, nu), the weight of the internal thrust Pi F: Pi the
+        projector onto the thrusts the acting allocation A = T diag(e) maps to no force or
+        moment, I - A' (A A' + lambda I)^-1 A, lambda = _DAMPING x the largest eigenvalue of
+        T T' (the projector to that order where A keeps T's rank; where a fault takes a rank,
+        the thrust that direction can no longer make is weighted too, and a dead thruster's
+        command with it). ``effectiveness`` (nu,): CasADi symbols (the problem's runtime
+        input) or numbers (a NumPy array back)."""
+        numeric = isinstance(effectiveness, np.ndarray | list | tuple)
+        e = ca.DM(np.asarray(effectiveness, dtype=float)) if numeric else effectiveness
+        T = ca.DM(self.allocation)
+        damping = _DAMPING * float(np.linalg.eigvalsh(self.allocation @ self.allocation.T)[-1])
+        acting = T @ ca.diag(e)
+        gram = acting @ acting.T + damping * ca.DM.eye(T.shape[0])
+        projector = ca.DM.eye(self.n_inputs) - acting.T @ ca.solve(gram, acting)
+        weight = projector.T @ ca.diag(ca.DM(self.input_weight)) @ projector
+        return np.array(weight) if numeric else weight
 
     @property
     def n_moves(self) -> int:
@@ -121,10 +146,6 @@ class TrackingOcp:
         """From a controller configuration (horizontal or depth) with Q, S, R, horizons;
         ``allocation``: T (tau = T F), for the internal thrust's weight (none without)."""
         weights = np.broadcast_to(np.asarray(config.R, dtype=float), (n_inputs,))
-        penalty = ThrustPenalty(config.thrust_penalty)
-        internal = None
-        if allocation is not None:
-            internal = internal_thrust_weight(allocation, weights, penalty)
         return cls(
             sample_time=float(config.sample_time),
             horizon=int(config.prediction_horizon),
@@ -132,26 +153,11 @@ class TrackingOcp:
             stage_weight=_frozen(config.Q),
             terminal_weight=_frozen(config.S),
             input_weight=_frozen(weights),
-            penalty=penalty,
+            penalty=ThrustPenalty(config.thrust_penalty),
             limits=limits,
-            internal_weight=internal,
+            allocation=None if allocation is None else _frozen(allocation),
             **extra,
         )
-
-
-def internal_thrust_weight(
-    allocation: np.ndarray, input_weight: np.ndarray, penalty: ThrustPenalty
-) -> np.ndarray | None:
-    """Pi diag(R) Pi, Pi the orthogonal projector onto the null space of ``allocation`` (the
-    thrusts that make no force or moment, module docstring): what the increment penalty adds
-    on the thrust itself. None with the absolute penalty (R weights all the thrust) or where
-    every thrust pushes the vehicle (no null space)."""
-    null = scipy.linalg.null_space(np.asarray(allocation, dtype=float))
-    if penalty is ThrustPenalty.ABSOLUTE or null.shape[1] == 0:
-        return None
-    projector = null @ null.T
-    weight = projector @ np.diag(np.asarray(input_weight, dtype=float)) @ projector
-    return _frozen(0.5 * (weight + weight.T))  # symmetric to the bit
 
 
 def _frozen(values) -> np.ndarray:

@@ -127,10 +127,10 @@ class CondensedQp:
         else:
             self._input_hessian = 2.0 * np.diag(np.tile(input_weight, nc))
             self._input_gradient_map = np.zeros((self.n_moves, nu))
-            if ocp.internal_weight is not None:  # |u_i|_M^2, u_i = u(k-1) + E_i moves
-                weighted = np.einsum("ij,njm->nim", ocp.internal_weight, self.move_to_input)
-                self._input_hessian += 2.0 * np.einsum("nim,nik->mk", self.move_to_input, weighted)
-                self._input_gradient_map += 2.0 * weighted.sum(axis=0).T
+        self._ocp = ocp
+        self._increment_hessian = self._input_hessian  # without the internal thrust's part
+        self._effectiveness: np.ndarray | None = None
+        self.set_effectiveness(np.ones(nu))
         self.limits = limits
         self.max_move = ocp.max_move
         self._move_bound = np.tile(self.max_move, nc)  # every move, built once
@@ -139,6 +139,21 @@ class CondensedQp:
         self._input_lower, self._input_upper = ocp.input_lower, ocp.input_upper
         self.slack_penalty = ocp.slack_penalty
         self.solver = make_qp_solver(qp_solver, iteration_limit)
+
+    def set_effectiveness(self, effectiveness: np.ndarray) -> None:
+        """The thrusters' effectiveness the internal thrust's weight is for (ocp/tracking.py,
+        TrackingOcp.internal_weight): with the increment penalty, |u_i|_M^2 over the horizon,
+        u_i = u(k-1) + E_i moves, in the input Hessian and gradient; remade when it changes."""
+        if not self._ocp.weights_internal_thrust or np.array_equal(
+            effectiveness, self._effectiveness
+        ):
+            return
+        self._effectiveness = np.array(effectiveness, dtype=float)
+        weight = self._ocp.internal_weight(self._effectiveness)
+        weighted = np.einsum("ij,njm->nim", weight, self.move_to_input)  # M E_i
+        internal = 2.0 * np.einsum("nim,nik->mk", self.move_to_input, weighted)
+        self._input_hessian = self._increment_hessian + internal
+        self._input_gradient_map = 2.0 * weighted.sum(axis=0).T
 
     def condense(
         self, state: np.ndarray, previous: np.ndarray, prediction: AffinePrediction

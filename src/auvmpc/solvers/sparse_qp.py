@@ -58,13 +58,25 @@ class SparseIncrementalQp:
         self.R = ocp.input_weight
         self.nu = ocp.n_inputs
         self.absolute = ocp.penalty is ThrustPenalty.ABSOLUTE
-        self.internal = ocp.internal_weight  # with the increment: the internal thrust's M
+        self._ocp = ocp
+        self.internal: np.ndarray | None = None  # M(e), the internal thrust's weight
+        self._effectiveness: np.ndarray | None = None
+        self.set_effectiveness(np.ones(ocp.n_inputs))
         self.lower, self.upper = ocp.input_lower, ocp.input_upper
         self.max_move = ocp.max_move
         self.slack_penalty = ocp.slack_penalty
         self.iteration_limit = iteration_limit
         self._solvers: dict[tuple, ca.Function] = {}  # by stage-row structure
         self._row_capacity = 1  # soft rows per step the structure has room for
+
+    def set_effectiveness(self, effectiveness: np.ndarray) -> None:
+        """The thrusters' effectiveness the internal thrust's weight is for (ocp/tracking.py,
+        TrackingOcp.internal_weight); remade when it changes."""
+        if self._ocp.weights_internal_thrust and not np.array_equal(
+            effectiveness, self._effectiveness
+        ):
+            self._effectiveness = np.array(effectiveness, dtype=float)
+            self.internal = self._ocp.internal_weight(self._effectiveness)
 
     # -- one sample ------------------------------------------------------------------------
     def solve(
