@@ -180,6 +180,9 @@ def test_objective_is_the_paper_cost_staged_as_linear_mpc(jmse, fields, moves_fr
                 + np.sum(error[-1] ** 2 * np.array(config.S))
                 + np.sum(moves**2 * R)
             )
+            # and R on the internal thrust, the part T maps to no force or moment
+            internal = plan @ (np.eye(4) - np.linalg.pinv(jmse.T) @ jmse.T)
+            expected += np.sum(internal**2 * R)
         else:
             expected = _paper_cost(config, jmse, observation.state, plan, reference)
         assert abs(value - constant - expected) <= COST_RELATIVE_TOL * expected

@@ -48,6 +48,35 @@ def test_ocp_states_limits_and_schedule_once(vehicle, request):
     assert ocp.keep_out_extra == filled.vehicle_radius + filled.obstacle_margin
 
 
+# The internal thrust's projector is damped by 1e-9 of the largest eigenvalue of T T'
+# (ocp/tracking.py), which leaves it off by ~1e-9 on the force directions and, with one R for
+# all thrusters, its weight by that squared. Measured 2.8e-16 (healthy) and 4.2e-16 (a dead
+# thruster) relative to R on BlueROV2 Heavy: round-off.
+INTERNAL_WEIGHT_TOL = 1e-12
+
+
+@pytest.mark.parametrize("dead", [None, 2])
+def test_internal_thrust_weight_is_r_on_the_thrust_that_makes_no_force(bluerov, dead):
+    """With the increment penalty R also weighs the internal thrust (ocp/tracking.py): the
+    thrusts the acting allocation T diag(e) maps to no force or moment. Healthy BlueROV2
+    Heavy: its four 45-degree thrusters pushing against each other, the null vector v of T,
+    so M = R v v'. With thruster 3 dead (e = 0) the other three have no such thrust left and
+    only the dead one's command makes none: M = R e_3 e_3'."""
+    R = 0.3
+    ocp = ControllerConfig(R=(R,)).ocp(bluerov)
+    assert ocp.weights_internal_thrust
+    effectiveness = np.ones(bluerov.n_thrusters)
+    if dead is None:
+        null = np.linalg.svd(bluerov.T)[2][-1]
+    else:
+        effectiveness[dead] = 0.0
+        null = np.eye(bluerov.n_thrusters)[dead]
+    weight = ocp.internal_weight(effectiveness)
+    np.testing.assert_allclose(weight, R * np.outer(null, null), atol=INTERNAL_WEIGHT_TOL * R)
+    # the paper's absolute penalty weighs all the thrust already: nothing added
+    assert not ControllerConfig(thrust_penalty="absolute").ocp(bluerov).weights_internal_thrust
+
+
 # -- the shell --------------------------------------------------------------------------------
 class _Scripted(ShelledController):
     """A back end that proposes what the test tells it to."""

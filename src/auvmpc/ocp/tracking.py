@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
+from functools import cached_property
 from typing import Any
 
 import casadi as ca
@@ -76,7 +77,7 @@ class TrackingOcp:
     def n_inputs(self) -> int:
         return len(self.input_weight)
 
-    @property
+    @cached_property
     def weights_internal_thrust(self) -> bool:
         """Whether R weights the internal thrust too (module docstring): the increment
         penalty, on thrusters some of whose thrust makes no force or moment when healthy."""
