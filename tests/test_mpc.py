@@ -309,8 +309,10 @@ def _solve_one_ocp(controller, prediction, state, reference, previous, half_plan
     R = ca.DM(np.diag(config.ocp(model).input_weight))
     if config.thrust_penalty is ThrustPenalty.ABSOLUTE:
         cost += sum(ca.bilin(R, F[:, i], F[:, i]) for i in range(ny))
-    else:
+    else:  # R on the moves, and on the internal thrust Pi F_i (no force or moment)
         cost += sum(ca.bilin(R, D[:, j], D[:, j]) for j in range(len(move_steps)))
+        internal = ca.DM(np.eye(n) - np.linalg.pinv(model.T) @ model.T)
+        cost += sum(ca.sumsqr(ca.sqrt(R) @ internal @ F[:, i]) for i in range(ny))
     if prediction.nominal is not None:
         deviation = X[2:, 1:] - ca.DM(prediction.nominal[1:, 2:].T)
         cost += config.trust_region_weight * ca.sumsqr(deviation)
@@ -487,8 +489,10 @@ def test_unconstrained_mpc_equals_least_squares_solution(penalty):
     tracking_rhs = sqrt_w * (target - free @ state - forced @ held)
     if penalty is ThrustPenalty.ABSOLUTE:
         effort, effort_rhs = sqrt_r * cumulative, -sqrt_r * held
-    else:
-        effort, effort_rhs = sqrt_r * np.eye(n * ny), np.zeros(n * ny)
+    else:  # R on the moves, and on the internal thrust Pi F_j (no force or moment)
+        internal = np.kron(np.eye(ny), np.eye(n) - np.linalg.pinv(model.T) @ model.T)
+        effort = sqrt_r * np.vstack([np.eye(n * ny), internal @ cumulative])
+        effort_rhs = np.concatenate([np.zeros(n * ny), -sqrt_r * internal @ held])
     moves = np.linalg.lstsq(
         np.vstack([tracking, effort]), np.concatenate([tracking_rhs, effort_rhs]), rcond=None
     )[0]
