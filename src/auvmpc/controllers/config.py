@@ -45,6 +45,7 @@ __all__ = [
     "PlanLinearisation",
     "PredictionModel",
     "QpSolverOptions",
+    "SolverTimeLimit",
     "Relinearisation",
     "SolverOptions",
     "TightenedConstraints",
@@ -492,8 +493,18 @@ class PredictionModel(StrictModel):
     )
 
 
-class QpSolverOptions(StrictModel):
-    """The QP back end and its budget (every controller that solves a QP)."""
+class SolverTimeLimit(StrictModel):
+    """The real-time budget of an optimiser's step (every optimising controller)."""
+
+    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="a step whose optimisation takes longer is treated as a failure "
+        "(the previous plan's next move is applied), as on a real-time computer",
+    )
+
+
+class QpBackEnd(StrictModel):
+    """The QP back end and its iteration cap."""
 
     qp_solver: QpSolverName = Field(
         default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
@@ -503,11 +514,10 @@ class QpSolverOptions(StrictModel):
         description="cap on QP iterations per interior-point pass (IPOPT iterations for nmpc "
         "full: below ~20 every step falls back); hitting it counts as a solver failure",
     )
-    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
-        default=None,
-        description="a step whose optimisation takes longer is treated as a failure "
-        "(the previous plan's next move is applied), as on a real-time computer",
-    )
+
+
+class QpSolverOptions(SolverTimeLimit, QpBackEnd):  # the bases in reverse, as below
+    """The QP back end and its budget (every controller that solves a QP)."""
 
 
 class ObstacleSlack(StrictModel):
