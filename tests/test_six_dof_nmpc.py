@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from auvmpc.controllers.base import Observation
+from auvmpc.controllers.recovery import AutopilotFeedback
+from auvmpc.controllers.registry import build_controller
 from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.run import simulate
@@ -159,9 +161,6 @@ def test_a_torpedo_whose_optimiser_never_delivers_is_flown_by_its_autopilot(star
 def test_a_thruster_vehicle_has_no_autopilot_to_recover_with():
     """los-pid needs a propeller, a rudder and stern planes: on the BlueROV2 Heavy the shell
     has no recovery, and a failed solve follows the last plan (then holds its last move)."""
-    from auvmpc.controllers.registry import build_controller
-    from auvmpc.controllers.recovery import AutopilotFeedback
-
     heavy = load_scenario("bluerov2-helix", SHORT)
     torpedo = load_scenario(TORPEDO_SHORT, [])
     assert build_controller(heavy.scenario.controller, heavy.model).recovery is None
