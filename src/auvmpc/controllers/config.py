@@ -209,10 +209,16 @@ class TypedControllerConfig(StrictModel):
             if foreign and (info.context or {}).get(SAVED_RUN):
                 return {key: value for key, value in data.items() if key in cls.model_fields}
             own_type = data.get("type", cls.model_fields["type"].default)
+            # No type named: the default's knobs are read before the vehicle is known (a
+            # torpedo's default, six-dof-nmpc, is chosen after), so say how to name one.
+            unnamed = "" if "type" in data else " (the default; name controller.type to use it)"
             for key in foreign:
                 owners = cls._knob_owners(str(key))
                 if owners:
-                    reason = f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+                    reason = (
+                        f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+                        + unnamed
+                    )
                     raise FieldError(str(key), data[key], reason)
         return super()._known_keys_only(data)
 
