@@ -56,8 +56,9 @@ __all__ = [
 ]
 
 # The depth MPC's own static arrays may take at most this much (bytes): its condensed QP grows
-# as (moves + soft rows)^2, about 270 kB at 4 vertical thrusters and 20 samples, the limit at
-# about 40 samples. DAQP's workspace, allocated once at init, comes on top.
+# as (moves + soft rows)^2, 334 kB at 4 vertical thrusters and 20 samples (bluerov2-helix), the
+# limit at 36 samples (53 at 2 vertical thrusters). DAQP's workspace, allocated once at init,
+# comes on top.
 DEPTH_STATIC_MEMORY_LIMIT_BYTES = 1024 * 1024
 
 _TEMPLATES = Path(__file__).with_name("c")
@@ -120,16 +121,17 @@ def check_six_dof(resolved) -> DepthControllerConfig:
 
 
 def depth_static_bytes(horizon: int, moves: int, thrusters: int) -> int:
-    """The depth MPC's arrays (auvmpc_depth.c), bytes: its condensed QP (Hessian and rows,
-    (moves + soft rows)^2 each), the sensitivities and their stage data; the generated
-    functions' work arrays and the filter come on top (a few hundred bytes)."""
-    N, nm = horizon, moves * thrusters
-    nz = nm + 2 * N  # the moves and a slack per soft row (below the surface, above the bottom)
-    rows = nm + 2 * N
-    qp = nz * nz + rows * nz + 3 * (nz + rows)  # H, rows, bounds and multipliers
-    condensed = (2 * N + 1) * _NX * (nm + 1) + 2 * N * nm  # forcing, stacked, weighted
-    plans = 4 * N * thrusters + 3 * nm  # plan, input, the rollout's Jacobians
-    return 8 * (qp + condensed + plans)
+    """The depth MPC's arrays (auvmpc_depth.c), bytes: its condensed QP (the Hessian and the
+    rows, (moves + soft rows)^2 each), the sensitivities, the stage data and the plans; the
+    generated functions' work arrays and the filter come on top (on bluerov2-helix 325 504 B
+    estimated, 333 808 B by sizeof)."""
+    N, n, nm = horizon, thrusters, moves * thrusters
+    nz = rows = nm + 2 * N  # the moves and a slack per soft row (surface, bottom)
+    qp = nz * nz + rows * nz + 4 * (nz + rows) + nz  # H, rows, bounds, multipliers, sense, x
+    condensed = (2 * N + 1) * _NX * (nm + 1) + 2 * N * (nm + 1)  # forcing, stacked, weighted
+    stages = N * (12 + 4 * n)  # the rollout, its Jacobians, A, B, c
+    plans = 2 * N * n + nm + 3 * _NX * (N + 1)  # plan, input, moves, states, reference
+    return 8 * (qp + condensed + stages + plans)
 
 
 def depth_controller(resolved) -> DepthMpc:
@@ -273,7 +275,7 @@ def _header(macros: dict[str, object], guard: str, vehicle: str) -> str:
 
 def _depth_macros(depth: DepthMpc, functions: list[ca.Function]) -> dict[str, object]:
     """The depth MPC's sizes and numbers, as the Python one holds them."""
-    qp, ocp, heave, config = depth.qp, depth.ocp, depth.heave, depth.config
+    qp, ocp, heave = depth.qp, depth.ocp, depth.heave
     nu = heave.thruster_count
     limits = depth.limits
     soft = depth.soft_rows(None, None, None)  # constant: the surface and the bottom
@@ -328,7 +330,6 @@ def _depth_macros(depth: DepthMpc, functions: list[ca.Function]) -> dict[str, ob
         "AUVMPC_DEPTH_SZ_RES": max(f.sz_res() for f in functions),
         "AUVMPC_DEPTH_SZ_IW": max(f.sz_iw() for f in functions),
         "AUVMPC_DEPTH_SZ_W": max(f.sz_w() for f in functions),
-        "AUVMPC_DEPTH_OFFSET_FREE": int(config.offset_free),
     }
 
 

@@ -70,9 +70,8 @@ typedef struct {
     /* one sample */
     double state[DNX], disturbance;
     double reference[N + 1][DNX];
-    double moves[NM], solution[NM];
+    double moves[NM];
     double input[N][NU];         /* the plan the model is linearised along */
-    double repeated_effectiveness[N][NU];
     double rollout[N][DNX], jac_x[N][DNX][DNX], jac_u[N][NU][DNX]; /* column-major blocks */
     double A[N][DNX][DNX], B[N][DNX][NU], c[N][DNX];
     double forcing[N][DNX][NM + 1];
