@@ -106,7 +106,7 @@ STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
 COMMAND_TOLERANCE_N = 1e-6
 
 _TEMPLATES = Path(__file__).with_name("c")
-_COPIED = ("replay.c", "example.c", "README.md")
+_COPIED = ("replay.c", "replay_common.h", "example.c", "README.md")
 _DATA = "replay_data.txt"
 _RECORD = "export.json"
 _NX = HORIZONTAL.size

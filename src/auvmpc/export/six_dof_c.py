@@ -65,7 +65,7 @@ _TEMPLATES = Path(__file__).with_name("c")
 # The fixed C of the pair, copied as they are; the replay and example main under the names the
 # Makefile builds.
 _FIXED = ("auvmpc_depth.c", "auvmpc_depth.h", "auvmpc_covariance.c", "auvmpc_covariance.h",
-          "auvmpc_six_dof.c", "auvmpc_six_dof.h", "replay_common.h")  # fmt: skip
+          "auvmpc_six_dof.c", "auvmpc_six_dof.h")  # fmt: skip
 TEMPLATES = {"replay_six_dof.c": "replay.c", "example_six_dof.c": "example.c"}
 _GENERATED = "depth_data.c"
 _DEPTH_CONFIG, _SIX_DOF_CONFIG = "auvmpc_depth_config.h", "auvmpc_six_dof_config.h"
