@@ -46,7 +46,6 @@ from auvmpc.solvers.dense_qp import _DAQP_INFINITY, QpSolverName
 
 __all__ = [
     "DEPTH_STATIC_MEMORY_LIMIT_BYTES",
-    "TEMPLATES",
     "check_six_dof",
     "daqp_libraries",
     "depth_static_bytes",
@@ -66,7 +65,7 @@ _TEMPLATES = Path(__file__).with_name("c")
 # Makefile builds.
 _FIXED = ("auvmpc_depth.c", "auvmpc_depth.h", "auvmpc_covariance.c", "auvmpc_covariance.h",
           "auvmpc_six_dof.c", "auvmpc_six_dof.h")  # fmt: skip
-TEMPLATES = {"replay_six_dof.c": "replay.c", "example_six_dof.c": "example.c"}
+_MAINS = {"replay_six_dof.c": "replay.c", "example_six_dof.c": "example.c"}
 _GENERATED = "depth_data.c"
 _DEPTH_CONFIG, _SIX_DOF_CONFIG = "auvmpc_depth_config.h", "auvmpc_six_dof_config.h"
 _DAQP, _DAQP_LICENCE = "libdaqp.so", "DAQP-LICENSE.txt"
@@ -180,7 +179,7 @@ def write_six_dof_sources(
     (folder / _SIX_DOF_CONFIG).write_text(_header(macros, "AUVMPC_SIX_DOF_CONFIG_H", vehicle))
     for name in _FIXED:
         shutil.copyfile(_TEMPLATES / name, folder / name)
-    for source, name in TEMPLATES.items():
+    for source, name in _MAINS.items():
         shutil.copyfile(_TEMPLATES / source, folder / name)
     for target, library in daqp.items():
         shutil.copyfile(library, folder / "lib" / target / _DAQP)
