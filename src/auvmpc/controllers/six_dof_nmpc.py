@@ -286,20 +286,21 @@ class SixDofNmpc(ShelledController):
         self._solution: tuple[np.ndarray, np.ndarray] | None = None  # this sample's, shifted
         self._current = np.zeros(3)
         self._predicted: np.ndarray | None = None  # x_{k} as the last sample predicted it
-        self._sample: tuple[np.ndarray, np.ndarray] | None = None  # (state, share) now
+        self._sample: tuple | None = None  # (state, share, stuck values or None) now
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
         share = np.asarray(self.effectiveness, dtype=float)
+        share, lower, upper, previous, stuck = self._fixed_at_stuck(observation, share, previous)
         self._estimate_current(state)
-        self._sample = (state, share)
+        self._sample = (state, share, stuck)
         nodes = self._nodes(state, observation.reference)
         parameters = np.concatenate([state, previous, nodes.ravel(order="F"), self._current, share])
         w0, lam0 = self._guess if self._guess is not None else self._cold(state, previous)
         started = time.perf_counter()
         solution = self._solver(
             x0=w0, lam_g0=lam0, p=parameters,
-            lbx=self._lbw, ubx=self._ubw, lbg=self._lbg, ubg=self._ubg,
+            lbx=lower, ubx=upper, lbg=self._lbg, ubg=self._ubg,
         )  # fmt: skip
         solve_time = time.perf_counter() - started
         stats = self._solver.stats()
@@ -319,13 +320,33 @@ class SixDofNmpc(ShelledController):
         """Warm-start the next solve from this one's (none after a fallback), and predict
         the next state under the command applied, for the current observer."""
         self._guess = None if fell_back else self._solution
-        state, share = self._sample
-        predicted, sensitivity = self._prediction(state, command, self._current, share)
+        state, share, stuck = self._sample
+        acting = command if stuck is None else np.where(np.isnan(stuck), command, stuck)
+        predicted, sensitivity = self._prediction(state, acting, self._current, share)
         self._predicted = np.asarray(predicted, dtype=float).ravel()
         self._sensitivity = np.asarray(sensitivity, dtype=float)
 
     def forget_plan(self) -> None:
         self._solution = None
+
+    def _fixed_at_stuck(self, observation: Observation, share: np.ndarray, previous: np.ndarray):
+        """``(share, lower, upper, previous, stuck)``: the program's effectiveness, bounds on
+        its variables and previous move, with each input ``observation.stuck_at`` says is
+        stuck fixed at its value (clipped into its limits) over the horizon, acting in full,
+        and its previous move that value (so its first move's rate holds); ``stuck``: the
+        values, NaN where free (None: none stuck, and the program's own bounds unchanged).
+        The shell moves the command to a stuck input there within the rate limit."""
+        told = observation.stuck_at
+        if told is None or np.isnan(told).all():
+            return share, self._lbw, self._ubw, previous, None
+        held = ~np.isnan(told)
+        value = np.clip(np.where(held, told, 0.0), self.limits.lower, self.limits.upper)
+        stuck = np.where(held, value, np.nan)
+        lower, upper = self._lbw.copy(), self._ubw.copy()
+        for bound in (lower, upper):  # the inputs, node by node: (N, nu) after the states
+            bound[self._n_states :].reshape(self.horizon, self.n_inputs)[:, held] = value[held]
+        share = np.where(held, 1.0, share)
+        return share, lower, upper, np.where(held, value, previous), stuck
 
     def _estimate_current(self, state: np.ndarray) -> None:
         """The world-frame horizontal current, moved by ``current_gain`` of the least-squares
