@@ -436,7 +436,7 @@ class SixDofKind(HorizontalKind):
         substeps = stable_substeps(model, sample_time)
         std = scenario.sensing.std  # [x, y, psi, u, v, r]; w, p, q are measured noise-free
         u, v, r = np.asarray(std)[HORIZONTAL.nu]
-        return SixDofFaultDetector(model, sample_time, substeps, np.array([u, v, 0, 0, 0, r]))
+        return SixDofFaultDetector(model, sample_time, substeps, np.array([u, v, v, r, r, r]))
 
     def _path(self, resolved, log: SimLog) -> dict[str, Any]:
         """The reference's horizontal path over the run, densely (the cross-track metric)."""
