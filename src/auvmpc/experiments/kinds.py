@@ -54,6 +54,7 @@ from auvmpc.sim.metrics import (
     compute_six_dof_metrics,
     fault_metrics,
     reference_path,
+    six_dof_fault_metrics,
 )
 from auvmpc.sim.plant import (
     HeavePlant,
@@ -437,6 +438,15 @@ class SixDofKind(HorizontalKind):
         std = scenario.sensing.std  # [x, y, psi, u, v, r]; w, p, q are measured noise-free
         u, v, r = np.asarray(std)[HORIZONTAL.nu]
         return SixDofFaultDetector(model, sample_time, substeps, np.array([u, v, v, r, r, r]))
+
+    def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
+        """The horizontal kind's, and what a fault cost in depth and off the path."""
+        metrics = super().metrics(resolved, log)
+        scenario = resolved.scenario
+        if scenario.faults:
+            path = self._path(resolved, log)["path"]
+            metrics |= six_dof_fault_metrics(log, scenario.transient_s, scenario.faults, path)
+        return metrics
 
     def _path(self, resolved, log: SimLog) -> dict[str, Any]:
         """The reference's horizontal path over the run, densely (the cross-track metric)."""
