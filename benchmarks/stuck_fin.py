@@ -58,7 +58,8 @@ def main() -> None:
     parser.add_argument("--set", nargs="*", default=[], help="further scenario overrides")
     args = parser.parse_args()
     if args.healthy:
-        session, metrics, wall = flown(args.scenario, [*args.set, "fault_detection=true"])
+        session, metrics, wall = flown(args.scenario, [*args.set, "faults=[]",
+                                                       "fault_detection=true"])  # fmt: skip
         found = [(session.input_names[f.index], t) for _, t, f in session.faults_found]
         print(f"healthy, detector on: found {found or 'nothing'}, verdict "
               f"{metrics and metrics['verdict']} ({wall:.0f} s wall)\n")  # fmt: skip

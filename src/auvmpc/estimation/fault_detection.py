@@ -310,7 +310,9 @@ class FaultDetector:
         error = np.sqrt(max(rss[j] / dof, 1.0) / spread[j])
         return _Fit(float(rss[j]), i, j + 1, float(lost[j] / error), lost=float(lost[j]))
 
-    def _stuck_fit(self, i: int, onsets: np.ndarray, residuals: np.ndarray, dof: int) -> _Fit | None:
+    def _stuck_fit(
+        self, i: int, onsets: np.ndarray, residuals: np.ndarray, dof: int
+    ) -> _Fit | None:
         """Input i stuck at s from onset j: r_k + [k >= j] B_ki a_ki = c + s [k >= j] B_ki
         (module docstring), fitted for each onset; the onset of the smallest residual sum of
         squares, its score the fit's gain over no fault in the window's scatter."""
@@ -396,9 +398,8 @@ class SixDofFaultDetector(FaultDetector):
         commands it did not follow (STUCK_FOUND of its range)."""
         i = fit.index
         span = self._upper[i] - self._lower[i]
-        inside = (
-            self._lower[i] - STUCK_BEYOND * span <= fit.stuck_at <= self._upper[i] + STUCK_BEYOND * span
-        )
+        beyond = STUCK_BEYOND * span
+        inside = self._lower[i] - beyond <= fit.stuck_at <= self._upper[i] + beyond
         return bool(inside and fit.gap >= STUCK_FOUND * span)
 
     def _refined(self, fit: _Fit) -> float:

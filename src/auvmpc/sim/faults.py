@@ -100,7 +100,6 @@ class FaultSchedule:
             effectiveness[index] = 0.0 if fault.stuck_at is not None else fault.effectiveness
         return effectiveness
 
-
     def stuck(self, t: float) -> np.ndarray | None:
         """The value each input is declared stuck at by ``t``, NaN where it is free (None:
         none declared stuck yet): ``Observation.stuck_at``."""
