@@ -96,8 +96,11 @@ STUCK_FOUND = 0.05
 # A stuck value this share of the range beyond the input's limits is no jammed actuator
 # (the model missed something else); within it, the value is clipped into the limits.
 STUCK_BEYOND = 0.25
-# Gauss-Newton steps that refine a stuck value on the model itself.
-STUCK_REFINEMENTS = 3
+# Gauss-Newton steps that refine a stuck value on the model itself, at most, and the step
+# (a share of the input's range) below which it has converged. From the tangent's estimate a
+# dead propeller's 0 rpm is a few steps away (its thrust is convex in rpm).
+STUCK_REFINEMENTS = 20
+STUCK_CONVERGED = 1e-6
 _NU = HORIZONTAL.nu
 
 
@@ -123,6 +126,7 @@ class _Fit:
     lost: float | None = None  # a loss's lambda
     stuck_at: float | None = None  # a stuck input's value
     gap: float = 0.0  # a stuck input's RMS distance from its commands, from the onset on
+    opposed: bool = False  # its value of the other sign than those commands' mean
 
 
 @dataclass
@@ -268,16 +272,16 @@ class FaultDetector:
         for i in range(self.n_inputs):
             if not watched[i]:
                 continue
-            candidates = [
-                fit
-                for fit in (
-                    self._loss_fit(i, onsets, regressors[:, :, i], centred_r, dof),
-                    self._stuck_fit(i, onsets, residuals, dof) if self.finds_stuck else None,
-                )
-                if fit is not None
-            ]
-            if candidates:
-                fits.append(min(candidates, key=lambda fit: fit.rss))
+            loss = self._loss_fit(i, onsets, regressors[:, :, i], centred_r, dof)
+            stuck = self._stuck_fit(i, onsets, residuals, dof) if self.finds_stuck else None
+            opposed = stuck is not None and stuck.opposed and loss is not None and loss.lost > 1
+            if stuck is not None and (loss is None or stuck.rss <= loss.rss or opposed):
+                # (a loss of more than all the force, where the stuck fit's value is of the
+                # other sign than the commands, is the input pushing against its command: a
+                # jam the other way, which a command held still cannot tell from a loss)
+                fits.append(stuck)
+            elif loss is not None:
+                fits.append(loss)
         if not fits:
             return None
         fits.sort(key=lambda fit: (fit.rss, fit.index))
@@ -334,8 +338,13 @@ class FaultDetector:
         centred = residuals - residuals.mean(axis=0)
         gain = max(float(np.einsum("km,km->", centred, centred)) - float(rss[j]), 0.0)
         sigmas = np.sqrt(gain / max(rss[j] / dof, 1.0))
-        gap = float(np.sqrt(np.mean((stuck[j] - acting[j + 1 :]) ** 2)))
-        return _Fit(float(rss[j]), i, j + 1, float(sigmas), stuck_at=float(stuck[j]), gap=gap)
+        after = acting[j + 1 :]
+        gap = float(np.sqrt(np.mean((stuck[j] - after) ** 2)))
+        opposed = bool(stuck[j] * np.mean(after) < 0.0)
+        return _Fit(
+            float(rss[j]), i, j + 1, float(sigmas), stuck_at=float(stuck[j]), gap=gap,
+            opposed=opposed,
+        )  # fmt: skip
 
 
 def _six_dof_one_step(model: VehicleParams, sample_time: float, substeps: int) -> ca.Function:
@@ -404,7 +413,7 @@ class SixDofFaultDetector(FaultDetector):
 
     def _refined(self, fit: _Fit) -> float:
         """The stuck value by Gauss-Newton on the model from the linear fit's (the window's
-        constant refitted each step), clipped into the input's limits."""
+        constant refitted each step), to convergence, clipped into the input's limits."""
         i, rows = fit.index, list(self._rows)
         on = np.arange(len(rows)) >= fit.onset
         stuck = float(fit.stuck_at)
@@ -422,5 +431,8 @@ class SixDofFaultDetector(FaultDetector):
             spread = float(np.einsum("km,km->", column, column))
             if not spread > 0.0:
                 break
-            stuck += float(np.einsum("km,km->", column, error)) / spread
+            step = float(np.einsum("km,km->", column, error)) / spread
+            stuck += step
+            if abs(step) <= STUCK_CONVERGED * (self._upper[i] - self._lower[i]):
+                break
         return float(np.clip(stuck, self._lower[i], self._upper[i]))
