@@ -127,7 +127,7 @@ def test_a_declared_stuck_fin_is_flown_at_its_value():
 def test_a_jammed_stern_plane_is_found_and_the_torpedo_flies_on():
     """Nobody told: the detector finds the stern plane stuck, at its angle, within its
     window, and nothing else; told, six-dof-nmpc flies on (not lost; not told, the same run
-    is degraded: measured 7 fallbacks, 3 in a row). run.json keeps what was found."""
+    is degraded: measured 6 fallbacks, 3 in a row). run.json keeps what was found."""
     session = _flown([*JAMMED, "fault_detection=true"])
     result = session.result()
     metrics, (found,) = result.metrics, result.run_json()["fault_detections"]
