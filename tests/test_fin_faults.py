@@ -110,8 +110,8 @@ def _flown(overrides: list[str]) -> RunSession:
 
 def test_a_declared_stuck_fin_is_flown_at_its_value():
     """Declared, the jammed stern plane is fixed at 5 deg in six-dof-nmpc's program from the
-    fault on: its command moves there within the rate limit and stays, and the fault costs
-    less depth than not telling the controller."""
+    fault on: its command moves there within the rate limit and stays there, within every
+    limit, and the delay is 0."""
     declared = _flown([JAMMED[0], JAMMED[1].replace("}]", ", declared: true}]")])
     log, metrics = declared.stepped_log, declared.result().metrics
     planes = log.thrust[:, STERN_PLANES]
