@@ -27,9 +27,11 @@ WHEEL_SHA256 = {
 MEMBERS = {
     "casadi/libhpipm.so": "libhpipm.so",
     "casadi/libblasfeo.so.0": "libblasfeo.so.0",
+    "casadi/libdaqp.so": "libdaqp.so",
     "casadi/include/blasfeo_target.h": "blasfeo_target.h",
     "licenses/hpipm-external/LICENSE.txt": "HPIPM-LICENSE.txt",
     "licenses/blasfeo-external/LICENSE.txt": "BLASFEO-LICENSE.txt",
+    "licenses/daqp-external/LICENSE": "DAQP-LICENSE.txt",
 }
 VERSION_FILE = "casadi-version"  # export-c checks it against the casadi it runs with
 

@@ -100,7 +100,6 @@ def test_a_depth_controller_given_beside_it_is_a_note_not_an_error():
         (["controller.linearisation_iterations=2"], "controller.linearisation_iterations"),
         (["initial_thrust=[2000, 0, 0]"], "initial_thrust"),
         (["initial_thrust=[900, 0]"], "initial_thrust"),
-        (["fault_detection=true"], "fault_detection"),
     ],
 )
 def test_what_cannot_fly_it_is_refused_in_one_line(monkeypatch, capsys, overrides, field):

@@ -1029,7 +1029,7 @@ def verify_c(
         Path,
         typer.Argument(
             help="a run of the same scenario with controller.type=nmpc, "
-            "controller.control_horizon=null"
+            "controller.control_horizon=null (and, for a six-dof one, no sensor noise)"
         ),
     ],
     target: Annotated[
@@ -1064,6 +1064,13 @@ def verify_c(
         f"static memory {result.static_bytes} B controller + {result.workspace_bytes} B HPIPM  "
         f"heap calls in steps {result.heap_calls}  iterations max {result.max_iterations} "
         f"(bound {result.iteration_bound})"
+        + (
+            ""
+            if result.depth_max_iterations is None
+            else f"  depth: fallbacks {result.depth_fallbacks}  recoveries "
+            f"{result.depth_recoveries}  status differences {result.depth_status_differences}  "
+            f"DAQP iterations max {result.depth_max_iterations}"
+        )
         + (
             ""
             if counted is None

@@ -48,6 +48,12 @@ class Observation:
     # order (1 healthy, 0 dead, 0.5 half force; ActuatorSet.force): what its prediction
     # model and its allocation use this sample. None: all healthy.
     effectiveness: np.ndarray | None = None
+    # (n,) the value each stuck input holds whatever it is commanded, in its own unit (rpm,
+    # deg, N), NaN where the input is free; None: none stuck. A stuck input's effectiveness
+    # above is 0 (a controller that does not read this takes it as not acting, its fixed
+    # force left to its disturbance estimate); one that reads it (six-dof-nmpc) predicts
+    # with the input fixed at this value, acting in full.
+    stuck_at: np.ndarray | None = None
 
 
 class ControlStatus(StrEnum):

@@ -39,7 +39,7 @@ from auvmpc.ocp.multiple_shooting import (
 from auvmpc.ocp.stage_qp import StageQp
 from auvmpc.solvers.hpipm import hpipm_settings, slack_scale
 
-__all__ = ["FIXED_SOURCES", "GENERATED_SOURCE", "write_sources"]
+__all__ = ["FIXED_SOURCES", "GENERATED_SOURCE", "generate_c", "write_sources"]
 
 _SOLVERS = Path(__file__).parents[1] / "solvers"
 # The C every configuration shares: the controller, its header, the HPIPM driver.
@@ -70,17 +70,23 @@ def write_sources(
         # Its own file: the largest generated code, compiled beside the other in parallel.
         functions[_OBSERVER_SOURCE] = [ekf.update, ekf.propagation]
     for name, members in functions.items():
-        generator = ca.CodeGenerator(name, {"with_header": True})
-        for function in members:
-            generator.add(function)
-        generator.generate(str(folder) + "/")
-        generated = folder / name
-        generated.write_text(_warning_clean(generated.read_text()))
+        generate_c(name, members, folder)
     (folder / _CONFIG_HEADER).write_text(_config_header(program, qp, config, law, observer))
     for source in FIXED_SOURCES:
         shutil.copyfile(source, folder / source.name)
     fixed = [source.name for source in FIXED_SOURCES if source.suffix == ".c"]
     return [folder / name for name in (*functions, *fixed)]
+
+
+def generate_c(name: str, functions: list[ca.Function], folder: Path) -> None:
+    """CasADi's C of ``functions`` as ``folder/name`` with its header, clean under -Wall
+    -Wextra -Werror (a six-dof export's depth functions are generated the same way)."""
+    generator = ca.CodeGenerator(name, {"with_header": True})
+    for function in functions:
+        generator.add(function)
+    generator.generate(str(folder) + "/")
+    generated = folder / name
+    generated.write_text(_warning_clean(generated.read_text()))
 
 
 _DEFINITION = re.compile(

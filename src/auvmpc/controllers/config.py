@@ -45,6 +45,7 @@ __all__ = [
     "PlanLinearisation",
     "PredictionModel",
     "QpSolverOptions",
+    "SolverTimeLimit",
     "Relinearisation",
     "SolverOptions",
     "TightenedConstraints",
@@ -208,10 +209,16 @@ class TypedControllerConfig(StrictModel):
             if foreign and (info.context or {}).get(SAVED_RUN):
                 return {key: value for key, value in data.items() if key in cls.model_fields}
             own_type = data.get("type", cls.model_fields["type"].default)
+            # No type named: the default's knobs are read before the vehicle is known (a
+            # torpedo's default, six-dof-nmpc, is chosen after), so say how to name one.
+            unnamed = "" if "type" in data else " (the default; name controller.type to use it)"
             for key in foreign:
                 owners = cls._knob_owners(str(key))
                 if owners:
-                    reason = f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+                    reason = (
+                        f"a knob of {', '.join(owners)}, not of controller type {own_type}"
+                        + unnamed
+                    )
                     raise FieldError(str(key), data[key], reason)
         return super()._known_keys_only(data)
 
@@ -493,8 +500,18 @@ class PredictionModel(StrictModel):
     )
 
 
-class QpSolverOptions(StrictModel):
-    """The QP back end and its budget (every controller that solves a QP)."""
+class SolverTimeLimit(StrictModel):
+    """The real-time budget of an optimiser's step (every optimising controller)."""
+
+    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="a step whose optimisation takes longer is treated as a failure "
+        "(the previous plan's next move is applied), as on a real-time computer",
+    )
+
+
+class QpBackEnd(StrictModel):
+    """The QP back end and its iteration cap."""
 
     qp_solver: QpSolverName = Field(
         default=QpSolverName.DAQP, description="dense QP backend of the condensed QPs"
@@ -504,11 +521,10 @@ class QpSolverOptions(StrictModel):
         description="cap on QP iterations per interior-point pass (IPOPT iterations for nmpc "
         "full: below ~20 every step falls back); hitting it counts as a solver failure",
     )
-    solver_time_limit_ms: Annotated[float, Field(gt=0)] | None = Field(
-        default=None,
-        description="a step whose optimisation takes longer is treated as a failure "
-        "(the previous plan's next move is applied), as on a real-time computer",
-    )
+
+
+class QpSolverOptions(SolverTimeLimit, QpBackEnd):  # the bases in reverse, as below
+    """The QP back end and its budget (every controller that solves a QP)."""
 
 
 class ObstacleSlack(StrictModel):

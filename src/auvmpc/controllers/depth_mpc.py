@@ -158,7 +158,9 @@ class DepthMpc(IncrementalMpc):
         step = ca.Function(
             "heave_step", [state, thrust, force, effectiveness], [following, jac_x, jac_u]
         )
-        self._rollout = step.mapaccum("heave_rollout", config.prediction_horizon)
+        # The model over the horizon with its one-step Jacobians, and the filter below: the
+        # functions export-c generates a six-dof export's depth channel from (export/six_dof_c.py).
+        self.rollout = step.mapaccum("heave_rollout", config.prediction_horizon)
         augmented = ca.SX.sym("z", NX + 1)
         next_augmented = ca.vertcat(
             healthy(augmented[:NX], acting, augmented[NX])[0], augmented[NX]
@@ -175,7 +177,7 @@ class DepthMpc(IncrementalMpc):
         )
         observer = config.observer
         rate, prior = config.force_statistics()
-        self._observer = AugmentedEkf(
+        self.filter = AugmentedEkf(
             observer_step,
             measured=1,
             process_covariance=np.diag(
@@ -192,21 +194,21 @@ class DepthMpc(IncrementalMpc):
 
     def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         super().reset(initial_state, initial_thrust)
-        self._observer.reset(np.array([initial_state[_Z], 0.0, 0.0]))
+        self.filter.reset(np.array([initial_state[_Z], 0.0, 0.0]))
 
     def estimate(self, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        estimate = self._observer.correct(measured[:1])  # the pressure sensor's [z]
+        estimate = self.filter.correct(measured[:1])  # the pressure sensor's [z]
         return estimate[:NX], estimate[NX:]
 
     def after_command(self, command: np.ndarray) -> None:
-        self._observer.predict(command, self.effectiveness)
+        self.filter.predict(command, self.effectiveness)
 
     def prediction_model(
         self, state: np.ndarray, nominal_input: np.ndarray, disturbance: np.ndarray
     ) -> AffinePrediction:
         ny, n = self.horizon, self.heave.thruster_count
         forces = np.full((1, ny), float(disturbance[0]))
-        states, jac_x, jac_u = self._rollout(state, nominal_input.T, forces, self.effectiveness)
+        states, jac_x, jac_u = self.rollout(state, nominal_input.T, forces, self.effectiveness)
         A = np.asarray(jac_x).reshape(NX, ny, NX).transpose(1, 0, 2)
         B = np.asarray(jac_u).reshape(NX, ny, n).transpose(1, 0, 2)
         nominal = np.vstack([state, np.asarray(states).T])

@@ -96,6 +96,7 @@ __all__ = [
     "LOS_PID",
     "AxisModel",
     "LosPid",
+    "flies",
     "LosPidConfig",
     "PathPoint",
     "los_heading",
@@ -302,14 +303,18 @@ class _Role:
         return float(self.signs[0] * command[self.inputs[0]])
 
 
-def _roles(model: VehicleParams) -> tuple[_Role, _Role, _Role]:
-    """The propeller, rudder and stern-plane inputs of ``model`` (refused in one line if it
-    has not all three), each input's sign from the model: which way its axis's rate (surge,
-    yaw, pitch) moves as the input goes from its lower to its upper end, at half the top
-    speed with the other inputs at zero."""
+def flies(model: VehicleParams) -> bool:
+    """Whether this autopilot can fly ``model``: it has a propeller, a rudder and stern
+    planes."""
+    return all(_actuators_by_role(model).values())
+
+
+def _actuators_by_role(model: VehicleParams) -> dict[str, list[int]]:
+    """The indices of ``model``'s 6-DOF inputs that push along the hull (propeller), turn it
+    (rudder) and pitch it (stern planes)."""
     inputs = model.six_dof_actuators if model.six_dof is not None else None
     actuators = () if inputs is None else inputs.actuators
-    kinds = {
+    return {
         "propeller": [i for i, a in enumerate(actuators)
                       if isinstance(a, Propeller) and abs(a.direction[0]) > _ALIGNED],
         "rudder": [i for i, a in enumerate(actuators)
@@ -317,9 +322,18 @@ def _roles(model: VehicleParams) -> tuple[_Role, _Role, _Role]:
         "stern planes": [i for i, a in enumerate(actuators)
                          if isinstance(a, ControlSurface) and abs(a.axis[1]) > _ALIGNED],
     }  # fmt: skip
+
+
+def _roles(model: VehicleParams) -> tuple[_Role, _Role, _Role]:
+    """The propeller, rudder and stern-plane inputs of ``model`` (refused in one line if it
+    has not all three), each input's sign from the model: which way its axis's rate (surge,
+    yaw, pitch) moves as the input goes from its lower to its upper end, at half the top
+    speed with the other inputs at zero."""
+    kinds = _actuators_by_role(model)
     missing = [name for name, found in kinds.items() if not found]
     if missing:
         raise ConfigError("controller.type", str(LOS_PID), _refusal(model, missing))
+    inputs = model.six_dof_actuators
     axes = {"propeller": _U, "rudder": _R, "stern planes": _Q}
     limits = inputs.limits
     lower = np.broadcast_to(limits.lower, (inputs.size,))

@@ -14,6 +14,11 @@ the inertia. Never blind plan-following for long, never zero thrust.
 The shell also applies it while the vehicle spins (``shell.spin_limit``), then starts the
 optimiser again cold (docs/recovery.md).
 
+A torpedo flown by the whole vehicle's MPC (``six-dof-nmpc``) has no fixed thrusters for that
+law: its recovery is :class:`AutopilotFeedback`, the torpedo's own classical autopilot
+(``los-pid``: LOS guidance and PID loops designed on the same nominal model), engaged afresh
+each time the optimiser hands over.
+
 The depth MPC's recovery is :class:`DepthFeedback`: a critically damped PD on depth through
 the nominal heave model (its damping, net buoyancy and the estimated force cancelled), on
 the depth MPC's own estimate of depth and heave rate.
@@ -25,7 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from auvmpc.controllers.base import Observation
+from auvmpc.controllers.base import Controller, Observation
 from auvmpc.controllers.baseline import BaselineConfig
 from auvmpc.controllers.tracking_law import (
     LAW_OUTPUTS,
@@ -35,12 +40,13 @@ from auvmpc.controllers.tracking_law import (
 )
 from auvmpc.models.heave import heave_damping_force
 from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
+from auvmpc.models.six_dof import SIX_DOF
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
 
 if TYPE_CHECKING:
     from auvmpc.controllers.shell import Proposal
 
-__all__ = ["DepthFeedback", "StabilisingFeedback"]
+__all__ = ["AutopilotFeedback", "DepthFeedback", "StabilisingFeedback"]
 
 _POSITION, _HEADING = HORIZONTAL.position, HORIZONTAL.heading
 # The baseline's gains without integrators: the optimiser's estimate stands in for them.
@@ -57,6 +63,7 @@ class StabilisingFeedback:
     heading, until the optimiser is back or the way is clear."""
 
     watches_yaw = True  # the shell judges spins by the yaw rate of [x y psi u v r]
+    yaw_rate_index = HORIZONTAL.index("r")
 
     def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
         self.law = tracking_law(model, sample_time, RECOVERY_GAINS, settling_yaw=True)
@@ -159,3 +166,30 @@ class DepthFeedback:
         if acting == 0.0:  # none left to push: ask for nothing
             return np.zeros(len(previous))
         return (force / acting) * effectiveness
+
+
+class AutopilotFeedback:
+    """The shell's recovery law for a whole-vehicle controller of a torpedo (module
+    docstring): ``autopilot``, a whole-vehicle controller at the shell's sample time
+    (``los-pid``), reset to the vehicle's state and last command each time it takes over, so
+    it starts without the wound-up integrals or stale path of an earlier engagement."""
+
+    watches_yaw = True  # the shell judges spins by the yaw rate of the 6-DOF state
+    yaw_rate_index = SIX_DOF.index("r")
+
+    def __init__(self, autopilot: Controller) -> None:
+        self.autopilot = autopilot
+        self._engaged = False
+
+    def release(self) -> None:
+        """The optimiser is in control again: the next takeover starts afresh."""
+        self._engaged = False
+
+    def command(
+        self, observation: Observation, previous: np.ndarray, proposal: Proposal
+    ) -> np.ndarray:
+        """The autopilot's command for the coming sample (within the hard limits)."""
+        if not self._engaged:
+            self.autopilot.reset(np.asarray(observation.state, dtype=float), previous)
+            self._engaged = True
+        return self.autopilot.compute(observation).thrust

@@ -42,14 +42,14 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.depth_mpc import DepthControllerConfig, DepthMpc
 from auvmpc.controllers.dompc import DoMpcConfig, DoMpcController
-from auvmpc.controllers.los_pid import LosPid, LosPidConfig
+from auvmpc.controllers.los_pid import LosPid, LosPidConfig, flies
 from auvmpc.controllers.ltv import LtvMpc, LtvMpcConfig
 from auvmpc.controllers.mpc import PaperMpc, PaperMpcConfig
 from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
 from auvmpc.controllers.playback import DepthPlaybackConfig, ThrustPlayback, ThrustPlaybackConfig
-from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
+from auvmpc.controllers.recovery import AutopilotFeedback, DepthFeedback, StabilisingFeedback
 from auvmpc.controllers.shell import ShelledController
-from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
+from auvmpc.controllers.six_dof_nmpc import SIX_DOF_NMPC, SixDofNmpc, SixDofNmpcConfig
 from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
@@ -364,4 +364,8 @@ def build_controller(
         )
     elif config.type == DEPTH_MPC:
         controller.recovery = DepthFeedback(controller.heave, controller.sample_time)
+    elif config.type == SIX_DOF_NMPC and flies(model):
+        # a torpedo: its classical autopilot, at the optimiser's sample time
+        autopilot = LosPid(model, LosPidConfig(sample_time=controller.sample_time))
+        controller.recovery = AutopilotFeedback(autopilot)
     return controller

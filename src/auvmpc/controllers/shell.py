@@ -74,6 +74,7 @@ INFO_KEYS = (
     "recovery",  # 1 if the shell's stabilising feedback was applied
     "spinning",  # 1 when the shell judged the vehicle to spin (spin_limit) at this sample
 )
+# The yaw rate in a reference row (horizontal and 6-DOF rows alike: controllers/channels.py).
 _YAW_RATE = HORIZONTAL.index("r")
 
 # Samples a failed optimiser may be covered by its last plan before the feedback takes over:
@@ -213,10 +214,12 @@ class ShelledController(Controller):
                 wanted, self._plan = next_planned_move(self._plan, previous)
         command, _ = self.limits.project(wanted, previous, self.sample_time)
         self._previous = command
-        if self._watches_yaw:  # a horizontal controller: states are [x y psi u v r]
+        if self._watches_yaw:
             states = None if fell_back else proposal.predicted_states
             self._predicted_yaw_rate = (
-                float(states[1, _YAW_RATE]) if states is not None and len(states) > 1 else None
+                float(states[1, self.recovery.yaw_rate_index])
+                if states is not None and len(states) > 1
+                else None
             )
         self.applied(command, fell_back)
         relaxed = not fell_back and proposal.max_slack > SLACK_ACTIVE
@@ -258,11 +261,11 @@ class ShelledController(Controller):
     def _spin(self, observation: Observation) -> bool:
         """Whether the vehicle spins at this sample: faster than :func:`spin_limit`, and not
         as the last applied plan predicted; only where there is a feedback that watches the
-        yaw (a horizontal one) to stop it. No
-        hysteresis: the optimiser gets each calm sample back."""
+        yaw (its ``yaw_rate_index`` in the state) to stop it. No hysteresis: the optimiser
+        gets each calm sample back."""
         if not self._watches_yaw:
             return False
-        yaw_rate = float(observation.state[_YAW_RATE])
+        yaw_rate = float(observation.state[self.recovery.yaw_rate_index])
         limit = spin_limit(observation, self.sample_time)
         if abs(yaw_rate) <= limit:
             return False

@@ -29,12 +29,15 @@ The current is estimated offset-free from the one-step prediction error of the p
 velocity: a damped Gauss-Newton step of the world-frame horizontal current each sample
 (``current_gain``).
 
-Safety shell: a solution lies inside the hard limits by construction (a move the projection
-into them had to change is logged ``saturated``); a solve that failed or did not converge
-within ``max_iterations`` applies the previous plan's next move (``fallback``), and after the
-plan is used up repeats its last move. There is no stabilising feedback for a torpedo yet
-(the horizontal controllers' recovery needs fixed thrusters): the fallback metrics say how
-often it ran on the plan.
+Safety shell (controllers/shell.py, the one every optimising controller has): only a
+converged solve is a proposal; one that failed, did not converge within ``max_iterations`` or
+came later than ``solver_time_limit_ms`` is replaced by the previous plan's next move
+(``fallback``) for at most ``PLAN_FALLBACK_STEPS`` samples, then by the recovery feedback the
+registry gives it: for a torpedo (a propeller, a rudder and stern planes) its classical
+autopilot, ``los-pid`` (controllers/recovery.py, AutopilotFeedback), until a solve converges
+again; a vehicle without them has none and keeps the plan's last move. Whatever is applied is
+projected into the hard box and rate limits (a move the projection changed is logged
+``saturated``).
 """
 
 from __future__ import annotations
@@ -52,19 +55,15 @@ from pydantic import Field
 
 from auvmpc.angles import wrap_angle
 from auvmpc.config import NonNegative
-from auvmpc.controllers.base import (
-    Controller,
-    ControlResult,
-    ControlStatus,
-    Observation,
-    next_planned_move,
-)
+from auvmpc.controllers.base import Observation
 from auvmpc.controllers.config import (
     ControllerType,
     PredictionModel,
+    SolverTimeLimit,
     WholeVehicleConfig,
     type_field,
 )
+from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
 from auvmpc.models.six_dof import (
@@ -75,6 +74,7 @@ from auvmpc.models.six_dof import (
 )
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler, shared_library
+from auvmpc.solvers.ipopt import ipopt_options, warm_start_options
 
 __all__ = ["SIX_DOF_NMPC", "SixDofNmpc", "SixDofNmpcConfig"]
 
@@ -105,7 +105,7 @@ _RIDGE_FLOOR = 1e-12
 _STILL_M_PER_S = 1e-3
 
 
-class SixDofNmpcConfig(PredictionModel, WholeVehicleConfig):
+class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
     """``six-dof-nmpc``: the whole vehicle's nonlinear MPC (module docstring)."""
 
     default_sample_time_s: ClassVar[float] = 0.25
@@ -177,7 +177,7 @@ def _compiled(solver: ca.Function, options: dict, config: SixDofNmpcConfig) -> c
     return ca.nlpsol("six_dof_nmpc", "ipopt", library._name, options)
 
 
-class SixDofNmpc(Controller):
+class SixDofNmpc(ShelledController):
     """The whole vehicle's nonlinear MPC (module docstring)."""
 
     #: Commands every 6-DOF input itself (experiments/kinds.py pairs no depth channel).
@@ -187,11 +187,9 @@ class SixDofNmpc(Controller):
         if model.six_dof is None:
             raise ConfigError("vehicle.six_dof", model.name, "missing: six-dof-nmpc predicts "
                               "with the 6-DOF model (docs/six-dof.md)")  # fmt: skip
-        config = config.for_vehicle(model)
-        self.model, self.config = model, config
-        self.sample_time = float(config.sample_time)
-        self.horizon = n = config.prediction_horizon
-        self.preview_steps = n
+        self.model = model
+        self.take_config(config.for_vehicle(model))
+        self.sample_time = float(self.config.sample_time)
         inputs = model.six_dof_actuators
         self.limits = inputs.limits
         self.n_inputs = nu = inputs.size
@@ -199,10 +197,6 @@ class SixDofNmpc(Controller):
         self.crabs = not inputs.pushes_sideways
         self._build()
         self.reset(np.zeros(NX), np.zeros(nu))
-
-    @classmethod
-    def from_config(cls, model, config, obstacle_count: int = 0) -> Controller:
-        return cls(model, config)
 
     # -- the program --------------------------------------------------------------------
     def _build(self) -> None:
@@ -249,12 +243,10 @@ class SixDofNmpc(Controller):
             "g": ca.vertcat(X[:, 0] - x0, ca.vec(gaps), ca.vec(U - previous_moves)),
         }
         options = {
-            "ipopt": {
-                "print_level": 0, "sb": "yes", "tol": _TOLERANCE,
-                "max_iter": config.max_iterations,
-                "warm_start_init_point": "yes", "mu_init": _WARM_MU_INIT,
-                "warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
-            },
+            "ipopt": ipopt_options(
+                _TOLERANCE, config.max_iterations, config.solver_time_limit_ms,
+                **warm_start_options(_WARM_MU_INIT),
+            ),
             "print_time": False,
         }  # fmt: skip
         self._solver = _compiled(ca.nlpsol("six_dof_nmpc", "ipopt", nlp, options), options, config)
@@ -288,54 +280,73 @@ class SixDofNmpc(Controller):
             + weights.rate_weight * ca.sumsqr(rates)
         )
 
-    # -- the controller -----------------------------------------------------------------
-    def reset(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
-        self._previous = np.asarray(initial_thrust, dtype=float).copy()
+    # -- the back end (the shell, controllers/shell.py, decides what is applied) -----------
+    def restart(self, initial_state: np.ndarray, initial_thrust: np.ndarray) -> None:
         self._guess: tuple[np.ndarray, np.ndarray] | None = None  # (w, lam_g) shifted
-        self._plan: np.ndarray | None = None
+        self._solution: tuple[np.ndarray, np.ndarray] | None = None  # this sample's, shifted
         self._current = np.zeros(3)
         self._predicted: np.ndarray | None = None  # x_{k} as the last sample predicted it
+        self._sample: tuple | None = None  # (state, share, stuck values or None) now
 
-    def compute(self, observation: Observation) -> ControlResult:
+    def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
-        share = (
-            np.ones(self.n_inputs)
-            if observation.effectiveness is None
-            else np.asarray(observation.effectiveness, dtype=float)
-        )
+        share = np.asarray(self.effectiveness, dtype=float)
+        share, lower, upper, previous, stuck = self._fixed_at_stuck(observation, share, previous)
         self._estimate_current(state)
+        self._sample = (state, share, stuck)
         nodes = self._nodes(state, observation.reference)
-        parameters = np.concatenate(
-            [state, self._previous, nodes.ravel(order="F"), self._current, share]
-        )
-        w0, lam0 = self._guess if self._guess is not None else self._cold(state)
+        parameters = np.concatenate([state, previous, nodes.ravel(order="F"), self._current, share])
+        w0, lam0 = self._guess if self._guess is not None else self._cold(state, previous)
         started = time.perf_counter()
         solution = self._solver(
             x0=w0, lam_g0=lam0, p=parameters,
-            lbx=self._lbw, ubx=self._ubw, lbg=self._lbg, ubg=self._ubg,
+            lbx=lower, ubx=upper, lbg=self._lbg, ubg=self._ubg,
         )  # fmt: skip
         solve_time = time.perf_counter() - started
         stats = self._solver.stats()
+        iterations = int(stats.get("iter_count", 0))
         w = np.asarray(solution["x"], dtype=float).ravel()
-        # Only a converged solve is applied: one cut short by the iteration cap counts as a
-        # fallback, so the run's fallback metrics see every unconverged sample.
-        if stats["success"] and np.all(np.isfinite(w)):
-            states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
-            plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
-            command, moved = self.limits.project(plan[0], self._previous, self.sample_time)
-            self._guess = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
-            self._plan = plan
-            status = ControlStatus.SATURATED if moved else ControlStatus.OK
-        else:
-            wanted, self._plan = next_planned_move(self._plan, self._previous)
-            command = self.limits.project(wanted, self._previous, self.sample_time)[0]
-            self._guess, status = None, ControlStatus.FALLBACK
-        predicted, sensitivity = self._prediction(state, command, self._current, share)
+        # Only a converged solve is a proposal: one cut short by the iteration cap (or the
+        # time limit) is a failure, so the run's fallback metrics see every such sample.
+        if not (stats["success"] and np.all(np.isfinite(w))):
+            self._solution = None
+            return Proposal(None, solve_time, iterations)
+        states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
+        plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
+        self._solution = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
+        return Proposal(plan, solve_time, iterations, predicted_states=states.T)
+
+    def applied(self, command: np.ndarray, fell_back: bool) -> None:
+        """Warm-start the next solve from this one's (none after a fallback), and predict
+        the next state under the command applied, for the current observer."""
+        self._guess = None if fell_back else self._solution
+        state, share, stuck = self._sample
+        acting = command if stuck is None else np.where(np.isnan(stuck), command, stuck)
+        predicted, sensitivity = self._prediction(state, acting, self._current, share)
         self._predicted = np.asarray(predicted, dtype=float).ravel()
         self._sensitivity = np.asarray(sensitivity, dtype=float)
-        self._previous = command
-        info = {"iterations": float(stats.get("iter_count", 0))}
-        return ControlResult(command.copy(), status, solve_time, info=info)
+
+    def forget_plan(self) -> None:
+        self._solution = None
+
+    def _fixed_at_stuck(self, observation: Observation, share: np.ndarray, previous: np.ndarray):
+        """``(share, lower, upper, previous, stuck)``: the program's effectiveness, bounds on
+        its variables and previous move, with each input ``observation.stuck_at`` says is
+        stuck fixed at its value (clipped into its limits) over the horizon, acting in full,
+        and its previous move that value (so its first move's rate holds); ``stuck``: the
+        values, NaN where free (None: none stuck, and the program's own bounds unchanged).
+        The shell moves the command to a stuck input there within the rate limit."""
+        told = observation.stuck_at
+        if told is None or np.isnan(told).all():
+            return share, self._lbw, self._ubw, previous, None
+        held = ~np.isnan(told)
+        value = np.clip(np.where(held, told, 0.0), self.limits.lower, self.limits.upper)
+        stuck = np.where(held, value, np.nan)
+        lower, upper = self._lbw.copy(), self._ubw.copy()
+        for bound in (lower, upper):  # the inputs, node by node: (N, nu) after the states
+            bound[self._n_states :].reshape(self.horizon, self.n_inputs)[:, held] = value[held]
+        share = np.where(held, 1.0, share)
+        return share, lower, upper, np.where(held, value, previous), stuck
 
     def _estimate_current(self, state: np.ndarray) -> None:
         """The world-frame horizontal current, moved by ``current_gain`` of the least-squares
@@ -376,10 +387,10 @@ class SixDofNmpc(Controller):
             [rows[:, 0], rows[:, 1], rows[:, _REF_Z], heading, surge, rows[:, _REF_R], pitch]
         )
 
-    def _cold(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A first guess: the measured state held, the previous command held."""
+    def _cold(self, state: np.ndarray, previous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A first guess: the measured state held, the ``previous`` command held."""
         states = np.tile(state, self.horizon + 1)
-        plan = np.tile(self._previous, self.horizon)
+        plan = np.tile(previous, self.horizon)
         return np.concatenate([states, plan]), np.zeros(self._lbg.size)
 
     def _shifted(self, states, plan, multipliers) -> tuple[np.ndarray, np.ndarray]:

@@ -27,6 +27,25 @@ a second detection 4 s later), and three of a vectored four-thruster vehicle's t
 still span surge, sway and yaw, so the error on the safe side costs a weak thruster's
 remaining force, the other one the vehicle's heading.
 
+:class:`FaultDetector` watches the horizontal thrusters on the 3-DOF model.
+:class:`SixDofFaultDetector` watches every input of the 6-DOF model (thrusters, a propeller,
+fins: ``vehicle.six_dof_actuators``) with the same fit, on the six body velocities. Its
+inputs need not be linear (a propeller's thrust grows with rpm squared, a fin's lift with
+the flow's speed squared), so its loss regressor is the secant ``g_ki = x(a_k, a_ki = 0) -
+x(a_k)`` (a = e F, what acts): exact for a dead input, which the tangent is not (at cruise,
+the REMUS 100 propeller's tangent times its rpm is 3.6 times its thrust). And it has a
+second hypothesis, an input stuck at a value s whatever it is commanded (a fin jammed at an
+angle, whose lift still acts):
+
+    r_k = c + [k >= j] (x(a_k, a_ki = s) - x(a_k)) ~ c + [k >= j] B_k[:, i] (s - a_ki),
+
+linear in s; each input's likelier hypothesis (the smaller residual sum of squares) is its
+fit. A stuck input is found when its score (the fit's gain over no fault, in the window's
+scatter: :data:`LOSS_SIGMAS` as for a loss) is high enough, s is inside its limits, and the
+commands it failed to follow were on average :data:`STUCK_FOUND` of its range or more away
+from s; s is then refined by Gauss-Newton on the model itself (the tangent's error for a
+propeller) and told to the controller (``Observation.stuck_at``).
+
 Limits, by design: a lost share below :data:`LOSS_FOUND` is not reported (model error of
 the size the presets carry, 20-30 %, must not read as a fault); an input that is not
 commanded away from a constant over the window cannot be told from the constant ``c``
@@ -38,13 +57,16 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
 from auvmpc.models.discrete import DISTURBANCE_NAMES, horizontal_model
+from auvmpc.models.integrators import rk4
 from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.six_dof import SIX_DOF, six_dof_model
 from auvmpc.models.vehicle import VehicleParams
 
-__all__ = ["FaultDetector", "FaultFound"]
+__all__ = ["FaultDetector", "FaultFound", "SixDofFaultDetector"]
 
 # An input is reported failed when at least this share of its assumed force is missing.
 LOSS_FOUND = 0.5
@@ -67,22 +89,70 @@ WINDOW_S = 2.0
 MIN_WINDOW_SAMPLES = 8
 # Residual rows are weighted by the velocity sensor's noise, at least this (m/s, rad/s).
 NOISE_FLOOR = 1e-3
+# A stuck input is reported when the commands it failed to follow were on average (RMS) at
+# least this share of its range away from the value it is found stuck at (model error must
+# not read as a jammed fin): measured, docs/faults.md.
+STUCK_FOUND = 0.05
+# A stuck value this share of the range beyond the input's limits is no jammed actuator
+# (the model missed something else); within it, the value is clipped into the limits.
+STUCK_BEYOND = 0.25
+# Gauss-Newton steps that refine a stuck value on the model itself, at most, and the step
+# (a share of the input's range) below which it has converged. From the tangent's estimate a
+# dead propeller's 0 rpm is a few steps away (its thrust is convex in rpm).
+STUCK_REFINEMENTS = 20
+STUCK_CONVERGED = 1e-6
 _NU = HORIZONTAL.nu
 
 
 @dataclass(frozen=True)
 class FaultFound:
-    """One detection: input ``index`` has failed (taken as dead from then on)."""
+    """One detection: input ``index`` has failed: dead from then on, or stuck at
+    ``stuck_at`` (its own unit)."""
 
     index: int
-    lost: float  # lambda: the share of the assumed force found missing
-    sigmas: float  # its score: lambda over its standard error (LOSS_SIGMAS)
+    lost: float | None  # lambda: the share of the assumed force found missing (None: stuck)
+    sigmas: float  # its score: its gain over no fault in the window's scatter (LOSS_SIGMAS)
+    stuck_at: float | None = None  # the value it holds whatever commanded (None: a loss)
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The best fit of one input's hypotheses over the window's onsets."""
+
+    rss: float
+    index: int
+    onset: int  # the window's row from which it acts
+    sigmas: float
+    lost: float | None = None  # a loss's lambda
+    stuck_at: float | None = None  # a stuck input's value
+    gap: float = 0.0  # a stuck input's RMS distance from its commands, from the onset on
+    opposed: bool = False  # its value of the other sign than those commands' mean
+
+
+@dataclass
+class _Row:
+    """One sample of the window: its weighted residual and regressors, and what they came
+    from (a stuck value is refined on the model)."""
+
+    residual: np.ndarray  # (m,) measured less predicted velocities, noise-weighted
+    loss: np.ndarray  # (m, n) the loss regressors g_ki
+    jacobian: np.ndarray | None  # (m, n) B_k: the velocities' Jacobian in what acts
+    acting: np.ndarray  # (n,) a_k = e F: what the prediction took as acting
+    watched: np.ndarray  # (n,) bool: inputs not known stuck
+    before: np.ndarray  # the measured state the prediction started from
+    measured: np.ndarray  # (m,) the measured velocities it is compared with
 
 
 class FaultDetector:
     """The horizontal model's fault detector (module docstring) on ``model`` (the controller's
     nominal vehicle), sampled every ``sample_time`` with ``substeps`` RK4 steps;
     ``velocity_noise``: the std of the measured ``u, v, r``."""
+
+    #: Whether an input stuck at a value is a hypothesis beside a loss.
+    finds_stuck = False
+    #: The state :meth:`check` is given, by name, and where its velocities are in it.
+    state_names = HORIZONTAL.names
+    velocities: slice | np.ndarray = _NU
 
     def __init__(
         self,
@@ -92,86 +162,277 @@ class FaultDetector:
         velocity_noise: np.ndarray,
     ) -> None:
         self._step = horizontal_model(model, sample_time, substeps, jit=False).linearised_step
-        self.n_inputs = model.n_thrusters
+        self._healthy = np.ones(model.n_thrusters)
+        self._watch(model.n_thrusters, HORIZONTAL.size, sample_time, velocity_noise)
+
+    def _watch(
+        self, n_inputs: int, n_states: int, sample_time: float, velocity_noise: np.ndarray
+    ) -> None:
+        """The window and weights every detector has."""
+        self.n_inputs = n_inputs
         self._weights = 1.0 / np.maximum(np.asarray(velocity_noise, dtype=float), NOISE_FLOOR)
         self.window = max(MIN_WINDOW_SAMPLES, round(WINDOW_S / sample_time))
-        self._rows: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=self.window)
-        self._healthy = np.ones(self.n_inputs)
-        self._state = np.zeros(HORIZONTAL.size)
-        self._held: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._rows: deque[_Row] = deque(maxlen=self.window)
+        self._state = np.zeros(n_states)
+        self._held: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def check(self, state: np.ndarray) -> FaultFound | None:
-        """The measured horizontal ``state`` ``[x, y, psi, u, v, r]`` of this sample, after
-        the command :meth:`held` since the last: a detection, if this sample confirms one."""
+        """The measured ``state`` of this sample (the horizontal ``[x, y, psi, u, v, r]``; a
+        6-DOF detector's whole state), after the command :meth:`held` since the last: a
+        detection, if this sample confirms one."""
         found = None if self._held is None else self._fit(state, *self._held)
         self._state = np.array(state, dtype=float)
         self._held = None
         return found
 
-    def held(self, command: np.ndarray, effectiveness: np.ndarray) -> None:
+    def held(
+        self,
+        command: np.ndarray,
+        effectiveness: np.ndarray,
+        stuck_at: np.ndarray | None = None,
+    ) -> None:
         """The command held from the sample last checked, with the effectiveness the
-        controller assumed for it."""
-        self._held = (self._state, np.array(command, dtype=float), np.array(effectiveness))
+        controller assumed for it; ``stuck_at``: each input's value where it is known stuck
+        (NaN where free; None: none), which acts in full whatever commanded and is not
+        watched."""
+        command, effectiveness = np.array(command, dtype=float), np.array(effectiveness)
+        watched = np.ones(self.n_inputs, dtype=bool)
+        if stuck_at is not None:
+            known = np.isfinite(stuck_at)
+            command = np.where(known, stuck_at, command)
+            effectiveness = np.where(known, 1.0, effectiveness)
+            watched = ~known
+        self._held = (self._state, command, effectiveness, watched)
 
-    def _fit(
-        self, state: np.ndarray, before: np.ndarray, command: np.ndarray, effectiveness: np.ndarray
-    ) -> FaultFound | None:
-        acting = effectiveness * command
+    def _predict(
+        self, before: np.ndarray, acting: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The velocities predicted from ``before`` under ``acting`` (m,), the loss
+        regressors (m, n) and, for a detector that finds stuck inputs, the velocities'
+        Jacobian in ``acting`` (m, n)."""
         still = np.zeros(len(DISTURBANCE_NAMES))  # the window's constant takes any force
         predicted, _, jacobian = self._step(before, acting, still, self._healthy)
-        residual = (state[_NU] - np.asarray(predicted).ravel()[_NU]) * self._weights
-        regressors = -np.asarray(jacobian)[_NU, :] * acting * self._weights[:, None]
+        return np.asarray(predicted).ravel()[_NU], -np.asarray(jacobian)[_NU, :] * acting, None
+
+    def _fit(
+        self,
+        state: np.ndarray,
+        before: np.ndarray,
+        command: np.ndarray,
+        effectiveness: np.ndarray,
+        watched: np.ndarray,
+    ) -> FaultFound | None:
+        acting = effectiveness * command
+        predicted, loss, jacobian = self._predict(before, acting)
+        measured = np.asarray(state, dtype=float)[self.velocities]
+        residual = (measured - predicted) * self._weights
+        regressors = loss * self._weights[:, None]
+        if jacobian is not None:
+            jacobian = jacobian * self._weights[:, None]
         if not (np.isfinite(residual).all() and np.isfinite(regressors).all()):
             return None  # a state the model cannot step from says nothing of the thrusters
-        self._rows.append((residual, regressors))
+        self._rows.append(_Row(residual, regressors, jacobian, acting, watched, before, measured))
         if len(self._rows) < self.window:
             return None
         best = self._likeliest_fault()
-        if best is None:
+        if best is None or not self._found(best):
             return None
-        index, lost, sigmas = best
-        if not (LOSS_FOUND <= lost <= LOSS_MOST and sigmas >= LOSS_SIGMAS):
-            return None
+        stuck_at = None if best.stuck_at is None else self._refined(best)
         self._rows.clear()
-        return FaultFound(index, lost, sigmas)
+        return FaultFound(best.index, best.lost, best.sigmas, stuck_at)
 
-    def _likeliest_fault(self) -> tuple[int, float, float] | None:
+    def _found(self, fit: _Fit) -> bool:
+        """Whether ``fit`` is a fault to report (module docstring)."""
+        if fit.stuck_at is None:
+            return LOSS_FOUND <= fit.lost <= LOSS_MOST and fit.sigmas >= LOSS_SIGMAS
+        return fit.sigmas >= LOSS_SIGMAS and self._stuck_plausible(fit)
+
+    def _stuck_plausible(self, fit: _Fit) -> bool:
+        return False  # the horizontal detector has no stuck hypothesis
+
+    def _refined(self, fit: _Fit) -> float:
+        return float(fit.stuck_at)
+
+    def _likeliest_fault(self) -> _Fit | None:
         """The single fault that best explains the window: for each input i and each onset
-        j, the fit r_k = c + lambda g_ki [k >= j]; the (i, j) of the smallest residual sum
-        of squares, as (i, lambda, lambda over its standard error). None if no input was
+        j, the fit r_k = c + lambda g_ki [k >= j] (and, where stuck inputs are found, the
+        stuck fit); the (i, j) of the smallest residual sum of squares. None if no input was
         commanded in the window."""
-        residuals = np.array([r for r, _ in self._rows])  # (W, m)
-        regressors = np.array([g for _, g in self._rows])  # (W, m, n)
+        residuals = np.array([row.residual for row in self._rows])  # (W, m)
+        regressors = np.array([row.loss for row in self._rows])  # (W, m, n)
+        watched = np.all([row.watched for row in self._rows], axis=0)  # (n,)
         window, rows = residuals.shape
         # Onsets j = 1..W-1, inside the window: a fault is a change, and one that began
         # before the window (j = 0) reads like the model's own error, which the window's
         # constant and LOSS_FOUND are there to leave alone.
         onsets = np.arange(window)[:, None] >= np.arange(1, window)[None, :]  # [k, j]
         centred_r = residuals - residuals.mean(axis=0)
-        fits: list[tuple[float, int, float, float]] = []  # (rss, i, lambda, sigmas) per input
+        fits: list[_Fit] = []  # the best per input
         dof = window * rows - rows - 1
         for i in range(self.n_inputs):
-            # (j, W, m): the regressor switched on from onset j, each centred over k.
-            x = onsets.T[:, :, None] * regressors[None, :, :, i]
-            x = x - x.mean(axis=1, keepdims=True)
-            spread = np.einsum("jkm,jkm->j", x, x)
-            usable = spread > 1e-12 * max(float(spread.max()), 1e-300)
-            if not usable.any():
+            if not watched[i]:
                 continue
-            lost = np.where(
-                usable, np.einsum("jkm,km->j", x, centred_r) / np.where(usable, spread, 1.0), 0.0
-            )
-            rss = np.einsum("jkm,jkm->j", *(2 * [centred_r[None] - lost[:, None, None] * x]))
-            rss = np.where(usable, rss, np.inf)
-            j = int(np.argmin(rss))
-            # The scatter in noise units (rows weighted by the sensor's noise): never
-            # below 1, however smooth the window, so a small regressor's lambda is not
-            # trusted beyond what the noise allows.
-            error = np.sqrt(max(rss[j] / dof, 1.0) / spread[j])
-            fits.append((float(rss[j]), i, float(lost[j]), float(lost[j] / error)))
+            loss = self._loss_fit(i, onsets, regressors[:, :, i], centred_r, dof)
+            stuck = self._stuck_fit(i, onsets, residuals, dof) if self.finds_stuck else None
+            opposed = stuck is not None and stuck.opposed and loss is not None and loss.lost > 1
+            if stuck is not None and (loss is None or stuck.rss <= loss.rss or opposed):
+                # (a loss of more than all the force, where the stuck fit's value is of the
+                # other sign than the commands, is the input pushing against its command: a
+                # jam the other way, which a command held still cannot tell from a loss)
+                fits.append(stuck)
+            elif loss is not None:
+                fits.append(loss)
         if not fits:
             return None
-        fits.sort()
-        if len(fits) > 1 and fits[0][0] > ISOLATION * fits[1][0]:
+        fits.sort(key=lambda fit: (fit.rss, fit.index))
+        if len(fits) > 1 and fits[0].rss > ISOLATION * fits[1].rss:
             return None  # two inputs explain the window about as well: not isolated yet
-        return fits[0][1:]
+        return fits[0]
+
+    @staticmethod
+    def _loss_fit(
+        i: int, onsets: np.ndarray, regressor: np.ndarray, centred_r: np.ndarray, dof: int
+    ) -> _Fit | None:
+        """Input i's loss: lambda for each onset, the onset of the smallest residual sum of
+        squares (None: the input was not commanded in the window)."""
+        # (j, W, m): the regressor switched on from onset j, each centred over k.
+        x = onsets.T[:, :, None] * regressor[None, :, :]
+        x = x - x.mean(axis=1, keepdims=True)
+        spread = np.einsum("jkm,jkm->j", x, x)
+        usable = spread > 1e-12 * max(float(spread.max()), 1e-300)
+        if not usable.any():
+            return None
+        lost = np.where(
+            usable, np.einsum("jkm,km->j", x, centred_r) / np.where(usable, spread, 1.0), 0.0
+        )
+        rss = np.einsum("jkm,jkm->j", *(2 * [centred_r[None] - lost[:, None, None] * x]))
+        rss = np.where(usable, rss, np.inf)
+        j = int(np.argmin(rss))
+        # The scatter in noise units (rows weighted by the sensor's noise): never
+        # below 1, however smooth the window, so a small regressor's lambda is not
+        # trusted beyond what the noise allows.
+        error = np.sqrt(max(rss[j] / dof, 1.0) / spread[j])
+        return _Fit(float(rss[j]), i, j + 1, float(lost[j] / error), lost=float(lost[j]))
+
+    def _stuck_fit(
+        self, i: int, onsets: np.ndarray, residuals: np.ndarray, dof: int
+    ) -> _Fit | None:
+        """Input i stuck at s from onset j: r_k + [k >= j] B_ki a_ki = c + s [k >= j] B_ki
+        (module docstring), fitted for each onset; the onset of the smallest residual sum of
+        squares, its score the fit's gain over no fault in the window's scatter."""
+        jacobian = np.array([row.jacobian[:, i] for row in self._rows])  # (W, m)
+        acting = np.array([row.acting[i] for row in self._rows])  # (W,)
+        on = onsets.T[:, :, None]  # (j, W, 1)
+        x = on * jacobian[None]
+        y = residuals[None] + x * acting[None, :, None]
+        x = x - x.mean(axis=1, keepdims=True)
+        y = y - y.mean(axis=1, keepdims=True)
+        spread = np.einsum("jkm,jkm->j", x, x)
+        usable = spread > 1e-12 * max(float(spread.max()), 1e-300)
+        if not usable.any():
+            return None
+        stuck = np.where(usable, np.einsum("jkm,jkm->j", x, y) / np.where(usable, spread, 1.0), 0)
+        rss = np.einsum("jkm,jkm->j", *(2 * [y - stuck[:, None, None] * x]))
+        rss = np.where(usable, rss, np.inf)
+        j = int(np.argmin(rss))
+        centred = residuals - residuals.mean(axis=0)
+        gain = max(float(np.einsum("km,km->", centred, centred)) - float(rss[j]), 0.0)
+        sigmas = np.sqrt(gain / max(rss[j] / dof, 1.0))
+        after = acting[j + 1 :]
+        gap = float(np.sqrt(np.mean((stuck[j] - after) ** 2)))
+        opposed = bool(stuck[j] * np.mean(after) < 0.0)
+        return _Fit(
+            float(rss[j]), i, j + 1, float(sigmas), stuck_at=float(stuck[j]), gap=gap,
+            opposed=opposed,
+        )  # fmt: skip
+
+
+def _six_dof_one_step(model: VehicleParams, sample_time: float, substeps: int) -> ca.Function:
+    """(x, a) -> (nu_next (6,), its Jacobian in a (6, n), the secants nu_next(a_i = 0) -
+    nu_next(a) (6, n)): the 6-DOF model's RK4 step in still water under the acting inputs."""
+    derivative = six_dof_model(model).derivative
+    n = model.six_dof_actuators.size
+    x, a = ca.SX.sym("x", SIX_DOF.size), ca.SX.sym("a", n)
+    still = ca.DM.zeros(3)  # the window's constant takes the current's share
+
+    def velocities(acting):
+        following = rk4(lambda s, u: derivative(s, u, still, still), x, acting, sample_time,
+                        substeps)  # fmt: skip
+        return following[SIX_DOF.nu]
+
+    following = velocities(a)
+    without = [
+        velocities(ca.vertcat(*(0 if j == i else a[j] for j in range(n)))) - following
+        for i in range(n)
+    ]
+    return ca.Function(
+        "fault_one_step", [x, a], [following, ca.jacobian(following, a), ca.horzcat(*without)]
+    )
+
+
+class SixDofFaultDetector(FaultDetector):
+    """The fault detector (module docstring) on every input of ``model``'s 6-DOF model (the
+    controller's nominal vehicle), sampled every ``sample_time`` with ``substeps`` RK4
+    steps; ``velocity_noise``: the std of the measured body velocities ``u, v, w, p, q, r``.
+    :meth:`check` takes the whole measured 6-DOF state."""
+
+    finds_stuck = True
+    state_names = SIX_DOF.names
+    velocities = SIX_DOF.nu
+
+    def __init__(
+        self,
+        model: VehicleParams,
+        sample_time: float,
+        substeps: int,
+        velocity_noise: np.ndarray,
+    ) -> None:
+        inputs = model.six_dof_actuators
+        self._one_step = _six_dof_one_step(model, sample_time, substeps)
+        limits = inputs.limits
+        self._lower = np.broadcast_to(np.asarray(limits.lower, dtype=float), (inputs.size,))
+        self._upper = np.broadcast_to(np.asarray(limits.upper, dtype=float), (inputs.size,))
+        self._watch(inputs.size, SIX_DOF.size, sample_time, velocity_noise)
+
+    def _predict(
+        self, before: np.ndarray, acting: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        predicted, jacobian, secants = self._one_step(before, acting)
+        return (
+            np.asarray(predicted).ravel(), np.asarray(secants), np.asarray(jacobian)
+        )  # fmt: skip
+
+    def _stuck_plausible(self, fit: _Fit) -> bool:
+        """Inside the input's limits (to STUCK_BEYOND of its range) and far enough from the
+        commands it did not follow (STUCK_FOUND of its range)."""
+        i = fit.index
+        span = self._upper[i] - self._lower[i]
+        beyond = STUCK_BEYOND * span
+        inside = self._lower[i] - beyond <= fit.stuck_at <= self._upper[i] + beyond
+        return bool(inside and fit.gap >= STUCK_FOUND * span)
+
+    def _refined(self, fit: _Fit) -> float:
+        """The stuck value by Gauss-Newton on the model from the linear fit's (the window's
+        constant refitted each step), to convergence, clipped into the input's limits."""
+        i, rows = fit.index, list(self._rows)
+        on = np.arange(len(rows)) >= fit.onset
+        stuck = float(fit.stuck_at)
+        for _ in range(STUCK_REFINEMENTS):
+            errors, columns = [], []
+            for row, acts in zip(rows, on, strict=True):
+                acting = row.acting.copy()
+                if acts:
+                    acting[i] = stuck
+                predicted, jacobian, _ = self._one_step(row.before, acting)
+                errors.append((row.measured - np.asarray(predicted).ravel()) * self._weights)
+                columns.append(acts * np.asarray(jacobian)[:, i] * self._weights)
+            error, column = np.array(errors), np.array(columns)
+            error, column = error - error.mean(axis=0), column - column.mean(axis=0)
+            spread = float(np.einsum("km,km->", column, column))
+            if not spread > 0.0:
+                break
+            step = float(np.einsum("km,km->", column, error)) / spread
+            stuck += step
+            if abs(step) <= STUCK_CONVERGED * (self._upper[i] - self._lower[i]):
+                break
+        return float(np.clip(stuck, self._lower[i], self._upper[i]))

@@ -34,8 +34,9 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.environment.waves import WaveField
 from auvmpc.errors import ConfigError
-from auvmpc.estimation.fault_detection import FaultDetector
+from auvmpc.estimation.fault_detection import FaultDetector, SixDofFaultDetector
 from auvmpc.models.layout import HORIZONTAL
+from auvmpc.models.six_dof import stable_substeps
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.references import DepthStep, make_reference
 from auvmpc.scenario import (
@@ -53,6 +54,7 @@ from auvmpc.sim.metrics import (
     compute_six_dof_metrics,
     fault_metrics,
     reference_path,
+    six_dof_fault_metrics,
 )
 from auvmpc.sim.plant import (
     HeavePlant,
@@ -423,6 +425,28 @@ class SixDofKind(HorizontalKind):
             np.random.default_rng(seeds["depth"]),
         )  # fmt: skip
         return SixDofPlant(resolved.plant, current, sample_time, scenario.plant.max_step), sensor
+
+    def _fault_detector(self, resolved) -> FaultDetector | None:
+        """Beside a controller of the whole vehicle, the detector of every 6-DOF input on
+        the nominal model (its body velocities as measured); beside the channel pair, the
+        horizontal thrusters' (:class:`HorizontalKind`)."""
+        scenario = resolved.scenario
+        if not (scenario.fault_detection and whole_vehicle(scenario.controller)):
+            return super()._fault_detector(resolved)
+        model, sample_time = resolved.model, _sample_time(scenario)
+        substeps = stable_substeps(model, sample_time)
+        std = scenario.sensing.std  # [x, y, psi, u, v, r]; w, p, q are measured noise-free
+        u, v, r = np.asarray(std)[HORIZONTAL.nu]
+        return SixDofFaultDetector(model, sample_time, substeps, np.array([u, v, v, r, r, r]))
+
+    def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
+        """The horizontal kind's, and what a fault cost in depth and off the path."""
+        metrics = super().metrics(resolved, log)
+        scenario = resolved.scenario
+        if scenario.faults:
+            path = self._path(resolved, log)["path"]
+            metrics |= six_dof_fault_metrics(log, scenario.transient_s, scenario.faults, path)
+        return metrics
 
     def _path(self, resolved, log: SimLog) -> dict[str, Any]:
         """The reference's horizontal path over the run, densely (the cross-track metric)."""

@@ -17,7 +17,8 @@ step, iterations against their bound, and optionally the instructions per step.
 
 Supported: a horizontal scenario, a fully actuated vehicle, the real-time iteration with every
 move free (what the bench label ``nmpc`` runs), with or without the offset-free estimator, no
-solve-time limit. Anything else is refused with one line.
+solve-time limit; and a six-dof scenario, that horizontal controller beside its depth MPC, one
+C controller of every thruster (export/six_dof_c.py). Anything else is refused with one line.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from auvmpc.controllers.config import (
     QpStructure,
     TightenedConstraints,
 )
+from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS, NmpcConfig
 from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
@@ -63,6 +65,13 @@ from auvmpc.export.c_targets import (
     write_solver_files,
 )
 from auvmpc.export.instruction_counts import emulator_command, step_instructions
+from auvmpc.export.six_dof_c import (
+    check_six_dof,
+    daqp_libraries,
+    depth_static_bytes,
+    six_dof_replay_data,
+    write_six_dof_sources,
+)
 from auvmpc.models.layout import HORIZONTAL
 from auvmpc.models.vehicle import VehicleParams
 from auvmpc.native import compiler
@@ -97,7 +106,7 @@ STATIC_MEMORY_LIMIT_BYTES = 256 * 1024
 COMMAND_TOLERANCE_N = 1e-6
 
 _TEMPLATES = Path(__file__).with_name("c")
-_COPIED = ("replay.c", "example.c", "README.md")
+_COPIED = ("replay.c", "replay_common.h", "example.c", "README.md")
 _DATA = "replay_data.txt"
 _RECORD = "export.json"
 _NX = HORIZONTAL.size
@@ -147,10 +156,22 @@ def iteration_bound(config: NmpcConfig) -> int:
     return 3 * sqp_steps * per_qp
 
 
+_KINDS = ("horizontal", "six-dof")  # the scenario kinds export-c takes
+_SIX_DOF = "six-dof"
+
+
+def _kind(resolved) -> str | None:
+    return getattr(resolved.scenario, "kind", None)
+
+
 def _check_supported(resolved) -> tuple[NmpcConfig, int]:
     scenario = resolved.scenario
-    if getattr(scenario, "kind", None) != "horizontal":
-        raise ConfigError("SCENARIO", scenario.name, "export-c takes horizontal scenarios only")
+    if _kind(resolved) not in _KINDS:
+        raise ConfigError(
+            "SCENARIO", scenario.name, "export-c takes horizontal and six-dof scenarios only"
+        )
+    if _kind(resolved) == _SIX_DOF:  # the depth channel first: it decides the controller type
+        check_six_dof(resolved)
     model = resolved.model
     if model.unactuated_direction is not None:
         raise ConfigError(
@@ -249,6 +270,7 @@ def export_c(
     (export/c_targets.py).
     """
     config, slots = _check_supported(resolved)
+    six_dof = _kind(resolved) == _SIX_DOF
     hpipm = _casadi_hpipm()
     if hpipm is None:
         raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
@@ -262,6 +284,7 @@ def export_c(
         if any(t.name == tuned.name for t in targets):
             raise ConfigError("--blasfeo", str(given), f"a second BLASFEO for {tuned.machine}")
         targets.append(tuned)
+    daqp = daqp_libraries(targets, libraries, aarch64) if six_dof else {}
     check_output_folder(out, OutputKind.EXPORT_C, overwrite=overwrite)  # before the work
     model = resolved.model
     program = MultipleShootingProgram(model, config, slots)
@@ -271,6 +294,9 @@ def export_c(
         for name in _COPIED:
             shutil.copyfile(_TEMPLATES / name, folder / name)
         write_solver_files(targets, include, folder)
+        depth = None
+        if six_dof:  # the depth channel and the mapping; the pair's replay and example main
+            depth = write_six_dof_sources(resolved, folder, daqp, include, program.horizon)
         arena = _arena_bytes(qp, program, config)
         defaults = {machine: _default_target(targets, machine) for machine in _MACHINES}
         fills = {
@@ -284,7 +310,8 @@ def export_c(
         for key, value in fills.items():
             makefile = makefile.replace(key, value)
         (folder / "Makefile").write_text(makefile)
-        (folder / _DATA).write_text(_replay_data(resolved, program.horizon, program.sample_time))
+        replay_data = six_dof_replay_data if six_dof else _replay_data
+        (folder / _DATA).write_text(replay_data(resolved, program.horizon, program.sample_time))
         record = {
             "scenario": resolved.scenario.name,
             "controller": json.loads(config.model_dump_json()),
@@ -298,7 +325,15 @@ def export_c(
             "static_bytes_estimate": static_bytes(program.horizon, program.n_thrusters, slots),
             "hpipm_arena_bytes": arena,
             "iteration_bound": iteration_bound(config),
+            "kind": _kind(resolved),
         }
+        if depth is not None:
+            depth_config = resolved.scenario.depth_controller
+            record["depth_controller"] = json.loads(depth_config.model_dump_json())
+            moves = depth.qp.n_moves // depth.heave.thruster_count
+            record["depth_static_bytes_estimate"] = depth_static_bytes(
+                depth.horizon, moves, depth.heave.thruster_count
+            )
         (folder / _RECORD).write_text(json.dumps(record, indent=2) + "\n")
     return Path(out)
 
@@ -332,6 +367,13 @@ class VerifyResult:
     recoveries: int  # steps the shell's stabilising feedback commanded
     status_differences: int  # steps whose C status is not the Python run's
     instructions: tuple[int, ...] = ()  # per step, where counted (--instructions)
+    # A six-dof export's depth channel (None for a horizontal one): the most DAQP iterations
+    # of one step, the steps its shell fell back or recovered, and those whose depth status
+    # is not the run's.
+    depth_max_iterations: int | None = None
+    depth_fallbacks: int = 0
+    depth_recoveries: int = 0
+    depth_status_differences: int = 0
 
     @property
     def failures(self) -> list[str]:
@@ -343,6 +385,10 @@ class VerifyResult:
             found.append(
                 f"{self.status_differences} steps with another status than the run's (the C "
                 "has neither the IPOPT rescue nor the estimator's restart: docs/onboard.md)"
+            )
+        if self.depth_status_differences:
+            found.append(
+                f"{self.depth_status_differences} steps with another depth status than the run's"
             )
         if self.heap_calls > 0:
             found.append(f"{self.heap_calls} heap calls inside the steps")
@@ -366,6 +412,8 @@ class _ExportRecord:
     controller: NmpcConfig
     targets: dict[str, dict]  # name -> machine, flags, blasfeo_target, blasfeo_features
     default_targets: dict[str, str | None]  # machine -> what make builds there
+    kind: str = "horizontal"  # the scenario kind exported
+    depth_controller: DepthControllerConfig | None = None  # a six-dof export's depth MPC
 
 
 def _export_record(export: Path) -> _ExportRecord:
@@ -398,18 +446,31 @@ def _export_record(export: Path) -> _ExportRecord:
         d is None or d in targets for d in defaults.values()
     ):
         raise ConfigError("DIR", str(file), "export.json's default_targets name no target")
+    kind = record.get("kind", "horizontal")  # exports before six-dof ones say none
+    if kind not in _KINDS or (kind == _SIX_DOF) != ("depth_controller" in record):
+        raise ConfigError("DIR", str(file), f"export.json's kind {kind!r} is not one it writes")
     try:
         model = VehicleParams.model_validate(record["model"])
         controller = NmpcConfig.model_validate(record["controller"], context={SAVED_RUN: True})
+        depth = record.get("depth_controller")
+        if depth is not None:
+            depth = DepthControllerConfig.model_validate(depth, context={SAVED_RUN: True})
     except ValidationError as error:
         raise format_validation_error(error, "export.json", str(file)) from None
-    return _ExportRecord(model, record["model"], controller, targets, defaults)
+    return _ExportRecord(model, record["model"], controller, targets, defaults, kind, depth)
 
 
 def _check_run(record: _ExportRecord, run: RunFolder) -> None:
     """The run must be the exported controller's, on the same vehicle, without sensor noise."""
     scenario = run.scenario()
-    if any(scenario.sensing.std):
+    kind = getattr(scenario, "kind", None)
+    if kind != record.kind:
+        raise ConfigError(
+            "RUN_DIR", str(run.path), f"a {kind} run; the export is of a {record.kind} scenario"
+        )
+    sensing = scenario.sensing
+    depth_noise = kind == _SIX_DOF and (sensing.depth_std_m or sensing.depth_rate_std_m_per_s)
+    if any(sensing.std) or depth_noise:
         raise ConfigError(
             "RUN_DIR", str(run.path), "the run has sensor noise; log.csv holds the true states"
         )
@@ -428,6 +489,12 @@ def _check_run(record: _ExportRecord, run: RunFolder) -> None:
             "RUN_DIR", str(run.path),
             "its controller is not the exported one (run the exported scenario with --set "
             "controller.type=nmpc --set controller.control_horizon=null)",
+        )  # fmt: skip
+    if record.depth_controller is not None and scenario.depth_controller != record.depth_controller:
+        raise ConfigError(
+            "RUN_DIR", str(run.path),
+            "its depth_controller is not the exported one (export the scenario the run was "
+            "made of)",
         )  # fmt: skip
     if run.info["model"] != record.model_data:
         raise ConfigError("RUN_DIR", str(run.path), "its vehicle model is not the exported one")
@@ -516,7 +583,11 @@ def verify_c(
         )
         if example.returncode:
             raise RunFailed(f"the example main failed: {example.stderr.strip()}")
-        counted = step_instructions(program, emulated, Path(scratch)) if instructions else []
+        counted = (
+            step_instructions(program, emulated, Path(scratch), _STEP_FUNCTION[record.kind])
+            if instructions
+            else []
+        )
     commands = list(csv.DictReader(replay.stdout.splitlines()))
     stats = dict(zip(*[iter(replay.stderr.split())] * 2, strict=True))
     inputs = log.input_names  # the replay's columns too: the export's AUVMPC_INPUT_NAMES
@@ -533,6 +604,7 @@ def verify_c(
     if not all(0 <= code < len(C_STATUS) for code in codes):
         raise RunFailed(f"replay wrote a status auvmpc does not know: {sorted(set(codes))}")
     c_status = [C_STATUS[code] for code in codes]
+    depth = _depth_comparison(commands, log) if record.kind == _SIX_DOF else {}
     return VerifyResult(
         target=target,
         steps=len(commands),
@@ -552,7 +624,29 @@ def verify_c(
             mine != logged for mine, logged in zip(c_status, log.status, strict=True)
         ),
         instructions=tuple(counted),
+        **depth,
     )
+
+
+# The function one controller step is: what the instruction counter counts natively.
+_STEP_FUNCTION = {"horizontal": "auvmpc_step", _SIX_DOF: "auvmpc_six_dof_step"}
+
+
+def _depth_comparison(commands: list[dict], log) -> dict:
+    """A six-dof replay's depth channel against the run's: VerifyResult's depth fields."""
+    codes = [int(r["depth_status"]) for r in commands]
+    if not all(0 <= code < len(C_STATUS) for code in codes):
+        raise RunFailed(f"replay wrote a depth status auvmpc does not know: {sorted(set(codes))}")
+    mine = [C_STATUS[code] for code in codes]
+    logged = log.diagnostics["depth_status"]
+    return {
+        "depth_max_iterations": max(int(r["depth_iterations"]) for r in commands),
+        "depth_fallbacks": mine.count(ControlStatus.FALLBACK),
+        "depth_recoveries": mine.count(ControlStatus.RECOVERY),
+        "depth_status_differences": sum(
+            status != str(was) for status, was in zip(mine, logged, strict=True)
+        ),
+    }
 
 
 def median_instructions(result: VerifyResult) -> float | None:

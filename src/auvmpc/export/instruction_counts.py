@@ -37,20 +37,23 @@ def emulator_command(machine: str) -> list[str]:
     return [emulator, "-L", QEMU_SYSROOT]
 
 
-def step_instructions(program: list[str], emulated: str | None, scratch: Path) -> list[int]:
-    """The instructions of each ``auvmpc_step`` call of the replay command ``program``;
-    ``emulated``: the machine it is emulated as (None: native)."""
+def step_instructions(
+    program: list[str], emulated: str | None, scratch: Path, function: str = "auvmpc_step"
+) -> list[int]:
+    """The instructions of each call of the step ``function`` (a six-dof export's is
+    ``auvmpc_six_dof_step``) of the replay command ``program``; ``emulated``: the machine it
+    is emulated as (None: native; emulated, the replay's clock readings mark the step)."""
     if emulated is None:
-        return _callgrind(program, scratch)
+        return _callgrind(program, scratch, function)
     return _qemu_plugin(program, emulated, scratch)
 
 
-def _callgrind(program: list[str], scratch: Path) -> list[int]:
+def _callgrind(program: list[str], scratch: Path, function: str) -> list[int]:
     if shutil.which("valgrind") is None:
         raise ConfigError("--instructions", "valgrind", "not on the PATH (Debian: valgrind)")
     out = scratch / "cg"
     _run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
-          "--dump-after=auvmpc_step", "--toggle-collect=auvmpc_step", *program])  # fmt: skip
+          f"--dump-after={function}", f"--toggle-collect={function}", *program])  # fmt: skip
     dumps = sorted(scratch.glob("cg.*"), key=lambda p: int(p.suffix[1:]))
     return [int(re.search(r"^totals: (\d+)", d.read_text(), re.M).group(1)) for d in dumps]
 

@@ -116,8 +116,9 @@ class Scenario(StrictModel):
     )
     fault_detection: bool = Field(
         default=False,
-        description="watch the horizontal thrusters for a fault from the model's prediction "
-        "residual and tell the controller what is found (estimation/fault_detection.py)",
+        description="watch the actuators for a fault from the model's prediction residual and "
+        "tell the controller what is found (estimation/fault_detection.py): the horizontal "
+        "thrusters, or beside a controller of the whole 6-DOF vehicle every input, dead or stuck",
     )
 
 

@@ -215,11 +215,12 @@ class ResolvedSixDofScenario(ResolvedScenario):
                 f"{typed.controller.type} has no keep-out constraint yet: it would fly through "
                 "them (the horizontal controllers keep clear, docs/moving-obstacles.md)",
             )  # fmt: skip
-        if scenario.fault_detection and not model.has_thrusters:
+        if scenario.fault_detection and not (whole or model.has_thrusters):
             raise ConfigError(
                 "fault_detection", True,
-                f"watches horizontal thrusters on the 3-DOF model; {model.name} has a "
-                "propeller and fins (declare its faults in faults: instead)",
+                f"with {typed.controller.type} it watches horizontal thrusters on the 3-DOF "
+                f"model; {model.name} has a propeller and fins: fly a controller of the whole "
+                "vehicle (six-dof-nmpc), whose detector watches every input",
             )  # fmt: skip
         self.reference: Reference = make_reference(scenario.reference, base_dir)
         if not self.reference.has_depth:

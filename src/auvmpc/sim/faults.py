@@ -90,7 +90,8 @@ class FaultSchedule:
     def declared(self, t: float) -> np.ndarray | None:
         """Each input's effectiveness as the mission has declared it by ``t`` (None: nothing
         declared yet, all healthy to the controller). A stuck actuator is declared as not
-        acting: its fixed force is the controller's disturbance estimate's to take up."""
+        acting, and its value told by :meth:`stuck`: a controller that reads only this
+        leaves its fixed force to its disturbance estimate."""
         acting = list(self._acting(t, declared_only=True))
         if not acting:
             return None
@@ -98,6 +99,17 @@ class FaultSchedule:
         for fault, index in acting:
             effectiveness[index] = 0.0 if fault.stuck_at is not None else fault.effectiveness
         return effectiveness
+
+    def stuck(self, t: float) -> np.ndarray | None:
+        """The value each input is declared stuck at by ``t``, NaN where it is free (None:
+        none declared stuck yet): ``Observation.stuck_at``."""
+        acting = [(f, i) for f, i in self._acting(t, declared_only=True) if f.stuck_at is not None]
+        if not acting:
+            return None
+        values = np.full(self.n_inputs, np.nan)
+        for fault, index in acting:
+            values[index] = fault.stuck_at
+        return values
 
 
 class FaultyPlant:

@@ -115,7 +115,8 @@ def run_session(
     the command over the sample; the session's log gets the plant's truth as well. A plant
     state that stops being finite raises :class:`PlantDiverged` before it reaches the
     controller or the log. ``faults``: the plant's actuators fail as they say (sim/faults.py),
-    and the session is told of the declared ones from their time on."""
+    and the session is told of the declared ones from their time on (a stuck one's value
+    too)."""
     if plant.sample_time != session.sample_time:
         raise ValueError(
             f"run_session: the plant steps {plant.sample_time} s, the controller samples "
@@ -139,6 +140,7 @@ def run_session(
         detections = None if perception is None else perception.observe(t, state[position])
         if faults:
             session.effectiveness = faults.declared(t)
+            session.stuck_at = faults.stuck(t)
         result = session.step(t, measured, detections, truth, trusted=True)
         try:
             with np.errstate(over="ignore", invalid="ignore"):  # the state is judged below

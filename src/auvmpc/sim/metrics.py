@@ -35,6 +35,8 @@ __all__ = [
     "compute_metrics",
     "compute_six_dof_metrics",
     "cross_track_error",
+    "fault_metrics",
+    "six_dof_fault_metrics",
     "input_limits",
     "reference_path",
     "detour_samples",
@@ -356,9 +358,7 @@ def fault_metrics(
     """
     first = min(faults, key=lambda fault: fault.at)
     error = position_error(log.horizontal())
-    start = acting_sample(log.t, first.at)
-    reached = np.arange(len(log.t)) >= start
-    before = (log.t >= transient_s - 1e-9) & ~reached
+    start, before, reached = _fault_windows(log, transient_s, faults)
     weaker = log.effectiveness < 1.0  # (N, n): what the controller assumed per command
     index = log.input_names.index(first.actuator)
     told = np.flatnonzero(weaker[start:, index])
@@ -380,6 +380,35 @@ def fault_metrics(
         "rms_before_fault_m": _rms(error[before]),
         "rms_after_fault_m": _rms(error[reached]),
     }
+
+
+def six_dof_fault_metrics(
+    log: SimLog, transient_s: float, faults: Sequence[Fault], path: np.ndarray
+) -> dict[str, float | None]:
+    """What a 6-DOF run's first fault cost in depth and off the path (a torpedo follows a
+    path: its lag along it is not a tracking error), over :func:`fault_metrics`'s windows:
+    ``depth_rms_before_fault_m``, ``depth_rms_after_fault_m``,
+    ``cross_track_rms_before_fault_m``, ``cross_track_rms_after_fault_m`` (``path``: the
+    reference's horizontal path, densely, :func:`reference_path`)."""
+    _, before, reached = _fault_windows(log, transient_s, faults)
+    depth_error = log.column("z") - log.column("z_ref")
+    cross_track = cross_track_error(log.state[:, SIX_DOF.span("x", "y")], path)
+    return {
+        "depth_rms_before_fault_m": _rms(depth_error[before]),
+        "depth_rms_after_fault_m": _rms(depth_error[reached]),
+        "cross_track_rms_before_fault_m": _rms(cross_track[before]),
+        "cross_track_rms_after_fault_m": _rms(cross_track[reached]),
+    }
+
+
+def _fault_windows(
+    log: SimLog, transient_s: float, faults: Sequence[Fault]
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """The sample the first of ``faults`` acts on, and the rows before it (from the
+    transient on) and from it to the end."""
+    start = acting_sample(log.t, min(fault.at for fault in faults))
+    reached = np.arange(len(log.t)) >= start
+    return start, (log.t >= transient_s - 1e-9) & ~reached, reached
 
 
 def _pick(metrics: dict, *names: str) -> dict:

@@ -31,7 +31,7 @@ from auvmpc.environment.obstacle_sensor import ObstaclePerception
 from auvmpc.environment.obstacles import ObstacleConfig, clearance, visible_obstacles
 from auvmpc.errors import ConfigError
 from auvmpc.estimation.fault_detection import FaultDetector, FaultFound
-from auvmpc.models.layout import HORIZONTAL, Layout
+from auvmpc.models.layout import Layout
 from auvmpc.sim.log import LiveLog, Row, SimLog
 
 __all__ = ["Session", "StateReference", "StepResult", "Truth"]
@@ -75,10 +75,10 @@ class Session:
     the vehicle-to-obstacle gap is the measured position's; a session whose measurement is
     not its whole state (6-DOF, depth) needs the truth. ``live_log``: a new file that
     gets each row of log.csv as soon as it is complete (sim/log.py, LiveLog).
-    ``fault_detector``: watches the horizontal thrusters (the first inputs) from the
-    measurements (estimation/fault_detection.py); what it finds is assumed from the sample
-    that finds it on, with whatever :attr:`effectiveness` says, and kept in
-    :attr:`faults_found`.
+    ``fault_detector``: watches the horizontal thrusters (the first inputs; a 6-DOF
+    detector every input) from the measurements (estimation/fault_detection.py); what it
+    finds is assumed from the sample that finds it on, with whatever :attr:`effectiveness`
+    and :attr:`stuck_at` say, and kept in :attr:`faults_found`.
     """
 
     def __init__(
@@ -127,15 +127,17 @@ class Session:
         log.initial_thrust = previous.copy()
         self._initial_state = np.asarray(initial_state, dtype=float).copy()
         self._effectiveness: np.ndarray | None = None  # all healthy
+        self._stuck_at: np.ndarray | None = None  # none stuck
         self.fault_detector = fault_detector
         self._healthy = np.ones(self.n_inputs)  # what "all healthy" assumes (never written)
         self._healthy.setflags(write=False)
         self._found = np.ones(self.n_inputs)  # the detector's effectiveness of each input
+        self._found_stuck = np.full(self.n_inputs, np.nan)  # ... and what it found stuck
         #: What the detector found: (sample k, time, FaultFound), in order.
         self.faults_found: list[tuple[int, float, FaultFound]] = []
-        # Where the horizontal state sits in the measurement (what the detector reads).
-        self._horizontal_measured = [
-            list(log.format.measured_names).index(name) for name in HORIZONTAL.names
+        # Where the state the detector reads sits in the measurement (by its names).
+        self._watched_measured = [
+            list(log.format.measured_names).index(name) for name in fault_detector.state_names
         ] if fault_detector is not None else []  # fmt: skip
         controller.reset(self._initial_state.copy(), previous.copy())
         self._preview_offsets = self.sample_time * np.arange(controller.preview_steps + 1)
@@ -168,6 +170,33 @@ class Session:
             raise ConfigError("effectiveness", values, "must be between 0 and 1 (1 healthy)")
         checked.setflags(write=False)
         self._effectiveness = checked
+
+    @property
+    def stuck_at(self) -> np.ndarray | None:
+        """The value each input is stuck at whatever it is commanded, in ``input_names`` order
+        and each input's own unit, NaN where it is free, or None: none stuck. Set it when
+        you learn of a jammed actuator (a mission's declared faults): a controller that reads
+        it (``Observation.stuck_at``: six-dof-nmpc) predicts with the input fixed there from
+        the next :meth:`step`; the others take the input as not acting (its effectiveness 0)."""
+        return None if self._stuck_at is None else self._stuck_at.copy()
+
+    @stuck_at.setter
+    def stuck_at(self, values: Any) -> None:
+        if values is None:
+            self._stuck_at = None
+            return
+        try:
+            checked = np.array(values, dtype=float)
+        except (TypeError, ValueError):
+            raise ConfigError("stuck_at", values, "must be numbers (NaN where free)") from None
+        if checked.shape != (self.n_inputs,):
+            raise ConfigError(
+                "stuck_at", values, f"must have one value per input ({self.n_inputs})"
+            )
+        if np.isinf(checked).any():
+            raise ConfigError("stuck_at", values, "must be finite (NaN where free)")
+        checked.setflags(write=False)
+        self._stuck_at = checked
 
     @property
     def initial_state(self) -> np.ndarray:
@@ -206,7 +235,7 @@ class Session:
         row = self._sample(t, measurement, truth)
         t = row["t"]
         self._detect_faults(k, t, measurement)
-        assumed = self._assumed()
+        assumed, stuck = self._assumed(), self._stuck()
         observation = Observation(
             k=k,
             t=t,
@@ -214,12 +243,15 @@ class Session:
             reference=self._preview,
             obstacles=self._detections(t, measurement) if detections is None else detections,
             effectiveness=assumed,
+            stuck_at=stuck,
         )
         result, thrust, solve_ms = timed_command(self.controller, observation, self.n_inputs)
         acting = self._healthy if assumed is None else assumed
         if self.fault_detector is not None:
             watched = self.fault_detector.n_inputs
-            self.fault_detector.held(thrust[:watched], acting[:watched])
+            self.fault_detector.held(
+                thrust[:watched], acting[:watched], None if stuck is None else stuck[:watched]
+            )
         command = self.log.format.command(result, thrust, solve_ms)
         self._append(row | command | {"effectiveness": acting})
         self.k = k + 1
@@ -264,18 +296,32 @@ class Session:
         """The detector's look at this sample's measurement; what it finds is kept."""
         if self.fault_detector is None:
             return
-        found = self.fault_detector.check(measurement[self._horizontal_measured])
+        found = self.fault_detector.check(measurement[self._watched_measured])
         if found is not None:
-            self._found[found.index] = 0.0  # taken as dead (fault_detection.py: why)
+            # taken as dead (fault_detection.py: why), or as acting at the value found
+            self._found[found.index] = 0.0
+            if found.stuck_at is not None:
+                self._found_stuck[found.index] = found.stuck_at
             self.faults_found.append((k, float(t), found))
 
     def _assumed(self) -> np.ndarray | None:
         """Each input's effectiveness the controller is to assume now: what it was told
-        (:attr:`effectiveness`) times what the detector found; None: all healthy."""
-        if self._effectiveness is None and not self.faults_found:
+        (:attr:`effectiveness`, 0 where :attr:`stuck_at` says stuck) times what the detector
+        found; None: all healthy."""
+        if self._effectiveness is None and self._stuck_at is None and not self.faults_found:
             return None
         told = self._healthy if self._effectiveness is None else self._effectiveness
+        if self._stuck_at is not None:
+            told = np.where(np.isnan(self._stuck_at), told, 0.0)
         return told * self._found
+
+    def _stuck(self) -> np.ndarray | None:
+        """Each input's stuck value the controller is to assume now: what it was told
+        (:attr:`stuck_at`), else what the detector found; None: none stuck."""
+        found = self._found_stuck
+        if self._stuck_at is None:
+            return None if np.isnan(found).all() else found.copy()
+        return np.where(np.isnan(self._stuck_at), found, self._stuck_at)
 
     def _check_open(self, what: str) -> None:
         if self.closed:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from auvmpc.ocp.multiple_shooting import NX, Iterate, MultipleShootingProgram, Sample, Solution
 
-__all__ = ["IpoptSolver"]
+__all__ = ["IpoptSolver", "ipopt_options", "warm_start_options"]
 
 # IPOPT: tolerance of the accuracy reference, and its iteration cap unless
 # config.qp_iteration_limit sets one.
@@ -27,6 +28,31 @@ _IPOPT_UNFINISHED = (
 )
 
 
+def ipopt_options(
+    tolerance: float, max_iterations: int, time_limit_ms: float | None, **extra: Any
+) -> dict[str, Any]:
+    """IPOPT's options as a controller runs it: silent, to ``tolerance`` within
+    ``max_iterations``, stopped at ``time_limit_ms`` where there is one (a solve past the
+    deadline is discarded: stop rather than finish it), and ``extra`` options."""
+    options: dict[str, Any] = {
+        "print_level": 0, "sb": "yes", "tol": tolerance, "max_iter": max_iterations, **extra,
+    }  # fmt: skip
+    if time_limit_ms is not None:
+        options["max_wall_time"] = 1e-3 * time_limit_ms
+    return options
+
+
+def warm_start_options(mu_init: float) -> dict[str, Any]:
+    """IPOPT's options to start from a shifted previous solution: its point and multipliers
+    kept, barely pushed off the bounds, the barrier started at ``mu_init``."""
+    return {
+        "warm_start_init_point": "yes",
+        "mu_init": mu_init,
+        "warm_start_bound_push": 1e-8,
+        "warm_start_mult_bound_push": 1e-8,
+    }
+
+
 class IpoptSolver:
     """The full solve: IPOPT to convergence, warm-started in primal and dual variables.
 
@@ -37,26 +63,17 @@ class IpoptSolver:
     """
 
     def __init__(self, program: MultipleShootingProgram, config) -> None:
-        common = {
-            "print_level": 0,
-            "sb": "yes",
-            "tol": _IPOPT_TOLERANCE,
+        common = ipopt_options(
+            _IPOPT_TOLERANCE,
+            config.qp_iteration_limit or _IPOPT_MAX_ITERATIONS,
+            config.solver_time_limit_ms,
             # IPOPT would scale the objective by 100 / max gradient, 1e-3 for the slack
             # penalty's 1e5, and loosen its tolerance as much (measured: first thrusts
             # 1.6e-5 N from the converged real-time iteration, 1.6e-8 N unscaled).
-            "nlp_scaling_method": "none",
-            "s_max": 1e6,
-            "max_iter": config.qp_iteration_limit or _IPOPT_MAX_ITERATIONS,
-        }
-        if config.solver_time_limit_ms is not None:
-            # Stop at the deadline rather than finish a solve whose result is discarded.
-            common["max_wall_time"] = 1e-3 * config.solver_time_limit_ms
-        warm = {
-            "warm_start_init_point": "yes",
-            "mu_init": _IPOPT_WARM_MU_INIT,
-            "warm_start_bound_push": 1e-8,
-            "warm_start_mult_bound_push": 1e-8,
-        }
+            nlp_scaling_method="none",
+            s_max=1e6,
+        )
+        warm = warm_start_options(_IPOPT_WARM_MU_INIT)
         w, p, cost, g = program.nlp
         nlp = {"x": w, "p": p, "f": cost, "g": g}
         self._warm = ca.nlpsol(

@@ -20,97 +20,15 @@
 #include <time.h>
 
 #include "auvmpc_controller.h"
+#include "replay_common.h"
 
-/* The heap calls inside auvmpc_step, counted: this program's malloc, calloc, realloc and
- * free (and the aligned posix_memalign, aligned_alloc, memalign) replace the C library's for
- * the whole process (HPIPM's and BLASFEO's shared libraries
- * included: glibc's documented way to replace malloc) and hand on to glibc's own allocator.
- * On another C library nothing is replaced and the count reads -1. */
-static long heap_calls = -1;
-static int counting;
-#ifdef __GLIBC__
-extern void *__libc_malloc(size_t size);
-extern void *__libc_calloc(size_t count, size_t size);
-extern void *__libc_realloc(void *pointer, size_t size);
-extern void __libc_free(void *pointer);
-extern void *__libc_memalign(size_t alignment, size_t size);
-
-void *malloc(size_t size) {
-    heap_calls += counting;
-    return __libc_malloc(size);
-}
-void *calloc(size_t count, size_t size) {
-    heap_calls += counting;
-    return __libc_calloc(count, size);
-}
-void *realloc(void *pointer, size_t size) {
-    heap_calls += counting;
-    return __libc_realloc(pointer, size);
-}
-void free(void *pointer) {
-    heap_calls += counting && pointer;
-    __libc_free(pointer);
-}
-/* The aligned allocators too: BLASFEO's own allocation is aligned (posix_memalign). */
-int posix_memalign(void **pointer, size_t alignment, size_t size) {
-    heap_calls += counting;
-    *pointer = __libc_memalign(alignment, size);
-    return *pointer || !size ? 0 : 12; /* ENOMEM */
-}
-void *aligned_alloc(size_t alignment, size_t size) {
-    heap_calls += counting;
-    return __libc_memalign(alignment, size);
-}
-void *memalign(size_t alignment, size_t size) {
-    heap_calls += counting;
-    return __libc_memalign(alignment, size);
-}
-#define HEAP_COUNTED 1
-#else
-#define HEAP_COUNTED 0
-#endif
-
-#define MAX_LINE 65536
-#define MAX_OBSTACLES 256
 #define ROWS ((AUVMPC_HORIZON + 1) * AUVMPC_NX)
-
-static int compare(const void *a, const void *b) {
-    double x = *(const double *) a, y = *(const double *) b;
-    return (x > y) - (x < y);
-}
 
 /* Column indices of the state's entries (AUVMPC_STATE_NAMES) in log.csv's header; 0 on
  * success. */
 static int state_columns(const char *header, int columns[AUVMPC_NX]) {
     static const char *names[AUVMPC_NX] = AUVMPC_STATE_NAMES;
-    char line[MAX_LINE];
-    strncpy(line, header, MAX_LINE - 1);
-    line[MAX_LINE - 1] = '\0';
-    for (int i = 0; i < AUVMPC_NX; ++i) columns[i] = -1;
-    int column = 0;
-    for (char *name = strtok(line, ",\r\n"); name; name = strtok(NULL, ",\r\n"), ++column)
-        for (int i = 0; i < AUVMPC_NX; ++i)
-            if (strcmp(name, names[i]) == 0) columns[i] = column;
-    for (int i = 0; i < AUVMPC_NX; ++i)
-        if (columns[i] < 0) return -1;
-    return 0;
-}
-
-static int read_state(const char *row, const int columns[AUVMPC_NX], double state[AUVMPC_NX]) {
-    int column = 0, found = 0;
-    const char *p = row;
-    while (*p && found < AUVMPC_NX) {
-        for (int i = 0; i < AUVMPC_NX; ++i)
-            if (columns[i] == column) {
-                state[i] = strtod(p, NULL);
-                ++found;
-            }
-        p = strchr(p, ',');
-        if (!p) break;
-        ++p;
-        ++column;
-    }
-    return found == AUVMPC_NX ? 0 : -1;
+    return find_columns(header, names, AUVMPC_NX, columns);
 }
 
 int main(int argc, char **argv) {
@@ -166,7 +84,7 @@ int main(int argc, char **argv) {
     int max_iterations = 0;
     for (int k = 0; k < steps; ++k) {
         int count;
-        if (!fgets(line, MAX_LINE, log) || read_state(line, columns, state)) {
+        if (!fgets(line, MAX_LINE, log) || read_columns(line, columns, AUVMPC_NX, state)) {
             fprintf(stderr, "replay: %s ends before sample %d\n", argv[1], k);
             return 2;
         }
@@ -204,15 +122,12 @@ int main(int argc, char **argv) {
         if (iterations > max_iterations) max_iterations = iterations;
         printf(",%d,%d\n", (int) status, iterations);
     }
-    double warm_max = 0.0; /* after the first step, which starts cold (10 SQP steps) */
-    for (int k = 1; k < steps; ++k)
-        if (times[k] > warm_max) warm_max = times[k];
-    qsort(times, (size_t) steps, sizeof(double), compare);
-    double median = steps % 2 ? times[steps / 2] : 0.5 * (times[steps / 2 - 1] + times[steps / 2]);
+    double median, largest, warm_max; /* warm: after the first step, which starts cold */
+    summarise(times, steps, &median, &largest, &warm_max);
     fprintf(stderr,
             "steps %d step_us_median %.1f step_us_max %.1f step_us_max_after_first %.1f "
             "static_bytes %ld workspace_bytes %ld heap_calls_in_steps %ld max_iterations %d\n",
-            steps, median, times[steps - 1], warm_max, auvmpc_static_bytes(),
+            steps, median, largest, warm_max, auvmpc_static_bytes(),
             auvmpc_workspace_bytes(), heap_calls, max_iterations);
     free(times);
     fclose(log);
