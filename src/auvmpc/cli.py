@@ -290,38 +290,68 @@ def bench(
     set_: Annotated[
         list[str] | None, typer.Option("--set", help="override a field in every run")
     ] = None,
+    yardstick: Annotated[
+        str | None,
+        typer.Option(
+            "--yardstick",
+            help="controller label every row is measured against on each scenario (same seed), "
+            "e.g. los-pid; run too; without --controllers the other is the scenario's own",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="folder for a run folder per row and the table (bench.md)"),
+    ] = None,
+    figures: Annotated[bool, typer.Option(help="with --out: draw each run's figures")] = True,
     overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="replace an existing --json file")
+        bool,
+        typer.Option("--overwrite", help="replace an existing --json file or --out benchmark"),
     ] = False,
 ) -> None:
     """Time controllers x scenarios on one core: per-step median/p99/max, wall time, metrics."""
     from auvmpc.experiments.bench import (
         DEFAULT_CONTROLLERS,
         DEFAULT_SCENARIOS,
+        SCENARIO_CONTROLLER_LABEL,
         format_table,
         machine_info,
         rows_to_json,
         run_benchmark,
     )
-    from auvmpc.experiments.outputs import check_output_file, write_named_file
+    from auvmpc.experiments.outputs import (
+        OutputKind,
+        check_output_file,
+        check_output_folder,
+        write_named_file,
+    )
 
     if json_file is not None:
         check_output_file(json_file, overwrite=overwrite, option="--json")
+    if out is not None:
+        check_output_folder(out, OutputKind.BENCH, overwrite=overwrite)  # before, not after
+    # Measured against a yardstick, the controller to measure is the scenario's own.
+    default = (SCENARIO_CONTROLLER_LABEL,) if yardstick is not None else DEFAULT_CONTROLLERS
     with progress_bar() as progress:
         task = progress.add_task("bench", total=None)
         rows = run_benchmark(
-            _split(controllers) or DEFAULT_CONTROLLERS,
+            _split(controllers) or default,
             _split(scenarios) or DEFAULT_SCENARIOS,
             repeats,
             on_run=lambda done, total, name: progress.update(
                 task, completed=done, total=total, description=name
             ),
             overrides=tuple(set_ or ()),
+            yardstick=yardstick,
+            out=out,
+            figures=figures,
+            overwrite=overwrite,
         )
     console.print(format_table(rows, machine_info()))
     if json_file is not None:
         write_named_file(json_file, rows_to_json(rows), option="--json")
         console.print(f"wrote {json_file}")
+    if out is not None:
+        console.print(f"wrote {out}")
 
 
 def _split(values: list[str] | None) -> list[str]:

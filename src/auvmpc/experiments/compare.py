@@ -31,13 +31,19 @@ __all__ = [
 
 RECORD_FILE = "comparison.json"  # the runs compared
 
+# A metric no compared run has (a 6-DOF run's path and depth errors in a planar comparison; a
+# torpedo's thrust in N, which it has not) leaves no column.
 COMPARED_METRICS = (
     "rms_position_error_m",
     "max_position_error_m",
     "rms_position_error_after_transient_m",
+    "cross_track_rms_after_transient_m",
+    "depth_rms_error_after_transient_m",
     "rms_heading_error_rad",
     "max_abs_thrust_N",
     "thrust_effort_N2s",
+    "actuator_limit_violations",
+    "actuator_rate_violations",
     "min_obstacle_clearance_m",
     "solve_ms_median",
     "solve_ms_p99",

@@ -1,6 +1,6 @@
 """Where auvmpc may write, and how: never over anything it did not write itself.
 
-Every command that writes (``run``, ``reproduce``, ``compare``, ``campaign``,
+Every command that writes (``run``, ``reproduce``, ``bench --out``, ``compare``, ``campaign``,
 ``campaign-report``, ``plot``, ``animate``, ``export``, ``export-c``) goes through this
 module. The rule:
 
@@ -83,6 +83,7 @@ class OutputKind(StrEnum):
     CAMPAIGN = "campaign"
     EXPORT_C = "export-c"
     COMPARE = "compare"
+    BENCH = "bench"
 
 
 _NOUN = {
@@ -91,6 +92,7 @@ _NOUN = {
     OutputKind.CAMPAIGN: "campaign",
     OutputKind.EXPORT_C: "C export",
     OutputKind.COMPARE: "comparison",
+    OutputKind.BENCH: "benchmark",
 }
 
 
