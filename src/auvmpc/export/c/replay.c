@@ -37,20 +37,7 @@ int main(int argc, char **argv) {
         return 2;
     }
     double effectiveness[AUVMPC_THRUSTERS];
-    for (int i = 0; i < AUVMPC_THRUSTERS; ++i) effectiveness[i] = 1.0;
-    if (argc == 5) {
-        const char *p = argv[4];
-        for (int i = 0; i < AUVMPC_THRUSTERS; ++i) {
-            char *end;
-            effectiveness[i] = strtod(p, &end);
-            if (end == p || (i + 1 < AUVMPC_THRUSTERS && *end != ',')) {
-                fprintf(stderr, "replay: %s is not %d comma-separated numbers\n", argv[4],
-                        AUVMPC_THRUSTERS);
-                return 2;
-            }
-            p = end + 1;
-        }
-    }
+    if (parse_effectiveness(argc == 5 ? argv[4] : NULL, effectiveness, AUVMPC_THRUSTERS)) return 2;
     FILE *log = fopen(argv[1], "r"), *data = fopen(argv[2], "r");
     if (!log || !data) {
         fprintf(stderr, "replay: cannot open %s\n", !log ? argv[1] : argv[2]);

@@ -10,6 +10,7 @@
 #ifndef AUVMPC_REPLAY_COMMON_H
 #define AUVMPC_REPLAY_COMMON_H
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -66,6 +67,24 @@ static int compare(const void *a, const void *b) {
 }
 
 /* Column indices of `names` (count of them) in log.csv's header; 0 when all are there. */
+/* The replay's optional effectiveness argument: ``count`` comma-separated numbers into
+ * ``values`` (all 1 when ``text`` is NULL); 0 on success, else a line on stderr. */
+static int parse_effectiveness(const char *text, double *values, int count) {
+    for (int i = 0; i < count; ++i) values[i] = 1.0;
+    if (text == NULL) return 0;
+    const char *p = text;
+    for (int i = 0; i < count; ++i) {
+        char *end;
+        values[i] = strtod(p, &end);
+        if (end == p || (i + 1 < count && *end != ',')) {
+            fprintf(stderr, "replay: %s is not %d comma-separated numbers\n", text, count);
+            return 2;
+        }
+        p = end + 1;
+    }
+    return 0;
+}
+
 static int find_columns(const char *header, const char *const *names, int count, int *columns) {
     char line[MAX_LINE];
     strncpy(line, header, MAX_LINE - 1);

@@ -45,19 +45,7 @@ int main(int argc, char **argv) {
         return 2;
     }
     double effectiveness[NT];
-    for (int i = 0; i < NT; ++i) effectiveness[i] = 1.0;
-    if (argc == 5) {
-        const char *p = argv[4];
-        for (int i = 0; i < NT; ++i) {
-            char *end;
-            effectiveness[i] = strtod(p, &end);
-            if (end == p || (i + 1 < NT && *end != ',')) {
-                fprintf(stderr, "replay: %s is not %d comma-separated numbers\n", argv[4], NT);
-                return 2;
-            }
-            p = end + 1;
-        }
-    }
+    if (parse_effectiveness(argc == 5 ? argv[4] : NULL, effectiveness, NT)) return 2;
     FILE *log = fopen(argv[1], "r"), *data = fopen(argv[2], "r");
     if (!log || !data) {
         fprintf(stderr, "replay: cannot open %s\n", !log ? argv[1] : argv[2]);
