@@ -89,7 +89,7 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.errors import ConfigError
 from auvmpc.models.actuators import ControlSurface, Propeller
-from auvmpc.models.six_dof import SIX_DOF, six_dof_model, top_surge_speed
+from auvmpc.models.six_dof import SIX_DOF, ground_velocity, six_dof_model, top_surge_speed
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
@@ -247,20 +247,6 @@ def los_heading(point: PathPoint, lookahead: float, integral_offset: float = 0.0
     """psi_d = pi_p - atan((y_e + kappa y_int) / Delta) (rad): towards the path, the
     closer the steeper; ``integral_offset`` is kappa y_int (m)."""
     return point.tangent - math.atan((point.cross_track + integral_offset) / lookahead)
-
-
-def ground_velocity(state: np.ndarray) -> np.ndarray:
-    """(2,) the world-frame horizontal velocity [x', y'] (m/s) of a 6-DOF state: the first two
-    rows of R(Theta) [u, v, w] (Fossen 2021, eq. 2.18)."""
-    phi, theta, psi = (float(state[SIX_DOF.index(name)]) for name in ("phi", "theta", "psi"))
-    u, v, w = (float(state[i]) for i in (_U, _V, _W))
-    cphi, sphi, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
-    cpsi, spsi = math.cos(psi), math.sin(psi)
-    north = cpsi * cth * u + (cpsi * sth * sphi - spsi * cphi) * v
-    east = spsi * cth * u + (cpsi * cphi + sphi * sth * spsi) * v
-    north += (spsi * sphi + cpsi * cphi * sth) * w
-    east += (spsi * sth * cphi - cpsi * sphi) * w
-    return np.array([north, east])
 
 
 # -- the vehicle's loops, from its model ------------------------------------------------------

@@ -77,7 +77,7 @@ from auvmpc.models.integrators import rk4
 from auvmpc.models.six_dof import (
     PITCH_LIMIT_RAD,
     SIX_DOF,
-    Rzyx,
+    ground_velocity,
     six_dof_model,
     stable_substeps,
 )
@@ -112,12 +112,6 @@ _RIDGE = 1e-2
 _RIDGE_FLOOR = 1e-12
 # Below this ground speed (m/s) the path gives no direction: hold the reference's heading.
 _STILL_M_PER_S = 1e-3
-
-
-def _ground_velocity(state: np.ndarray) -> np.ndarray:
-    """(2,) the horizontal velocity over ground (m/s, world frame): R(Theta) [u, v, w]."""
-    rotation = np.asarray(Rzyx(state[_PHI], state[_THETA], state[_PSI]), dtype=float)
-    return rotation[:2] @ state[SIX_DOF.span("u", "w")]
 
 
 class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
@@ -309,7 +303,7 @@ class SixDofNmpc(ShelledController):
         self._predicted: np.ndarray | None = None  # x_{k} as the last sample predicted it
         self._sample: tuple | None = None  # (state, share, stuck values or None) now
         self._fix_correction = np.zeros(2)  # filtered less measured horizontal position (m)
-        self._last_fix: np.ndarray | None = None
+        self._last_fix: tuple[np.ndarray, np.ndarray] | None = None
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
@@ -395,12 +389,14 @@ class SixDofNmpc(ShelledController):
         ground (trapezoidal over the sample: dead reckoning), then ``position_fix_gain`` of
         the new fix's difference from it. A first-order filter of the fix's noise (its
         variance times K / (2 - K)) that passes the motion the velocities measure."""
-        last, self._last_fix = self._last_fix, state.copy()
+        last = self._last_fix  # (its position, its velocity over ground)
+        velocity = ground_velocity(state)
+        self._last_fix = (state[_XY].copy(), velocity)
         if last is None:
             return
-        moved = 0.5 * self.sample_time * (_ground_velocity(last) + _ground_velocity(state))
+        moved = 0.5 * self.sample_time * (last[1] + velocity)
         keep = 1.0 - self.config.position_fix_gain
-        self._fix_correction = keep * (self._fix_correction + last[_XY] + moved - state[_XY])
+        self._fix_correction = keep * (self._fix_correction + last[0] + moved - state[_XY])
 
     def _nodes(self, state: np.ndarray, reference: np.ndarray) -> np.ndarray:
         """(_NODE, N) targets of nodes 1..N: position, depth, the crab heading through the

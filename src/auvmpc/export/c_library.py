@@ -50,7 +50,6 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.depth_mpc import DepthControllerConfig
 from auvmpc.controllers.nmpc import _COLD_START_ITERATIONS, NmpcConfig
-from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError, RunFailed, format_validation_error
 from auvmpc.experiments.outputs import OutputKind, check_output_folder, staged_folder
 from auvmpc.experiments.run_folder import RunFolder, read_run_folder
@@ -65,6 +64,7 @@ from auvmpc.export.c_targets import (
     write_solver_files,
 )
 from auvmpc.export.instruction_counts import emulator_command, step_instructions
+from auvmpc.export.replay_data import replay_data
 from auvmpc.export.six_dof_c import (
     check_six_dof,
     daqp_libraries,
@@ -233,21 +233,8 @@ def _replay_data(resolved, horizon: int, sample_time: float) -> str:
     reference = make_reference(scenario.reference, resolved.base_dir)
     n = resolved.model.n_thrusters
     initial = np.zeros(n) if scenario.initial_thrust is None else scenario.initial_thrust
-    times = sample_time * np.arange(steps + 1, dtype=float)
-    offsets = sample_time * np.arange(horizon + 1)
-    lines = [f"auvmpc-replay 1 steps {steps} horizon {horizon} thrusters {n}", _row(initial)]
-    for k in range(steps):
-        t = times[k]
-        preview = reference.states(t + offsets)
-        lines.extend(_row(row) for row in preview)
-        obstacles = visible_obstacles(scenario.obstacles, t)
-        lines.append(str(len(obstacles)))
-        lines.extend(_row([*o.center, *o.velocity, o.radius]) for o in obstacles)
-    return "\n".join(lines) + "\n"
-
-
-def _row(values) -> str:
-    return " ".join(f"{float(v):.17g}" for v in np.ravel(values))
+    header = f"auvmpc-replay 1 steps {steps} horizon {horizon} thrusters {n}"
+    return replay_data(header, initial, reference, horizon, steps, sample_time, scenario.obstacles)
 
 
 def export_c(

@@ -34,10 +34,10 @@ from auvmpc.controllers.channels import CLIP_TOLERANCE_N, ReferenceWithDepth, Th
 from auvmpc.controllers.depth_mpc import DepthControllerConfig, DepthMpc
 from auvmpc.controllers.registry import build_controller, whole_vehicle
 from auvmpc.controllers.shell import _SATURATION_N, PLAN_FALLBACK_STEPS, SLACK_ACTIVE
-from auvmpc.environment.obstacles import visible_obstacles
 from auvmpc.errors import ConfigError
 from auvmpc.experiments.kinds import padded
 from auvmpc.export.c_targets import Target
+from auvmpc.export.replay_data import replay_data
 from auvmpc.models.layout import DEPTH
 from auvmpc.models.six_dof import HORIZONTAL_INDEX, SIX_DOF, SIX_DOF_MEASUREMENT
 from auvmpc.ocp.tracking import SLACK_QUADRATIC_WEIGHT
@@ -204,24 +204,12 @@ def six_dof_replay_data(resolved, horizontal_horizon: int, sample_time: float) -
     scenario, model = resolved.scenario, resolved.model
     steps = int(round(scenario.duration / sample_time))
     preview = preview_steps(resolved, horizontal_horizon)
-    reference = ReferenceWithDepth(resolved.reference)
     n = model.six_dof_actuators.size
-    offsets = sample_time * np.arange(preview + 1)
-    lines = [
-        f"{_REPLAY_HEADER} steps {steps} preview {preview} thrusters {n}",
-        _row(padded(scenario.initial_thrust, n)),
-    ]
-    for k in range(steps):
-        t = sample_time * k
-        lines.extend(_row(row) for row in reference.states(t + offsets))
-        obstacles = visible_obstacles(scenario.obstacles, t)
-        lines.append(str(len(obstacles)))
-        lines.extend(_row([*o.center, *o.velocity, o.radius]) for o in obstacles)
-    return "\n".join(lines) + "\n"
-
-
-def _row(values) -> str:
-    return " ".join(f"{float(v):.17g}" for v in np.ravel(values))
+    header = f"{_REPLAY_HEADER} steps {steps} preview {preview} thrusters {n}"
+    return replay_data(
+        header, padded(scenario.initial_thrust, n), ReferenceWithDepth(resolved.reference),
+        preview, steps, sample_time, scenario.obstacles,
+    )  # fmt: skip
 
 
 def _depth_functions(depth: DepthMpc) -> tuple[ca.Function, ...]:

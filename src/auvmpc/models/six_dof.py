@@ -57,6 +57,7 @@ __all__ = [
     "TILT",
     "SixDofModel",
     "Rzyx",
+    "ground_velocity",
     "Tzyx",
     "check_pitch",
     "coriolis_added_mass",
@@ -327,6 +328,20 @@ def check_pitch(state: np.ndarray) -> None:
 def horizontal_state(state: np.ndarray) -> np.ndarray:
     """``[x, y, psi, u, v, r]`` (6,) of a 6-DOF state (12,) (or rows of them)."""
     return np.asarray(state)[..., HORIZONTAL_INDEX]
+
+
+def ground_velocity(state: np.ndarray) -> np.ndarray:
+    """(2,) the world-frame horizontal velocity [x', y'] (m/s) of a 6-DOF state: the first two
+    rows of R(Theta) [u, v, w] (Fossen 2021, eq. 2.18)."""
+    phi, theta, psi = (float(state[i]) for i in (3, 4, 5))
+    u, v, w = (float(state[i]) for i in (6, 7, 8))
+    cphi, sphi, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
+    cpsi, spsi = math.cos(psi), math.sin(psi)
+    north = cpsi * cth * u + (cpsi * sth * sphi - spsi * cphi) * v
+    east = spsi * cth * u + (cpsi * cphi + sphi * sth * spsi) * v
+    north += (spsi * sphi + cpsi * cphi * sth) * w
+    east += (spsi * sth * cphi - cpsi * sphi) * w
+    return np.array([north, east])
 
 
 def depth_rate(state: np.ndarray) -> float:

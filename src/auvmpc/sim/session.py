@@ -155,20 +155,9 @@ class Session:
 
     @effectiveness.setter
     def effectiveness(self, values: Any) -> None:
-        if values is None:
-            self._effectiveness = None
-            return
-        try:
-            checked = np.array(values, dtype=float)
-        except (TypeError, ValueError):
-            raise ConfigError("effectiveness", values, "must be numbers") from None
-        if checked.shape != (self.n_inputs,):
-            raise ConfigError(
-                "effectiveness", values, f"must have one value per input ({self.n_inputs})"
-            )
-        if not np.all((checked >= 0.0) & (checked <= 1.0)):
+        checked = self._per_input("effectiveness", values, "")
+        if checked is not None and not np.all((checked >= 0.0) & (checked <= 1.0)):
             raise ConfigError("effectiveness", values, "must be between 0 and 1 (1 healthy)")
-        checked.setflags(write=False)
         self._effectiveness = checked
 
     @property
@@ -182,21 +171,24 @@ class Session:
 
     @stuck_at.setter
     def stuck_at(self, values: Any) -> None:
+        checked = self._per_input("stuck_at", values, " (NaN where free)")
+        if checked is not None and np.isinf(checked).any():
+            raise ConfigError("stuck_at", values, "must be finite (NaN where free)")
+        self._stuck_at = checked
+
+    def _per_input(self, name: str, values: Any, free: str) -> np.ndarray | None:
+        """``values`` as a read-only array of one number per input (None stays None), or
+        one ConfigError line naming ``name``; ``free`` says how a free input is written."""
         if values is None:
-            self._stuck_at = None
-            return
+            return None
         try:
             checked = np.array(values, dtype=float)
         except (TypeError, ValueError):
-            raise ConfigError("stuck_at", values, "must be numbers (NaN where free)") from None
+            raise ConfigError(name, values, f"must be numbers{free}") from None
         if checked.shape != (self.n_inputs,):
-            raise ConfigError(
-                "stuck_at", values, f"must have one value per input ({self.n_inputs})"
-            )
-        if np.isinf(checked).any():
-            raise ConfigError("stuck_at", values, "must be finite (NaN where free)")
+            raise ConfigError(name, values, f"must have one value per input ({self.n_inputs})")
         checked.setflags(write=False)
-        self._stuck_at = checked
+        return checked
 
     @property
     def initial_state(self) -> np.ndarray:
