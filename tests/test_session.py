@@ -270,7 +270,7 @@ def test_every_log_field_is_cut_by_first():
     assert all(len(getattr(cut, name)) == 4 for name in PER_SAMPLE)
     assert all(len(getattr(cut, name)) == 3 for name in PER_COMMAND)
     assert all(len(values) == 3 for values in cut.diagnostics.values())
-    assert len(cut.diagnostics) == len(SIX_DOF_LOG.diagnostics) == 5
+    assert len(cut.diagnostics) == len(SIX_DOF_LOG.diagnostics) == 6
 
 
 def test_what_is_not_a_scenario_is_refused_in_one_line():

@@ -71,9 +71,11 @@ from auvmpc.controllers.config import (
     WholeVehicleConfig,
     type_field,
 )
+from auvmpc.controllers.schedule import ReferenceSchedule
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
+from auvmpc.models.level_flight import fastest_level_flight
 from auvmpc.models.six_dof import (
     PITCH_LIMIT_RAD,
     SIX_DOF,
@@ -92,6 +94,7 @@ NX = SIX_DOF.size
 # The reference rows a 6-DOF controller sees (controllers/channels.py, ReferenceWithDepth):
 # [x, y, psi, u, v, r, z, z'].
 _REF_XY, _REF_R, _REF_Z = slice(0, 2), 5, 6
+_REF_PSI = 2
 _XY = SIX_DOF.span("x", "y")
 _Z, _PHI, _THETA, _PSI = (SIX_DOF.index(name) for name in ("z", "phi", "theta", "psi"))
 _U = SIX_DOF.index("u")
@@ -231,6 +234,8 @@ class SixDofNmpc(ShelledController):
         # The observer's one-step prediction and how it moves with the horizontal current,
         # from one evaluation (one call per sample on the controller's step).
         predicted = step(x, u, current, share)
+        # The model in still water as the vehicle is (its effectiveness), for its level flight
+        self._flow = ca.Function("flow", [x, u, share], [derivative(x, u * share, still, still)])
         self._prediction = ca.Function(
             "prediction", [x, u, current, share],
             [predicted, ca.jacobian(predicted, current)[:, 0:2]],
@@ -304,6 +309,8 @@ class SixDofNmpc(ShelledController):
         self._sample: tuple | None = None  # (state, share, stuck values or None) now
         self._fix_correction = np.zeros(2)  # filtered less measured horizontal position (m)
         self._last_fix: tuple[np.ndarray, np.ndarray] | None = None
+        self._schedule = ReferenceSchedule(self.sample_time, _REF_PSI)
+        self._level_speeds: dict[tuple, float | None] = {}  # by the fault (_pace's key)
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
@@ -311,7 +318,11 @@ class SixDofNmpc(ShelledController):
         share, lower, upper, previous, stuck = self._fixed_at_stuck(observation, share, previous)
         self._estimate_current(state)
         self._sample = (state, share, stuck)
-        nodes = self._nodes(state, observation.reference)
+        speed = self._pace(share, lower, upper, previous, observation.reference)
+        reference = self._schedule.rows(
+            observation.k, observation.reference, self.horizon, speed, self._current[:2]
+        )
+        nodes = self._nodes(state, reference)
         parameters = np.concatenate([state, previous, nodes.ravel(order="F"), self._current, share])
         w0, lam0 = self._guess if self._guess is not None else self._cold(state, previous)
         started = time.perf_counter()
@@ -327,11 +338,12 @@ class SixDofNmpc(ShelledController):
         # time limit) is a failure, so the run's fallback metrics see every such sample.
         if not (stats["success"] and np.all(np.isfinite(w))):
             self._solution = None
-            return Proposal(None, solve_time, iterations)
+            return Proposal(None, solve_time, iterations, details=self._details(observation.k))
         states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
         plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
         self._solution = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
-        return Proposal(plan, solve_time, iterations, predicted_states=states.T)
+        return Proposal(plan, solve_time, iterations, predicted_states=states.T,
+                        details=self._details(observation.k))  # fmt: skip
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Warm-start the next solve from this one's (none after a fallback), and predict
@@ -364,6 +376,31 @@ class SixDofNmpc(ShelledController):
             bound[self._n_states :].reshape(self.horizon, self.n_inputs)[:, held] = value[held]
         share = np.where(held, 1.0, share)
         return share, lower, upper, np.where(held, value, previous), stuck
+
+    def _pace(self, share, lower, upper, previous, reference) -> float | None:
+        """The speed through the water (m/s) the vehicle can hold its depth at as it is now
+        (models/level_flight.py: its fastest level flight, no faster than the mission asks
+        over the preview), or None: healthy, or no level flight at all (then the mission's
+        pace is flown as it is, whatever comes of it). Solved once per fault."""
+        if np.all(share >= 1.0) and np.array_equal(lower, self._lbw):
+            return None
+        first = self._n_states  # the first move's bounds: the stuck inputs' values in them
+        low, high = lower[first : first + self.n_inputs], upper[first : first + self.n_inputs]
+        key = (tuple(np.round(share, 6)), tuple(np.round(low, 6)), tuple(np.round(high, 6)))
+        if key not in self._level_speeds:
+            ground = np.diff(np.asarray(reference, dtype=float)[:, _REF_XY], axis=0)
+            asked = np.hypot(*(ground / self.sample_time - self._current[:2]).T).max()
+            x, u = ca.SX.sym("x", NX), ca.SX.sym("u", self.n_inputs)
+            flow = ca.Function("flow_now", [x, u], [self._flow(x, u, share)])
+            flight = fastest_level_flight(flow, low, high, float(asked), PITCH_BOUND_RAD,
+                                          start=previous)  # fmt: skip
+            self._level_speeds[key] = None if flight is None else flight.speed
+        return self._level_speeds[key]
+
+    def _details(self, k: int) -> dict[str, float]:
+        """What the log keeps of this controller's own: how far behind the mission's clock
+        its schedule flies (s)."""
+        return {"schedule_lag_s": self._schedule.lag(k) * self.sample_time}
 
     def _estimate_current(self, state: np.ndarray) -> None:
         """The world-frame horizontal current, moved by ``current_gain`` of the least-squares

@@ -53,6 +53,7 @@ from auvmpc.sim.metrics import (
     compute_metrics,
     compute_six_dof_metrics,
     fault_metrics,
+    reference_as_flown,
     reference_path,
     six_dof_fault_metrics,
 )
@@ -440,7 +441,10 @@ class SixDofKind(HorizontalKind):
         return SixDofFaultDetector(model, sample_time, substeps, np.array([u, v, v, r, r, r]))
 
     def metrics(self, resolved, log: SimLog) -> dict[str, Any]:
-        """The horizontal kind's, and what a fault cost in depth and off the path."""
+        """The horizontal kind's, and what a fault cost in depth and off the path, against
+        the reference as the controller flew it (a vehicle that slowed for a fault follows
+        the path later: sim/metrics.py, reference_as_flown)."""
+        log = reference_as_flown(log)
         metrics = super().metrics(resolved, log)
         scenario = resolved.scenario
         if scenario.faults:

@@ -574,6 +574,9 @@ SIX_DOF_LOG = LogFormat(
         Diagnostic("depth_status", ("depth_status",), "depth_status", text=True),
         # how many thrusters' demand the mapping had to change (rate or force limit)
         Diagnostic("saturated", ("saturated",), "saturated", dtype=int),
+        # how far behind the mission's clock the controller flew the reference (s): a
+        # vehicle too crippled to keep its pace follows the path later (controllers/schedule.py)
+        Diagnostic("schedule_lag_s", ("schedule_lag_s",)),
     ),
     columns=(
         Column(("t",), "t"),
@@ -587,6 +590,7 @@ SIX_DOF_LOG = LogFormat(
         Column(CURRENT_NAMES, "environment"),
         Column(("depth_solve_ms",), "depth_solve_ms"),
         Column(("depth_status",), "depth_status", text=True),
+        Column(("schedule_lag_s",), "schedule_lag_s", optional=True),
     ),
     horizontal_part=HorizontalPart(
         HORIZONTAL_INDEX, _HORIZONTAL_REFERENCE, SIX_DOF_MEASUREMENT.span("x", "r")

@@ -37,6 +37,7 @@ __all__ = [
     "cross_track_error",
     "fault_metrics",
     "six_dof_fault_metrics",
+    "reference_as_flown",
     "input_limits",
     "reference_path",
     "detour_samples",
@@ -499,9 +500,15 @@ def compute_six_dof_metrics(
             "actuator_limit_violations": every_thruster["thrust_limit_violations"],
             "actuator_rate_violations": every_thruster["thrust_rate_violations"],
             "cross_track_rms_after_transient_m": _rms(cross_track[steady]),
+            "max_schedule_lag_s": float(schedule_lag(log).max()),
         }
     )
     trouble = []
+    if metrics["max_schedule_lag_s"] >= log.sample_time:
+        trouble.append(
+            f"flew {metrics['max_schedule_lag_s']:.3g} s behind the mission's schedule "
+            "(slowed to hold its depth)"
+        )
     if metrics["thrust_limit_violations"] or metrics["thrust_rate_violations"]:
         trouble.append(
             f"thrust limits violated ({metrics['thrust_limit_violations']} force, "
@@ -518,6 +525,32 @@ def compute_six_dof_metrics(
     elif trouble:
         metrics["verdict_reason"] = "; ".join([str(metrics["verdict_reason"]), *trouble])
     return metrics
+
+
+def schedule_lag(log: SimLog) -> np.ndarray:
+    """(N+1,) how far behind the mission's clock the controller flew the reference at each
+    sample (s; controllers/schedule.py): 0 throughout for a log without the column, and the
+    final row's the last command's."""
+    if "schedule_lag_s" not in log.format.diagnostic_fields or not log.steps:
+        return np.zeros(len(log.t))
+    lag = np.ravel(log.diagnostics["schedule_lag_s"])
+    return np.append(lag, lag[-1])
+
+
+def reference_as_flown(log: SimLog) -> SimLog:
+    """``log`` with its reference rows as the controller flew them, each sample's taken at
+    t - :func:`schedule_lag` (linear in between, the heading unwrapped): a vehicle that slowed
+    for a fault is judged against the path it followed on its own, later, clock, and its lag
+    is reported beside (``max_schedule_lag_s``); the log itself where it never slowed."""
+    lag = schedule_lag(log)
+    if not lag.any():
+        return log
+    flown = log.first(len(log.t))
+    rows = log.reference.copy()
+    rows[:, _HEADING] = np.unwrap(rows[:, _HEADING])
+    at = log.t - lag
+    flown.reference = np.column_stack([np.interp(at, log.t, column) for column in rows.T])
+    return flown
 
 
 def reference_path(reference: Reference, end_s: float, sample_time: float) -> np.ndarray:
