@@ -37,6 +37,14 @@ vehicle's motion depends on where it is, so starting from the filtered position 
 program started from the fix with the position targets moved back by the filter's
 correction (``_nodes``).
 
+A vehicle that a fault leaves unable to keep the mission's pace (a stuck input, declared or
+found; an input below full effectiveness) is flown no faster than its fastest straight,
+level flight as it is now (models/level_flight.py, solved once per fault): a jammed stern
+plane holds the depth at one speed only, and at the mission's it dives or climbs whatever
+the propeller does. The path is then followed on the controller's own, slower clock
+(controllers/schedule.py); the log keeps how far behind the mission it flies
+(``schedule_lag_s``). Healthy, the reference rows are the loop's, untouched.
+
 Safety shell (controllers/shell.py, the one every optimising controller has): only a
 converged solve is a proposal; one that failed, did not converge within ``max_iterations`` or
 came later than ``solver_time_limit_ms`` is replaced by the previous plan's next move
