@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import auvmpc
+from auvmpc.environment.disturbances import DisturbanceConfig, WorldDisturbance
 from auvmpc.errors import ConfigError
 from auvmpc.estimation.fault_detection import FaultDetector
 from auvmpc.experiments.run import RunSession, run_plant
@@ -19,6 +20,7 @@ from auvmpc.models.vehicle import load_vehicle
 from auvmpc.scenario.faults import ActuatorFault
 from auvmpc.sim.faults import FaultSchedule, FaultyPlant
 from auvmpc.sim.loop import run_session
+from auvmpc.sim.plant import PlantStepper, SixDofPlant
 from tests.test_cli import run_cli
 
 DEAD_F3 = "faults=[{actuator: F3, at: 50.0, effectiveness: 0.0}]"
@@ -38,19 +40,48 @@ def _four_thrusters() -> ActuatorSet:
 
 
 def test_the_schedule_delivers_each_fault_from_its_sample_on():
-    """Effectiveness scales the command, stuck_at replaces it, from the first sample at or
-    after ``at`` (a time k Te a little below ``at`` by round-off counts as reached); the
-    declared ones only are what the controller is told, a stuck one as not acting."""
+    """Effectiveness is the share of the force that acts (the command is followed as it is),
+    stuck_at replaces the command, from the first sample at or after ``at`` (a time k Te a
+    little below ``at`` by round-off counts as reached); the declared ones only are what the
+    controller is told, a stuck one as not acting."""
     faults = [
         ActuatorFault(actuator="F2", at=1.5, effectiveness=0.25),
         ActuatorFault(actuator="F4", at=3 * 0.1 * 5, stuck_at=-4.0, declared=True),
     ]
     schedule = FaultSchedule(faults, _four_thrusters(), duration=10.0)
     command = np.array([1.0, 8.0, -2.0, 6.0])
-    np.testing.assert_array_equal(schedule.delivered(command, 1.0), command)
-    assert schedule.declared(1.0) is None
-    np.testing.assert_array_equal(schedule.delivered(command, 15 * 0.1), [1.0, 2.0, -2.0, -4.0])
+    delivered, effectiveness = schedule.delivered(command, 1.0)
+    np.testing.assert_array_equal(delivered, command)
+    assert effectiveness is None and schedule.declared(1.0) is None
+    delivered, effectiveness = schedule.delivered(command, 15 * 0.1)
+    np.testing.assert_array_equal(delivered, [1.0, 8.0, -2.0, -4.0])
+    np.testing.assert_array_equal(effectiveness, [1.0, 0.25, 1.0, 1.0])
     np.testing.assert_array_equal(schedule.declared(1.5), [1.0, 1.0, 1.0, 0.0])
+
+
+def test_a_thrusters_effectiveness_is_the_share_of_its_command_to_the_bit(jmse, bluerov):
+    """A thruster's force is linear in its command: a plant stepped with effectiveness e
+    (the share of each wrench) is the plant stepped with e F, to the bit, for the 3-DOF
+    plant (compiled where there is a compiler) and a thruster vehicle's 6-DOF plant; so
+    the thruster presets' faults act as they did when the plant scaled the command."""
+    e = np.array([0.0, 0.5, 1.0, 0.3])
+    disturbance = WorldDisturbance(
+        DisturbanceConfig(current_force_world=(10.0, 5.0)), 0.5, np.random.default_rng(0)
+    )
+    state, thrust = np.array([7.5, -12.0, 1.57, 0.4, 0.1, 0.06]), np.array([12, -3, 7, 15.0])
+    stepper = PlantStepper(jmse, 0.5, 10)
+    np.testing.assert_array_equal(
+        stepper(state, thrust, 0.0, disturbance, e), stepper(state, e * thrust, 0.0, disturbance)
+    )
+    plant = SixDofPlant(bluerov, None, 0.25, 0.05)
+    six_e = np.array([0.0, 0.5, 1.0, 0.3, 1.0, 0.7, 1.0, 1.0])
+    six_state = np.zeros(12)
+    six_state[6:9] = [0.3, -0.1, 0.05]
+    six_thrust = np.array([10.0, -8.0, 6.0, -4.0, 3.0, -2.0, 1.0, 5.0])
+    np.testing.assert_array_equal(
+        plant.step(six_state, six_thrust, 0.0, six_e),
+        plant.step(six_state, six_e * six_thrust, 0.0),
+    )
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,9 @@ solution, to convergence or its iteration cap):
 e(x, r): the position and depth errors, the heading's as 2 (1 - cos(psi - psi_r)), the
 surge's, and roll, pitch and the angular rates against the reference's (level, the path's
 turn rate). Each input is weighted over its own range, so rpm and degrees weigh alike; e is
-each actuator's effectiveness (a parameter: a fault changes it, not the program).
+each actuator's effectiveness, the share of its wrench that acts (a parameter: a fault
+changes it, not the program; the model scales each wrench, not the command, as the plant
+does: a propeller's thrust goes with rpm squared).
 
 Path following with a speed profile: the reference is the path's point at t_k + n Te. A
 vehicle that can push sideways tracks the reference's heading; one that cannot (a torpedo:
@@ -227,13 +229,13 @@ class SixDofNmpc(ShelledController):
     # -- the program --------------------------------------------------------------------
     def _build(self) -> None:
         config, n, nu = self.config, self.horizon, self.n_inputs
-        derivative = six_dof_model(self.model).derivative
+        derivative = six_dof_model(self.model).derivative_with_effectiveness
         x, u = ca.SX.sym("x", NX), ca.SX.sym("u", nu)
         current, share = ca.SX.sym("v_c", 3), ca.SX.sym("e", nu)
         still = ca.DM.zeros(3)
 
         def f(state, command):
-            return derivative(state, command * share, current, still)
+            return derivative(state, command, current, still, share)
 
         step = ca.Function(
             "step", [x, u, current, share],
@@ -243,7 +245,7 @@ class SixDofNmpc(ShelledController):
         # from one evaluation (one call per sample on the controller's step).
         predicted = step(x, u, current, share)
         # The model in still water as the vehicle is (its effectiveness), for its level flight
-        self._flow = ca.Function("flow", [x, u, share], [derivative(x, u * share, still, still)])
+        self._flow = ca.Function("flow", [x, u, share], [derivative(x, u, still, still, share)])
         self._prediction = ca.Function(
             "prediction", [x, u, current, share],
             [predicted, ca.jacobian(predicted, current)[:, 0:2]],

@@ -2,12 +2,12 @@
 residual (issue 26's fault detection).
 
 Each sample the nominal model predicts the velocities from the last measurement under the
-command held since, with the actuators as the controller assumes them (effectiveness e).
-If input i delivers only (1 - lambda) of that from sample j on, the measured velocities miss
-what its lost share would have given, to first order ``-lambda B_i e_i F_i`` (B: the sampled
-model's Jacobian in the acting thrust). Over a sliding window, for each input i and each
-onset j inside the window (a single fault, at an unknown time), the residuals are fitted by
-least squares to
+command held since, with the actuators as the controller assumes them (effectiveness e: the
+share of its wrench each makes). If input i makes only (1 - lambda) of that from sample j on,
+the measured velocities miss what its lost share would have given, to first order
+``-lambda B_i e_i F_i`` (B: the sampled model's Jacobian in the acting thrust). Over a
+sliding window, for each input i and each onset j inside the window (a single fault, at an
+unknown time), the residuals are fitted by least squares to
 
     r_k = c + lambda g_ki [k >= j],      g_ki = -B_k[:, i] e_i F_ki,
 
@@ -19,7 +19,8 @@ Systems*, 2006): an input is found failed when its lambda is between :data:`LOSS
 :data:`LOSS_MOST` and its score reaches :data:`LOSS_SIGMAS`; one sample is enough, as the
 fault must first be isolated to one input (:data:`ISOLATION`). Found, it is taken as dead:
 the controller stops relying on it, the window restarts, and the prediction leaves it out
-(a second fault is found the same way).
+(a second fault is found the same way). That is the horizontal detector's rule;
+the 6-DOF detector's (below) reports the share left instead.
 Dead, not its estimated share: a single sample's estimate is rough (a first version of this
 detector, one joint fit of every input, read a dead thruster on the BlueROV2 Heavy's helix
 as 58 % lost, and the controller, relying on the rest, let the heading go 0.5 rad off until
@@ -31,25 +32,32 @@ remaining force, the other one the vehicle's heading.
 :class:`SixDofFaultDetector` watches every input of the 6-DOF model (thrusters, a propeller,
 fins: ``vehicle.six_dof_actuators``) with the same fit, on the six body velocities. Its
 inputs need not be linear (a propeller's thrust grows with rpm squared, a fin's lift with
-the flow's speed squared), so its loss regressor is the secant ``g_ki = x(a_k, a_ki = 0) -
-x(a_k)`` (a = e F, what acts): exact for a dead input, which the tangent is not (at cruise,
-the REMUS 100 propeller's tangent times its rpm is 3.6 times its thrust). And it has a
-second hypothesis, an input stuck at a value s whatever it is commanded (a fin jammed at an
-angle, whose lift still acts):
+the flow's speed squared), so its loss regressor is the secant ``g_ki = x(F_k; e_i = 0) -
+x(F_k; e)``, the input's whole wrench taken away: lambda g_ki is then the loss of lambda of
+its wrench to first order in the state's change over one sample, where the tangent times the
+command is not (at cruise, the REMUS 100 propeller's tangent times its rpm is 3.6 times its
+thrust). A loss found keeps 1 - lambda of the wrench assumed (clipped to [0, 1]): the
+torpedo's propeller is its only thrust, and a weak one taken as dead leaves the controller
+none; the loss is reported from :data:`SIX_DOF_LOSS_FOUND` on, its score the guard against
+model error. And it has a second hypothesis, an input stuck at a value s whatever it is
+commanded (a fin jammed at an angle, whose lift still acts):
 
-    r_k = c + [k >= j] (x(a_k, a_ki = s) - x(a_k)) ~ c + [k >= j] B_k[:, i] (s - a_ki),
+    r_k = c + [k >= j] (x(F_k; F_ki = s) - x(F_k)) ~ c + [k >= j] B_k[:, i] (s - F_ki),
 
-linear in s; each input's likelier hypothesis (the smaller residual sum of squares) is its
-fit. A stuck input is found when its score (the fit's gain over no fault, in the window's
-scatter: :data:`LOSS_SIGMAS` as for a loss) is high enough, s is inside its limits, and the
-commands it failed to follow were on average :data:`STUCK_FOUND` of its range or more away
-from s; s is then refined by Gauss-Newton on the model itself (the tangent's error for a
-propeller) and told to the controller (``Observation.stuck_at``).
+linear in s (B: the Jacobian in the command); each input's likelier hypothesis is its fit:
+the stuck one only where its residual sum of squares is at most :data:`ISOLATION` of the
+loss's (a propeller whose rpm barely moves, made weak, fits a lower rpm held almost as well,
+and held there it could not speed up; a loss keeps it commanded). A stuck input is found
+when its score (the fit's gain over no fault, in the window's scatter: :data:`LOSS_SIGMAS` as
+for a loss) is high enough, s is inside its limits, and the commands it failed to follow
+were on average :data:`STUCK_FOUND` of its range or more away from s; s is then refined by
+Gauss-Newton on the model itself (the tangent's error for a propeller) and told to the
+controller (``Observation.stuck_at``).
 
-Limits, by design: a lost share below :data:`LOSS_FOUND` is not reported (model error of
-the size the presets carry, 20-30 %, must not read as a fault); an input that is not
-commanded away from a constant over the window cannot be told from the constant ``c``
-and is found only once its command moves.
+Limits, by design: a lost share below :data:`LOSS_FOUND` (the 6-DOF detector's
+:data:`SIX_DOF_LOSS_FOUND`) is not reported (model error of the size the presets carry,
+20-30 %, must not read as a fault); an input that is not commanded away from a constant over
+the window cannot be told from the constant ``c`` and is found only once its command moves.
 """
 
 from __future__ import annotations
@@ -70,6 +78,10 @@ __all__ = ["FaultDetector", "FaultFound", "SixDofFaultDetector"]
 
 # An input is reported failed when at least this share of its assumed force is missing.
 LOSS_FOUND = 0.5
+# The 6-DOF detector reports a lost share from this on: it reports the share left (a weak
+# propeller is the torpedo's only thrust), and its score alone kept the presets' model error
+# from reading as a fault (docs/faults.md, measured).
+SIX_DOF_LOSS_FOUND = 0.2
 # A loss estimate beyond this is not an actuator that stopped (it cannot lose more than
 # its force, 1, by more than the estimate's scatter): the model missed something else.
 LOSS_MOST = 1.5
@@ -106,13 +118,16 @@ _NU = HORIZONTAL.nu
 
 @dataclass(frozen=True)
 class FaultFound:
-    """One detection: input ``index`` has failed: dead from then on, or stuck at
-    ``stuck_at`` (its own unit)."""
+    """One detection: input ``index`` has failed: it keeps ``remaining`` of the wrench it was
+    assumed to make from then on, or is stuck at ``stuck_at`` (its own unit)."""
 
     index: int
     lost: float | None  # lambda: the share of the assumed force found missing (None: stuck)
     sigmas: float  # its score: its gain over no fault in the window's scatter (LOSS_SIGMAS)
     stuck_at: float | None = None  # the value it holds whatever commanded (None: a loss)
+    # The share of its assumed wrench the controller is to take it as making from then on:
+    # 0 (dead) for the horizontal detector and a stuck input, 1 - lambda for a 6-DOF loss.
+    remaining: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -136,8 +151,9 @@ class _Row:
 
     residual: np.ndarray  # (m,) measured less predicted velocities, noise-weighted
     loss: np.ndarray  # (m, n) the loss regressors g_ki
-    jacobian: np.ndarray | None  # (m, n) B_k: the velocities' Jacobian in what acts
-    acting: np.ndarray  # (n,) a_k = e F: what the prediction took as acting
+    jacobian: np.ndarray | None  # (m, n) B_k: the velocities' Jacobian in the command
+    command: np.ndarray  # (n,) F_k: what the inputs were to follow (a known stuck one's value)
+    effectiveness: np.ndarray  # (n,) e: the share of its wrench each was taken to make
     watched: np.ndarray  # (n,) bool: inputs not known stuck
     before: np.ndarray  # the measured state the prediction started from
     measured: np.ndarray  # (m,) the measured velocities it is compared with
@@ -150,6 +166,8 @@ class FaultDetector:
 
     #: Whether an input stuck at a value is a hypothesis beside a loss.
     finds_stuck = False
+    #: The least lost share reported (module docstring).
+    loss_found = LOSS_FOUND
     #: The state :meth:`check` is given, by name, and where its velocities are in it.
     state_names = HORIZONTAL.names
     velocities: slice | np.ndarray = _NU
@@ -205,12 +223,13 @@ class FaultDetector:
         self._held = (self._state, command, effectiveness, watched)
 
     def _predict(
-        self, before: np.ndarray, acting: np.ndarray
+        self, before: np.ndarray, command: np.ndarray, effectiveness: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """The velocities predicted from ``before`` under ``acting`` (m,), the loss
-        regressors (m, n) and, for a detector that finds stuck inputs, the velocities'
-        Jacobian in ``acting`` (m, n)."""
+        """The velocities predicted from ``before`` under ``command`` with ``effectiveness``
+        (m,), the loss regressors (m, n) and, for a detector that finds stuck inputs, the
+        velocities' Jacobian in the command (m, n)."""
         still = np.zeros(len(DISTURBANCE_NAMES))  # the window's constant takes any force
+        acting = effectiveness * command  # a thruster's force is linear in its command
         predicted, _, jacobian = self._step(before, acting, still, self._healthy)
         return np.asarray(predicted).ravel()[_NU], -np.asarray(jacobian)[_NU, :] * acting, None
 
@@ -222,8 +241,7 @@ class FaultDetector:
         effectiveness: np.ndarray,
         watched: np.ndarray,
     ) -> FaultFound | None:
-        acting = effectiveness * command
-        predicted, loss, jacobian = self._predict(before, acting)
+        predicted, loss, jacobian = self._predict(before, command, effectiveness)
         measured = np.asarray(state, dtype=float)[self.velocities]
         residual = (measured - predicted) * self._weights
         regressors = loss * self._weights[:, None]
@@ -231,7 +249,9 @@ class FaultDetector:
             jacobian = jacobian * self._weights[:, None]
         if not (np.isfinite(residual).all() and np.isfinite(regressors).all()):
             return None  # a state the model cannot step from says nothing of the thrusters
-        self._rows.append(_Row(residual, regressors, jacobian, acting, watched, before, measured))
+        self._rows.append(
+            _Row(residual, regressors, jacobian, command, effectiveness, watched, before, measured)
+        )
         if len(self._rows) < self.window:
             return None
         best = self._likeliest_fault()
@@ -239,12 +259,18 @@ class FaultDetector:
             return None
         stuck_at = None if best.stuck_at is None else self._refined(best)
         self._rows.clear()
-        return FaultFound(best.index, best.lost, best.sigmas, stuck_at)
+        remaining = 0.0 if stuck_at is not None else self._remaining(best.lost)
+        return FaultFound(best.index, best.lost, best.sigmas, stuck_at, remaining)
+
+    def _remaining(self, lost: float) -> float:
+        """The share of its assumed wrench a lost input is taken to keep: none (module
+        docstring: why dead)."""
+        return 0.0
 
     def _found(self, fit: _Fit) -> bool:
         """Whether ``fit`` is a fault to report (module docstring)."""
         if fit.stuck_at is None:
-            return LOSS_FOUND <= fit.lost <= LOSS_MOST and fit.sigmas >= LOSS_SIGMAS
+            return self.loss_found <= fit.lost <= LOSS_MOST and fit.sigmas >= LOSS_SIGMAS
         return fit.sigmas >= LOSS_SIGMAS and self._stuck_plausible(fit)
 
     def _stuck_plausible(self, fit: _Fit) -> bool:
@@ -275,10 +301,13 @@ class FaultDetector:
             loss = self._loss_fit(i, onsets, regressors[:, :, i], centred_r, dof)
             stuck = self._stuck_fit(i, onsets, residuals, dof) if self.finds_stuck else None
             opposed = stuck is not None and stuck.opposed and loss is not None and loss.lost > 1
-            if stuck is not None and (loss is None or stuck.rss <= loss.rss or opposed):
-                # (a loss of more than all the force, where the stuck fit's value is of the
-                # other sign than the commands, is the input pushing against its command: a
-                # jam the other way, which a command held still cannot tell from a loss)
+            clearer = loss is None or stuck is not None and stuck.rss <= ISOLATION * loss.rss
+            if stuck is not None and (clearer or opposed):
+                # (stuck only where it explains the window clearly better than a loss: module
+                # docstring. A loss of more than all the force, where the stuck fit's value is
+                # of the other sign than the commands, is the input pushing against its
+                # command: a jam the other way, which a command held still cannot tell from a
+                # loss)
                 fits.append(stuck)
             elif loss is not None:
                 fits.append(loss)
@@ -317,14 +346,14 @@ class FaultDetector:
     def _stuck_fit(
         self, i: int, onsets: np.ndarray, residuals: np.ndarray, dof: int
     ) -> _Fit | None:
-        """Input i stuck at s from onset j: r_k + [k >= j] B_ki a_ki = c + s [k >= j] B_ki
+        """Input i stuck at s from onset j: r_k + [k >= j] B_ki F_ki = c + s [k >= j] B_ki
         (module docstring), fitted for each onset; the onset of the smallest residual sum of
         squares, its score the fit's gain over no fault in the window's scatter."""
         jacobian = np.array([row.jacobian[:, i] for row in self._rows])  # (W, m)
-        acting = np.array([row.acting[i] for row in self._rows])  # (W,)
+        commanded = np.array([row.command[i] for row in self._rows])  # (W,)
         on = onsets.T[:, :, None]  # (j, W, 1)
         x = on * jacobian[None]
-        y = residuals[None] + x * acting[None, :, None]
+        y = residuals[None] + x * commanded[None, :, None]
         x = x - x.mean(axis=1, keepdims=True)
         y = y - y.mean(axis=1, keepdims=True)
         spread = np.einsum("jkm,jkm->j", x, x)
@@ -338,7 +367,7 @@ class FaultDetector:
         centred = residuals - residuals.mean(axis=0)
         gain = max(float(np.einsum("km,km->", centred, centred)) - float(rss[j]), 0.0)
         sigmas = np.sqrt(gain / max(rss[j] / dof, 1.0))
-        after = acting[j + 1 :]
+        after = commanded[j + 1 :]
         gap = float(np.sqrt(np.mean((stuck[j] - after) ** 2)))
         opposed = bool(stuck[j] * np.mean(after) < 0.0)
         return _Fit(
@@ -348,26 +377,28 @@ class FaultDetector:
 
 
 def _six_dof_one_step(model: VehicleParams, sample_time: float, substeps: int) -> ca.Function:
-    """(x, a) -> (nu_next (6,), its Jacobian in a (6, n), the secants nu_next(a_i = 0) -
-    nu_next(a) (6, n)): the 6-DOF model's RK4 step in still water under the acting inputs."""
-    derivative = six_dof_model(model).derivative
+    """(x, F, e) -> (nu_next (6,), its Jacobian in F (6, n), the secants nu_next(e_i = 0) -
+    nu_next(e) (6, n)): the 6-DOF model's RK4 step in still water under the commands F, each
+    input making the share e of its wrench."""
+    derivative = six_dof_model(model).derivative_with_effectiveness
     n = model.six_dof_actuators.size
-    x, a = ca.SX.sym("x", SIX_DOF.size), ca.SX.sym("a", n)
+    x, command, e = ca.SX.sym("x", SIX_DOF.size), ca.SX.sym("F", n), ca.SX.sym("e", n)
     still = ca.DM.zeros(3)  # the window's constant takes the current's share
 
-    def velocities(acting):
-        following = rk4(lambda s, u: derivative(s, u, still, still), x, acting, sample_time,
-                        substeps)  # fmt: skip
+    def velocities(share):
+        following = rk4(lambda s, u: derivative(s, u, still, still, share), x, command,
+                        sample_time, substeps)  # fmt: skip
         return following[SIX_DOF.nu]
 
-    following = velocities(a)
+    following = velocities(e)
     without = [
-        velocities(ca.vertcat(*(0 if j == i else a[j] for j in range(n)))) - following
+        velocities(ca.vertcat(*(0 if j == i else e[j] for j in range(n)))) - following
         for i in range(n)
     ]
     return ca.Function(
-        "fault_one_step", [x, a], [following, ca.jacobian(following, a), ca.horzcat(*without)]
-    )
+        "fault_one_step", [x, command, e],
+        [following, ca.jacobian(following, command), ca.horzcat(*without)],
+    )  # fmt: skip
 
 
 class SixDofFaultDetector(FaultDetector):
@@ -377,6 +408,7 @@ class SixDofFaultDetector(FaultDetector):
     :meth:`check` takes the whole measured 6-DOF state."""
 
     finds_stuck = True
+    loss_found = SIX_DOF_LOSS_FOUND
     state_names = SIX_DOF.names
     velocities = SIX_DOF.nu
 
@@ -395,12 +427,17 @@ class SixDofFaultDetector(FaultDetector):
         self._watch(inputs.size, SIX_DOF.size, sample_time, velocity_noise)
 
     def _predict(
-        self, before: np.ndarray, acting: np.ndarray
+        self, before: np.ndarray, command: np.ndarray, effectiveness: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        predicted, jacobian, secants = self._one_step(before, acting)
+        predicted, jacobian, secants = self._one_step(before, command, effectiveness)
         return (
             np.asarray(predicted).ravel(), np.asarray(secants), np.asarray(jacobian)
         )  # fmt: skip
+
+    def _remaining(self, lost: float) -> float:
+        """The share of its assumed wrench a lost input keeps: 1 - lambda, in [0, 1] (module
+        docstring: a weak propeller is the torpedo's only thrust)."""
+        return float(np.clip(1.0 - lost, 0.0, 1.0))
 
     def _stuck_plausible(self, fit: _Fit) -> bool:
         """Inside the input's limits (to STUCK_BEYOND of its range) and far enough from the
@@ -420,10 +457,10 @@ class SixDofFaultDetector(FaultDetector):
         for _ in range(STUCK_REFINEMENTS):
             errors, columns = [], []
             for row, acts in zip(rows, on, strict=True):
-                acting = row.acting.copy()
+                command = row.command.copy()
                 if acts:
-                    acting[i] = stuck
-                predicted, jacobian, _ = self._one_step(row.before, acting)
+                    command[i] = stuck
+                predicted, jacobian, _ = self._one_step(row.before, command, row.effectiveness)
                 errors.append((row.measured - np.asarray(predicted).ravel()) * self._weights)
                 columns.append(acts * np.asarray(jacobian)[:, i] * self._weights)
             error, column = np.array(errors), np.array(columns)

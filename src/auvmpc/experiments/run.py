@@ -193,7 +193,7 @@ class RunSession(Session):
         if self.fault_detector is not None:
             finished.fault_detections = [
                 {"actuator": self.input_names[found.index], "t_s": t, "lost": found.lost,
-                 "score": found.sigmas,
+                 "remaining": found.remaining, "score": found.sigmas,
                  **({} if found.stuck_at is None else {"stuck_at": found.stuck_at})}
                 for _, t, found in self.faults_found
             ]  # fmt: skip

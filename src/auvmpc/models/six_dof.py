@@ -8,7 +8,10 @@ Hydrodynamics and Motion Control*, 2nd ed., 2021):
   convert at the boundary, never here.
 - State ``[x, y, z, phi, theta, psi, u, v, w, p, q, r]`` = [eta; nu]: position (m), zyx Euler
   angles (rad), body linear (m/s) and angular (rad/s) velocity. Input: one force per
-  ``six_dof`` thruster (N), tau = T F.
+  ``six_dof`` thruster (N), tau = T F; or each actuator's command in its own unit (rpm, deg),
+  tau the sum of their wrenches (models/actuators). Actuator effectiveness e (faults: each
+  actuator's share of its wrench that acts, 1 healthy, 0 dead) scales each wrench
+  (``ActuatorSet.force``), never the command: a propeller's thrust goes with rpm squared.
 - Current: water velocity v_c (m/s, world frame, irrotational) at the vehicle and v_c' its
   rate of change along the vehicle's path (m/s2; zero for a current uniform in space and
   constant in time). Body frame nu_c = [R^T v_c; 0]; relative velocity nu_r = nu - nu_c.
@@ -216,7 +219,9 @@ def _entries(vector):
     return [vector[i] for i in range(3)]
 
 
-def _expression(params: VehicleParams, state, thrust, current_world, current_rate_world):
+def _expression(
+    params: VehicleParams, state, thrust, current_world, current_rate_world, effectiveness=None
+):
     six = six_dof_section(params)
     r_g = np.array(six.center_of_gravity, dtype=float)
     r_b = np.array(six.center_of_buoyancy, dtype=float)
@@ -243,7 +248,7 @@ def _expression(params: VehicleParams, state, thrust, current_world, current_rat
         - ca.DM(np.array(six.quadratic_damping)) * ca.fabs(nu_r) * nu_r
     )  # D(nu_r) nu_r, diagonal: element-wise
     g = restoring_forces(six.weight(params.mass), six.buoyancy, r_g, r_b, phi, theta)
-    tau = params.six_dof_actuators.force(nu_r, thrust)
+    tau = params.six_dof_actuators.force(nu_r, thrust, effectiveness=effectiveness)
     if six.hull_lift is not None:
         tau = tau + hull_lift(six.hull_lift, nu_r)
 
@@ -272,7 +277,9 @@ class SixDofModel:
     """The 6-DOF model of one vehicle as compiled CasADi functions, built once.
 
     ``derivative(x, F, v_c, v_c')`` is the model; ``step(x, F, v_c, h)`` is one RK4 step of
-    length h under a current uniform in space and constant over the step.
+    length h under a current uniform in space and constant over the step. Their
+    ``..._with_effectiveness`` forms take each actuator's effectiveness ``e`` (n,) last: the
+    share of its wrench that acts (module docstring); the plain forms are all healthy.
     """
 
     layout = SIX_DOF
@@ -283,21 +290,32 @@ class SixDofModel:
         self.n_thrusters = params.six_dof_actuators.size  # inputs: thrusts, or rpm and angles
         state, thrust = ca.SX.sym("x", NX), ca.SX.sym("F", self.n_thrusters)
         current, current_rate = ca.SX.sym("v_c", 3), ca.SX.sym("v_c_rate", 3)
-        derivative = _expression(params, state, thrust, current, current_rate)
-        self.derivative = ca.Function(
-            "six_dof", [state, thrust, current, current_rate], [derivative],
-            ["x", "F", "v_c", "v_c_rate"], ["x_dot"],
-        )  # fmt: skip
-        h = ca.SX.sym("h")
+        share, h = ca.SX.sym("e", self.n_thrusters), ca.SX.sym("h")
         still = ca.DM.zeros(3)
 
-        def f(x, u):
-            return self.derivative(x, u, current, still)
+        def functions(acting, suffix: str) -> tuple[ca.Function, ca.Function]:
+            """The derivative and the RK4 step, with ``acting`` (the effectiveness symbol)
+            their last input, or all healthy (None: the wrenches unscaled)."""
+            extra, extra_names = ([], []) if acting is None else ([acting], ["e"])
+            expression = _expression(params, state, thrust, current, current_rate, acting)
+            derivative = ca.Function(
+                "six_dof" + suffix, [state, thrust, current, current_rate, *extra], [expression],
+                ["x", "F", "v_c", "v_c_rate", *extra_names], ["x_dot"],
+            )  # fmt: skip
 
-        self.step = ca.Function(
-            "six_dof_rk4", [state, thrust, current, h], [rk4(f, state, thrust, h)],
-            ["x", "F", "v_c", "h"], ["x_next"],
-        )  # fmt: skip
+            def f(x, u):
+                return derivative(x, u, current, still, *extra)
+
+            step = ca.Function(
+                "six_dof_rk4" + suffix, [state, thrust, current, h, *extra],
+                [rk4(f, state, thrust, h)], ["x", "F", "v_c", "h", *extra_names], ["x_next"],
+            )  # fmt: skip
+            return derivative, step
+
+        self.derivative, self.step = functions(None, "")
+        self.derivative_with_effectiveness, self.step_with_effectiveness = functions(
+            share, "_with_effectiveness"
+        )
 
     def evaluate(self, state, thrust, current_world=None, current_rate_world=None) -> np.ndarray:
         """x' (12,) on NumPy input; refuses |theta| > PITCH_LIMIT_RAD."""
@@ -472,28 +490,35 @@ def integrate(
     current_at: CurrentAt | None = None,
     t0: float = 0.0,
     held_current: np.ndarray | None = None,
+    effectiveness: np.ndarray | None = None,
 ) -> np.ndarray:
     """The plant over one zero-order-hold sample: ``substeps`` RK4 steps (as the 3-DOF plant).
 
     ``current_at(t, x) -> (v_c, v_c')`` gives the water velocity at the vehicle and its rate
     along the path (world frame), e.g. from :class:`auvmpc.environment.currents.WaterCurrent`;
     without it the water velocity ``held_current`` (3,) is held over the sample (the compiled
-    RK4 step), still water if None. The pitch is checked after every step.
+    RK4 step), still water if None. ``effectiveness`` (n,): each actuator's share of its
+    wrench that acts (None: all healthy). The pitch is checked after every step.
     """
     thrust = np.asarray(thrust, dtype=float)
     state = np.asarray(state, dtype=float)
+    if effectiveness is None:
+        step, derivative, extra = model.step, model.derivative, ()
+    else:
+        step, derivative = model.step_with_effectiveness, model.derivative_with_effectiveness
+        extra = (np.asarray(effectiveness, dtype=float),)
     h = duration / substeps
     check_pitch(state)
     if current_at is None:
         held = np.zeros(3) if held_current is None else held_current
         for _ in range(substeps):
-            state = np.asarray(model.step(state, thrust, held, h), dtype=float).ravel()
+            state = np.asarray(step(state, thrust, held, h, *extra), dtype=float).ravel()
             check_pitch(state)
         return state
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         current, rate = current_at(t, x)
-        return np.asarray(model.derivative(x, thrust, current, rate), dtype=float).ravel()
+        return np.asarray(derivative(x, thrust, current, rate, *extra), dtype=float).ravel()
 
     for i in range(substeps):
         state = rk4_step_time_varying(rhs, t0 + i * h, state, h)

@@ -628,7 +628,7 @@ def dynamics(
     params : VehicleParams
     disturbance_body : (3,) [d_u, d_v, d_r] or None
     current_world : (2,) water velocity (V_x, V_y) in the world frame (m/s), or None
-    effectiveness : (n,) each thruster's share of its command that acts (1 healthy), or None
+    effectiveness : (n,) each thruster's share of its force that acts (1 healthy), or None
 
     Returns
     -------

@@ -2,8 +2,10 @@
 
 :class:`ActuatorFault` is one fault as written; sim/faults.py's ``FaultSchedule`` holds a
 run's faults on the plant's inputs, in time, and steps the plant with them. A fault acts in
-the plant: from its time on, the actuator delivers a share of its command
-(``effectiveness``: 0 dead, 0.5 half force) or a fixed value whatever it is commanded
+the plant: from its time on, the actuator makes a share of its force and moment
+(``effectiveness``: 0 dead, 0.5 half force at whatever command: a propeller at 0.5 makes
+half the thrust of its rpm, not the thrust of half the rpm) or follows a fixed value
+whatever it is commanded
 (``stuck_at``, in the actuator's own unit: N for a thruster). The controller learns of it
 only if the mission ``declared`` it (it is then told at that time, as a vehicle's health
 monitor would tell it); otherwise the fault is a disturbance to it, as at sea.
@@ -33,7 +35,9 @@ class ActuatorFault(StrictModel):
         "first sample at or after this time, when the next command is applied)"
     )
     effectiveness: Annotated[float, Field(ge=0.0, le=1.0)] | None = Field(
-        default=None, description="the share of its command it delivers from then on (0: dead)"
+        default=None,
+        description="the share of its force and moment it makes from then on, at whatever "
+        "command (0: dead, 0.5: half the force of its command)",
     )
     stuck_at: float | None = Field(
         default=None,
@@ -53,7 +57,7 @@ class ActuatorFault(StrictModel):
             raise FieldError(
                 "effectiveness" if not given else given[1],
                 None if not given else getattr(self, given[1]),
-                "give exactly one of effectiveness (a share of the command) and stuck_at "
+                "give exactly one of effectiveness (a share of the force) and stuck_at "
                 "(a fixed value)",
             )
         return self

@@ -1,6 +1,11 @@
 """A run's actuator faults in time (the scenario's ``faults``, scenario/faults.py): what the
 actuators deliver of each command, what the controller is told, and a plant stepped with
 what is delivered.
+
+Effectiveness is each actuator's share of its wrench (force and moment) that acts, never a
+share of its command: a propeller at 0.5 makes half its thrust at any rpm (scaling its rpm
+by 0.5 would make a quarter, thrust going with rpm squared). The plant scales each wrench
+(``ActuatorSet.force``), as every controller's prediction does.
 """
 
 from __future__ import annotations
@@ -77,15 +82,19 @@ class FaultSchedule:
             if t + _TIME_ROUND_OFF_S >= fault.at and (fault.declared or not declared_only):
                 yield fault, index
 
-    def delivered(self, command: np.ndarray, t: float) -> np.ndarray:
-        """What the actuators deliver of ``command`` over the sample from ``t``."""
+    def delivered(self, command: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """What the actuators follow of ``command`` over the sample from ``t`` (a stuck one
+        its value), and each one's share of its wrench that acts then (None: all healthy)."""
         delivered = np.array(command, dtype=float)
+        effectiveness = None
         for fault, index in self._acting(t):
             if fault.stuck_at is not None:
                 delivered[index] = fault.stuck_at
             else:
-                delivered[index] *= fault.effectiveness
-        return delivered
+                if effectiveness is None:
+                    effectiveness = np.ones(self.n_inputs)
+                effectiveness[index] = fault.effectiveness
+        return delivered, effectiveness
 
     def declared(self, t: float) -> np.ndarray | None:
         """Each input's effectiveness as the mission has declared it by ``t`` (None: nothing
@@ -113,8 +122,8 @@ class FaultSchedule:
 
 
 class FaultyPlant:
-    """``plant`` whose actuators fail as ``schedule`` says: it is stepped with the delivered
-    thrust (the log keeps the commanded one)."""
+    """``plant`` whose actuators fail as ``schedule`` says: it is stepped with what they
+    follow and the share of their wrench that acts (the log keeps the commanded thrust)."""
 
     def __init__(self, plant: Plant, schedule: FaultSchedule) -> None:
         self.plant = plant
@@ -127,4 +136,5 @@ class FaultyPlant:
         return self.plant.environment(t, state)
 
     def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
-        return self.plant.step(state, self.schedule.delivered(thrust, t0), t0)
+        delivered, effectiveness = self.schedule.delivered(thrust, t0)
+        return self.plant.step(state, delivered, t0, effectiveness)

@@ -78,9 +78,17 @@ class Plant(Protocol):
         """What the environment does at ``t`` (the log's ``environment_names``, one row per
         sample): a force on the vehicle, or the water's velocity."""
 
-    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+    def step(
+        self,
+        state: np.ndarray,
+        thrust: np.ndarray,
+        t0: float,
+        effectiveness: np.ndarray | None = None,
+    ) -> np.ndarray:
         """The state one sample after ``t0`` under ``thrust`` held; the environment then
-        moves on to the next sample."""
+        moves on to the next sample. ``effectiveness`` (n,): each actuator's share of its
+        wrench that acts (a fault, sim/faults.py; None: all healthy; only a plant whose
+        scenarios take faults, horizontal and 6-DOF, is given one)."""
 
 
 def substeps_for(sample_time: float, max_step: float) -> int:
@@ -112,8 +120,14 @@ class HorizontalPlant:
             [self.disturbance.force_world(t), _STILL_WATER if water is None else water]
         )
 
-    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
-        following = self.stepper(state, thrust, t0, self.disturbance)
+    def step(
+        self,
+        state: np.ndarray,
+        thrust: np.ndarray,
+        t0: float,
+        effectiveness: np.ndarray | None = None,
+    ) -> np.ndarray:
+        following = self.stepper(state, thrust, t0, self.disturbance, effectiveness)
         self.disturbance.advance()
         return following
 
@@ -178,18 +192,26 @@ class SixDofPlant:
             return np.zeros(len(SIX_DOF_LOG.environment_names))
         return self.current.at(t, state[_SIX_DOF_DEPTH], depth_rate(state))[0]
 
-    def step(self, state: np.ndarray, thrust: np.ndarray, t0: float) -> np.ndarray:
+    def step(
+        self,
+        state: np.ndarray,
+        thrust: np.ndarray,
+        t0: float,
+        effectiveness: np.ndarray | None = None,
+    ) -> np.ndarray:
         if self.profiled:
             current = self.current
             state = integrate(
                 self.model, state, thrust, self.sample_time, self.substeps,
                 lambda time_s, x: current.at(time_s, x[_SIX_DOF_DEPTH], depth_rate(x)), t0=t0,
+                effectiveness=effectiveness,
             )  # fmt: skip
         else:  # uniform in space: held over the sample
             velocity = self.environment(t0, state)
             state = integrate(
-                self.model, state, thrust, self.sample_time, self.substeps, held_current=velocity
-            )
+                self.model, state, thrust, self.sample_time, self.substeps,
+                held_current=velocity, effectiveness=effectiveness,
+            )  # fmt: skip
         if self.current is not None:
             self.current.advance()
         return state
@@ -240,14 +262,19 @@ def plant_step(
     duration: float,
     disturbance: WorldDisturbance,
     substeps: int,
+    effectiveness: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Integrate the plant over one zero-order-hold sample with RK4 sub-steps."""
+    """Integrate the plant over one zero-order-hold sample with RK4 sub-steps, each thruster
+    making ``effectiveness`` (n,) of its force (None: all healthy)."""
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         force = disturbance.force_world(t)
         d_u, d_v = body_from_world(force, x[_HEADING])
         water = disturbance.water_velocity_world(t)
-        return dynamics(x, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water)
+        return dynamics(
+            x, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water,
+            effectiveness=effectiveness,
+        )  # fmt: skip
 
     h = duration / substeps
     for i in range(substeps):
@@ -271,19 +298,27 @@ class PlantStepper:
         self.plant, self.duration, self.substeps = plant, duration, substeps
         self._native = _compiled_map(plant.model_dump_json(), duration, substeps)
         self.compiled = self._native is not None
+        self._healthy = np.ones(plant.n_thrusters)  # e u is u to the bit: no fault, no change
 
     def __call__(
-        self, state: np.ndarray, thrust: np.ndarray, t0: float, disturbance: WorldDisturbance
+        self,
+        state: np.ndarray,
+        thrust: np.ndarray,
+        t0: float,
+        disturbance: WorldDisturbance,
+        effectiveness: np.ndarray | None = None,
     ) -> np.ndarray:
         if self._native is None:
             return plant_step(
-                self.plant, state, thrust, t0, self.duration, disturbance, self.substeps
-            )
+                self.plant, state, thrust, t0, self.duration, disturbance, self.substeps,
+                effectiveness,
+            )  # fmt: skip
         times = stage_times(t0, self.duration, self.substeps)
         # (3 substeps, PLANAR_FORCE.size), time-major
         forces = disturbance.forces_world(times.ravel())
         water = disturbance.water_velocity_world(t0)
-        return self._native(state, thrust, forces, _STILL_WATER if water is None else water)
+        share = self._healthy if effectiveness is None else effectiveness
+        return self._native(state, thrust, forces, _STILL_WATER if water is None else water, share)
 
 
 # No current: the model's relative velocity is then its velocity, to the last bit (x - 0).
@@ -292,19 +327,23 @@ _STILL_WATER = np.zeros(WORLD_VECTOR.size)[HORIZONTAL_COMPONENTS].copy()  # its 
 
 @functools.lru_cache(maxsize=32)
 def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunction | None:
-    """The sample's RK4 map (x, F, forces at the stage times, time-major, water velocity)
-    -> x, compiled."""
+    """The sample's RK4 map (x, F, forces at the stage times, time-major, water velocity,
+    effectiveness) -> x, compiled."""
     plant = VehicleParams.model_validate_json(plant_json)
     x = ca.SX.sym("x", HORIZONTAL.size)
     thrust = ca.SX.sym("F", plant.n_thrusters)
     # Column j: the force at stage time j (RK4 evaluates three times per sub-step).
     forces = ca.SX.sym("forces", PLANAR_FORCE.size, 3 * substeps)
     water = ca.SX.sym("water", len(_STILL_WATER))
+    effectiveness = ca.SX.sym("e", plant.n_thrusters)
 
     def rhs(j: int, state):
         force = forces[:, j]
         d_u, d_v = body_from_world(force, state[_HEADING])
-        return dynamics(state, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water)
+        return dynamics(
+            state, thrust, plant, (d_u, d_v, force[PLANAR_MOMENT]), current_world=water,
+            effectiveness=effectiveness,
+        )  # fmt: skip
 
     h = duration / substeps
     state = x
@@ -315,4 +354,6 @@ def _compiled_map(plant_json: str, duration: float, substeps: int) -> NativeFunc
         k3 = rhs(middle, state + (0.5 * h) * k2)
         k4 = rhs(end, state + h * k3)
         state = state + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    return native_function(ca.Function("plant_sample", [x, thrust, forces, water], [state]))
+    return native_function(
+        ca.Function("plant_sample", [x, thrust, forces, water, effectiveness], [state])
+    )

@@ -290,8 +290,10 @@ class Session:
             return
         found = self.fault_detector.check(measurement[self._watched_measured])
         if found is not None:
-            # taken as dead (fault_detection.py: why), or as acting at the value found
-            self._found[found.index] = 0.0
+            # taken as keeping what the detector says of the wrench assumed so far (none for
+            # a thruster of the horizontal detector: fault_detection.py says why), or as
+            # acting at the value found
+            self._found[found.index] *= found.remaining
             if found.stuck_at is not None:
                 self._found_stuck[found.index] = found.stuck_at
             self.faults_found.append((k, float(t), found))
