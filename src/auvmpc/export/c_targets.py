@@ -10,7 +10,8 @@ the aarch64 casadi wheel of the same version fetched once by ``make hpipm-aarch6
 BLASFEO are BSD-2-Clause: redistributable with their licence.
 
 Targets: ``x86-64-generic`` and ``aarch64`` (the wheels' portable builds, GENERIC BLASFEO, no
-instruction beyond the base instruction set), and ``x86-64-tuned`` or ``aarch64-tuned``: the
+instruction beyond the base instruction set but the x86-64 wheel's HPIPM's, which is built
+with AVX: docs/onboard.md), and ``x86-64-tuned`` or ``aarch64-tuned``: the
 wheel's HPIPM over the ``--blasfeo`` library, compiled for that BLASFEO's CPU.
 
 The generic x86-64 build also carries a tuned x86-64 BLASFEO where there is one, in
