@@ -157,9 +157,10 @@ def test_a_jammed_stern_plane_is_flown_slower_and_holds_the_depth(remus):
     assert metrics["max_schedule_lag_s"] > 5.0
     # the depth held to well within the 6-DOF verdict's 0.5 m (measured 0.09 m RMS)
     assert metrics["depth_rms_after_fault_m"] < 0.2
-    # the last 10 s at the level flight's speed through the water (a steady flight: the
-    # plant is the controller's model here); tolerance: the noise-free plant settles within
-    # 1 % (measured below), the detector not involved
+    # the last 10 s near the level flight's speed through the water (the plant is the
+    # controller's model here): the pace trims it by the depth error's PI (controllers/
+    # pace.py), which after the jam's transient still held it 2 % above at 30-40 s; 3 %
+    # is well within the 30 % the trim may move it, and far from the mission's 1.5 m/s
     level = _jammed(remus, PLANES, 10.0)
     steady = log.t >= 30.0
     current = np.array([0.0, 0.3, 0.0])
@@ -169,4 +170,51 @@ def test_a_jammed_stern_plane_is_flown_slower_and_holds_the_depth(remus):
     ]
     trim = _trim(remus[0], 10.0, _off([*level.inputs[:2], level.speed, 0, 0, 0, level.pitch]))
     expected = math.hypot(level.speed, trim["w"])
-    assert np.mean(through_water) == pytest.approx(expected, rel=0.01)
+    assert np.mean(through_water) == pytest.approx(expected, rel=0.03)
+
+
+def test_the_sinking_per_speed_is_the_steady_flights_slope(remus):
+    """d z'/d u at the level flight (the implicit function theorem on the model's Jacobian)
+    against a central difference of two steady flights 1 cm/s either side, each solved by
+    fsolve on the six body accelerations with the speed held: positive for a plane jammed
+    nose down (faster dives). Tolerance: the difference's truncation, measured 2e-5."""
+    flow = remus[0]
+    flight = _jammed(remus, PLANES, 5.0)
+
+    def sinking_at(speed):
+        def body(z):
+            rpm, rudder, v, w, roll, pitch = z
+            state = np.zeros(SIX_DOF.size)
+            state[SIX_DOF.span("u", "w")] = speed, v, w
+            state[SIX_DOF.index("phi")], state[SIX_DOF.index("theta")] = roll, pitch
+            return np.asarray(flow(state, [rpm, rudder, 5.0]), dtype=float).ravel()
+
+        start = [*flight.inputs[:2], 0.0, 0.0, 0.0, flight.pitch]
+        z = fsolve(lambda z: body(z)[SIX_DOF.span("u", "r")], start, xtol=1e-13)
+        return body(z)[SIX_DOF.index("z")]
+
+    step = 0.01
+    slope = (sinking_at(flight.speed + step) - sinking_at(flight.speed - step)) / (2 * step)
+    assert flight.sinking_per_speed > 0.0
+    assert flight.sinking_per_speed == pytest.approx(slope, rel=1e-3)
+
+
+def test_the_depth_pace_settles_a_speed_error_without_overshoot():
+    """On the quasi-steady depth e' = s (U - U_true) with the true level speed 0.05 m/s
+    below the model's, the pace's PI (critically damped by design) brings the depth error
+    back to 0 and the speed to the true one, and the error never changes sign (a critically
+    damped loop from rest at e = 0 does not overshoot)."""
+    from auvmpc.controllers.pace import DepthHoldingPace
+    from auvmpc.models.level_flight import LevelFlight
+
+    dt, sinking, true_speed = 0.25, 0.079, 0.96
+    flight = LevelFlight(1.01, -0.045, np.zeros(3), sinking)
+    pace, error, errors, speed = DepthHoldingPace(dt), 0.0, [], 0.0
+    for _ in range(int(600 / dt)):
+        speed = pace.speed(flight, error)
+        error += sinking * (speed - true_speed) * dt
+        errors.append(error)
+    errors = np.array(errors)
+    assert errors.max() > 0.01  # it did sink first (0.05 m/s too fast)
+    assert np.all(errors >= -1e-6)  # and came back without overshooting
+    assert abs(errors[-1]) < 1e-3 and speed == pytest.approx(true_speed, abs=1e-3)

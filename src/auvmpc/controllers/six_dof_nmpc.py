@@ -81,11 +81,12 @@ from auvmpc.controllers.config import (
     WholeVehicleConfig,
     type_field,
 )
+from auvmpc.controllers.pace import DepthHoldingPace
 from auvmpc.controllers.schedule import ReferenceSchedule
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
 from auvmpc.models.integrators import rk4
-from auvmpc.models.level_flight import fastest_level_flight
+from auvmpc.models.level_flight import LevelFlight, fastest_level_flight
 from auvmpc.models.six_dof import (
     PITCH_LIMIT_RAD,
     SIX_DOF,
@@ -320,7 +321,9 @@ class SixDofNmpc(ShelledController):
         self._fix_correction = np.zeros(2)  # filtered less measured horizontal position (m)
         self._last_fix: tuple[np.ndarray, np.ndarray] | None = None
         self._schedule = ReferenceSchedule(self.sample_time, _REF_PSI)
-        self._level_speeds: dict[tuple, float | None] = {}  # by the fault (_pace's key)
+        self._level_flights: dict[tuple, LevelFlight | None] = {}  # by the fault (_pace's key)
+        self._depth_pace = DepthHoldingPace(self.sample_time)
+        self._depth_target: float | None = None  # the last sample's flown depth reference
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
@@ -328,10 +331,11 @@ class SixDofNmpc(ShelledController):
         share, lower, upper, previous, stuck = self._fixed_at_stuck(observation, share, previous)
         self._estimate_current(state)
         self._sample = (state, share, stuck)
-        speed = self._pace(share, lower, upper, previous, observation.reference)
+        speed = self._pace(share, lower, upper, previous, observation.reference, state)
         reference = self._schedule.rows(
             observation.k, observation.reference, self.horizon, speed, self._current[:2]
         )
+        self._depth_target = float(reference[0, _REF_Z])
         nodes = self._nodes(state, reference)
         parameters = np.concatenate([state, previous, nodes.ravel(order="F"), self._current, share])
         w0, lam0 = self._guess if self._guess is not None else self._cold(state, previous)
@@ -387,25 +391,30 @@ class SixDofNmpc(ShelledController):
         share = np.where(held, 1.0, share)
         return share, lower, upper, np.where(held, value, previous), stuck
 
-    def _pace(self, share, lower, upper, previous, reference) -> float | None:
-        """The speed through the water (m/s) the vehicle can hold its depth at as it is now
-        (models/level_flight.py: its fastest level flight, no faster than the mission asks
-        over the preview), or None: healthy, or no level flight at all (then the mission's
-        pace is flown as it is, whatever comes of it). Solved once per fault."""
+    def _pace(self, share, lower, upper, previous, reference, state) -> float | None:
+        """The speed through the water (m/s) the vehicle can hold its depth at as it is now,
+        or None: healthy, or no level flight at all (then the mission's pace is flown as it
+        is, whatever comes of it). The fastest level flight (models/level_flight.py), no
+        faster than the mission asks over the preview, solved once per fault, trimmed by
+        the depth error (controllers/pace.py)."""
         if np.all(share >= 1.0) and np.array_equal(lower, self._lbw):
             return None
         first = self._n_states  # the first move's bounds: the stuck inputs' values in them
         low, high = lower[first : first + self.n_inputs], upper[first : first + self.n_inputs]
         key = (tuple(np.round(share, 6)), tuple(np.round(low, 6)), tuple(np.round(high, 6)))
-        if key not in self._level_speeds:
+        if key not in self._level_flights:
             ground = np.diff(np.asarray(reference, dtype=float)[:, _REF_XY], axis=0)
             asked = np.hypot(*(ground / self.sample_time - self._current[:2]).T).max()
             x, u = ca.SX.sym("x", NX), ca.SX.sym("u", self.n_inputs)
             flow = ca.Function("flow_now", [x, u], [self._flow(x, u, share)])
-            flight = fastest_level_flight(flow, low, high, float(asked), PITCH_BOUND_RAD,
-                                          start=previous)  # fmt: skip
-            self._level_speeds[key] = None if flight is None else flight.speed
-        return self._level_speeds[key]
+            self._level_flights[key] = fastest_level_flight(
+                flow, low, high, float(asked), PITCH_BOUND_RAD, start=previous
+            )
+        flight = self._level_flights[key]
+        if flight is None:
+            return None
+        target = reference[0, _REF_Z] if self._depth_target is None else self._depth_target
+        return self._depth_pace.speed(flight, float(state[_Z] - target))
 
     def _details(self, k: int) -> dict[str, float]:
         """What the log keeps of this controller's own: how far behind the mission's clock

@@ -60,11 +60,14 @@ _STEADY = 1e-5
 @dataclass(frozen=True)
 class LevelFlight:
     """A steady straight and level flight: the speed through the water (m/s), the pitch
-    (rad) it is flown at, and every input that holds it (each in its own unit)."""
+    (rad) it is flown at, every input that holds it (each in its own unit), and how the
+    steady flight's depth rate moves with the speed there (m/s per m/s, down positive):
+    flown a little faster, a torpedo with its planes jammed nose down dives (positive)."""
 
     speed: float
     pitch: float
     inputs: np.ndarray
+    sinking_per_speed: float
 
 
 def fastest_level_flight(
@@ -124,4 +127,14 @@ def fastest_level_flight(
         return None
     held = lower.copy()
     held[free] = best[5:]
-    return LevelFlight(speed=float(best[0]), pitch=float(best[4]), inputs=held)
+    jacobian_at = np.asarray(equations(best)[1], dtype=float)
+    return LevelFlight(float(best[0]), float(best[4]), held, _sinking_per_speed(jacobian_at))
+
+
+def _sinking_per_speed(jacobian: np.ndarray) -> float:
+    """d z'/d u along the steady flights through a level one, by the implicit function
+    theorem on the Jacobian (7, unknowns) of [nu'; z'] in [u, the rest]: the rest follow u
+    as -(dnu'/drest)^+ dnu'/du (least norm where several inputs hold the same flight)."""
+    body, depth = jacobian[:-1], jacobian[-1]
+    follows = -np.linalg.lstsq(body[:, 1:], body[:, 0], rcond=None)[0]
+    return float(depth[0] + depth[1:] @ follows)
