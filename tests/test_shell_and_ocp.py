@@ -137,6 +137,35 @@ def test_shell_projects_falls_back_and_says_so(vehicle, request):
         assert result.info["fallback"] == float(result.status is ControlStatus.FALLBACK)
 
 
+class _Recording:
+    """A recovery that records the observation it is asked to fly."""
+
+    watches_yaw, yaw_rate_index = False, 5
+
+    def __init__(self):
+        self.seen = []
+
+    def release(self):
+        pass
+
+    def command(self, observation, previous, proposal):
+        self.seen.append(observation.reference)
+        return previous
+
+
+def test_the_recovery_flies_the_reference_the_back_end_flew(jmse):
+    """A back end on its own clock (a crippled vehicle's schedule) hands the shell its rows;
+    the recovery, when it takes over, flies those rows, not the loop's; without them, the
+    loop's."""
+    own = np.full((2, 6), 7.0)
+    shell = _Scripted(jmse, [Proposal(plan=None, reference=own), Proposal(plan=None)])
+    shell.recovery = _Recording()
+    shown = _observation()
+    shell.compute(shown)
+    shell.compute(shown)
+    assert shell.recovery.seen[0] is own and shell.recovery.seen[1] is shown.reference
+
+
 @pytest.mark.parametrize(
     "label", ["baseline", "mpc", "ltv-mpc-nc30", "nmpc", "nmpc-full", "do-mpc"]
 )

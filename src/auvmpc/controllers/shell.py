@@ -19,7 +19,7 @@ A back end (the paper's MPC, LTV-MPC, NMPC, the do-mpc yardstick, the depth MPC)
 from __future__ import annotations
 
 from abc import abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -112,6 +112,9 @@ class Proposal:
     estimated_state: np.ndarray | None = None  # the state the back end estimated, if any
     limited: bool = False  # the back end itself cut its demand to fit the limits
     details: dict[str, float] = field(default_factory=dict)  # back-end-specific, in ``info``
+    # The reference rows the back end flies, where they are not the loop's (a crippled
+    # vehicle's own, later, clock: controllers/schedule.py); the recovery flies them too.
+    reference: np.ndarray | None = None
 
 
 class ShelledController(Controller):
@@ -205,7 +208,10 @@ class ShelledController(Controller):
                 spinning or self._plan is None or self._unsolved > PLAN_FALLBACK_STEPS
             )
             if recovered:
-                wanted = self.recovery.command(observation, previous, proposal)
+                flown = observation
+                if proposal.reference is not None:
+                    flown = replace(observation, reference=proposal.reference)
+                wanted = self.recovery.command(flown, previous, proposal)
                 if not np.all(np.isfinite(wanted)):  # a non-finite state or estimate in it
                     wanted = previous
                 self._plan = None

@@ -332,8 +332,9 @@ class SixDofNmpc(ShelledController):
         self._estimate_current(state)
         self._sample = (state, share, stuck)
         speed = self._pace(share, lower, upper, previous, observation.reference, state)
+        shown = observation.reference  # as many rows as the loop shows, for the recovery
         reference = self._schedule.rows(
-            observation.k, observation.reference, self.horizon, speed, self._current[:2]
+            observation.k, shown, len(shown) - 1, speed, self._current[:2]
         )
         self._depth_target = float(reference[0, _REF_Z])
         nodes = self._nodes(state, reference)
@@ -352,12 +353,14 @@ class SixDofNmpc(ShelledController):
         # time limit) is a failure, so the run's fallback metrics see every such sample.
         if not (stats["success"] and np.all(np.isfinite(w))):
             self._solution = None
-            return Proposal(None, solve_time, iterations, details=self._details(observation.k))
+            return Proposal(None, solve_time, iterations, details=self._details(observation.k),
+                            reference=self._flown(reference, observation))  # fmt: skip
         states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
         plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
         self._solution = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
         return Proposal(plan, solve_time, iterations, predicted_states=states.T,
-                        details=self._details(observation.k))  # fmt: skip
+                        details=self._details(observation.k),
+                        reference=self._flown(reference, observation))  # fmt: skip
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Warm-start the next solve from this one's (none after a fallback), and predict
@@ -415,6 +418,11 @@ class SixDofNmpc(ShelledController):
             return None
         target = reference[0, _REF_Z] if self._depth_target is None else self._depth_target
         return self._depth_pace.speed(flight, float(state[_Z] - target))
+
+    def _flown(self, reference: np.ndarray, observation: Observation) -> np.ndarray | None:
+        """The rows flown, for the shell's recovery, where they are not the loop's (None
+        while on the mission's clock)."""
+        return None if reference is observation.reference else reference
 
     def _details(self, k: int) -> dict[str, float]:
         """What the log keeps of this controller's own: how far behind the mission's clock
