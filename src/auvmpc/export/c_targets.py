@@ -158,9 +158,10 @@ def tuned_target(folder: Path, portable: dict[str, Target]) -> Target:
 
 
 def generic_with(portable: Target, folder: Path) -> Target:
-    """The portable x86-64 target with the BLASFEO in ``folder`` (``--generic-blasfeo``,
-    already checked by blasfeo_folder) instead of the wheel's GENERIC one: an x86-64 library
-    that needs no CPU feature the target's HPIPM does not already need."""
+    """The portable target with the BLASFEO in ``folder`` (``--generic-blasfeo``, already
+    checked by blasfeo_folder) instead of the wheel's GENERIC one: a library for its
+    instruction set that needs no CPU feature its HPIPM does not already need (AVX on x86-64,
+    nothing on aarch64)."""
     library = folder / LIBRARY
     if elf_machine(library, "--generic-blasfeo") != portable.machine:
         raise ConfigError("--generic-blasfeo", str(folder), f"not a library for {portable.machine}")
