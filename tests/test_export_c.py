@@ -232,9 +232,11 @@ def test_a_generic_blasfeo_needing_more_than_avx_is_refused_in_one_line(tmp_path
     code, _, err = run_cli(monkeypatch, capsys, "export-c", "paper-ideal",
                            "--generic-blasfeo", str(folder), "--out", str(out))  # fmt: skip
     assert code == 2
-    assert err.strip() == (
+    # one line; the folder named after it, which the printer shortens when it is long
+    (line,) = err.strip().splitlines()
+    assert line.startswith(
         "error: --generic-blasfeo: its BLASFEO needs AVX2, FMA, which x86-64-generic does not: "
-        f"give it as --blasfeo (the tuned target) (got '{folder}')"
+        "give it as --blasfeo (the tuned target) (got '"
     )
     assert not out.exists()
 
