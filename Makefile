@@ -10,8 +10,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 OUT ?= results/paper
 
-.PHONY: setup reproduce test fuzz bench lint docs clean blasfeo blasfeo-aarch64 hpipm-aarch64 \
-	verify-arm
+.PHONY: setup reproduce test fuzz bench lint docs clean blasfeo blasfeo-avx blasfeo-aarch64 \
+	hpipm-aarch64 verify-arm
 
 setup: $(STAMP)
 
@@ -46,14 +46,21 @@ bench: $(STAMP)
 # never at run time; as are the aarch64 HPIPM and BLASFEO an export carries for TARGET=aarch64.
 # Once fetched they stay (order-only on the setup: a reinstall does not fetch them again).
 BLASFEO_HASWELL := $(VENV)/blasfeo-x64-haswell
+BLASFEO_SANDY_BRIDGE := $(VENV)/blasfeo-x64-sandy-bridge
 BLASFEO_A57 := $(VENV)/blasfeo-armv8a-a57
 HPIPM_AARCH64 := $(VENV)/hpipm-aarch64
 blasfeo: $(BLASFEO_HASWELL)/libblasfeo.so
+blasfeo-avx: $(BLASFEO_SANDY_BRIDGE)/libblasfeo.so
 blasfeo-aarch64: $(BLASFEO_A57)/libblasfeo.so
 hpipm-aarch64: $(HPIPM_AARCH64)/libdaqp.so
 
 $(BLASFEO_HASWELL)/libblasfeo.so: | $(STAMP)
 	$(BIN)/python benchmarks/blasfeo_tuned.py --out $(BLASFEO_HASWELL)
+
+# The generic x86-64 build's BLASFEO for AVX (export-c --generic-blasfeo): no package ships
+# it, so it is built here from the BLASFEO sources a pinned wheel carries (gcc, cmake).
+$(BLASFEO_SANDY_BRIDGE)/libblasfeo.so: | $(STAMP)
+	$(BIN)/python benchmarks/blasfeo_avx.py --out $(BLASFEO_SANDY_BRIDGE)
 
 $(BLASFEO_A57)/libblasfeo.so: | $(STAMP)
 	$(BIN)/python benchmarks/blasfeo_tuned.py --machine aarch64 --out $(BLASFEO_A57)

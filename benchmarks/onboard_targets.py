@@ -4,16 +4,19 @@ tuned one (median step time), and the instructions per step on x86-64 and aarch6
 
     python benchmarks/onboard_targets.py --aarch64 .venv/hpipm-aarch64 \\
         --blasfeo .venv/blasfeo-x64-haswell --blasfeo-aarch64 .venv/blasfeo-armv8a-a57 \\
-        [--scenario paper-obstacles] [--repeats 5]
+        [--generic-blasfeo .venv/blasfeo-x64-sandy-bridge] [--scenario paper-obstacles] \\
+        [--repeats 5]
 
 Runs the scenario with the exported controller (nmpc, every move free) and exports it twice:
 with the aarch64 HPIPM and both tuned BLASFEOs, and with none of them (the generic x86-64
 build alone, whose BLASFEO is then the wheel's GENERIC one everywhere; with the tuned x86-64
 BLASFEO exported, the generic build carries it for glibc's loader to take on a CPU with AVX2
-and FMA). Each x86-64 build is replayed ``--repeats`` times, the builds in turn, for its
-median step (the median of the replays' medians: the machine is shared); then every build
-once with its instructions counted (callgrind natively, a QEMU plugin for aarch64). Prints
-the machine (lscpu's model name, load average) and one table row per build.
+and FMA); with ``--generic-blasfeo``, a third time with that BLASFEO (built for AVX) as the
+generic build's own and nothing else. Each x86-64 build is replayed ``--repeats`` times, the
+builds in turn, for its median step (the median of the replays' medians: the machine is
+shared); then every build once with its instructions counted (callgrind natively, a QEMU
+plugin for aarch64). Prints the machine (lscpu's model name, load average) and one table row
+per build.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from pathlib import Path
 from auvmpc.experiments.run import simulate, write_run
 from auvmpc.export.c_library import export_c, verify_c
 from auvmpc.scenario import load_scenario
+from auvmpc.solvers.blasfeo_target import blasfeo_target
 
 _FREE = ["controller.type=nmpc", "controller.control_horizon=null"]
 
@@ -50,6 +54,7 @@ def main() -> None:
     parser.add_argument("--aarch64", type=Path, required=True, help="make hpipm-aarch64's folder")
     parser.add_argument("--blasfeo", type=Path, required=True, help="a tuned x86-64 BLASFEO")
     parser.add_argument("--blasfeo-aarch64", type=Path, required=True, help="a tuned aarch64 one")
+    parser.add_argument("--generic-blasfeo", type=Path, help="an AVX x86-64 BLASFEO")
     parser.add_argument("--scenario", default="paper-obstacles")
     parser.add_argument("--repeats", type=int, default=5)
     arguments = parser.parse_args()
@@ -64,6 +69,13 @@ def main() -> None:
         export_c(scenario, plain)
         builds = {  # label -> (export, target, timed)
             "x86-64-generic, GENERIC BLASFEO": (plain, "x86-64-generic", True),
+        }
+        if arguments.generic_blasfeo is not None:
+            avx = Path(scratch) / "generic-avx"
+            export_c(scenario, avx, generic_blasfeo=arguments.generic_blasfeo)
+            label = f"x86-64-generic, {blasfeo_target(arguments.generic_blasfeo)} BLASFEO"
+            builds[label] = (avx, "x86-64-generic", True)
+        builds |= {
             "x86-64-generic, tuned BLASFEO by glibc-hwcaps": (full, "x86-64-generic", True),
             "x86-64-tuned": (full, "x86-64-tuned", True),
             "aarch64 (qemu)": (full, "aarch64", False),
@@ -93,7 +105,7 @@ def main() -> None:
             f"{statistics.median(result.instructions):,.0f}", f"{max(result.instructions):,}",
         ]))  # fmt: skip
     tuned = statistics.median(timed["x86-64-tuned"])
-    for label in list(timed)[:2]:
+    for label in (label for label in timed if label != "x86-64-tuned"):
         print(f"{label} / x86-64-tuned median step: {statistics.median(timed[label]) / tuned:.2f}")
 
 

@@ -206,6 +206,65 @@ def test_export_links_the_blasfeo_it_is_given(tmp_path):
 
 
 @needs_cc
+def test_the_generic_build_carries_the_avx_blasfeo_it_is_given(tmp_path):
+    """--generic-blasfeo DIR: the target x86-64-generic carries DIR's libblasfeo.so instead
+    of the wheel's GENERIC one, still compiled for every x86-64, with no tuned target added;
+    export.json names DIR's target and its AVX, which verify-c checks before a replay."""
+    folder = _blasfeo_folder(tmp_path, ("AVX",), "X64_INTEL_SANDY_BRIDGE")
+    export = tmp_path / "export"
+    export_c(load_scenario("paper-ideal", _FREE), export, generic_blasfeo=folder)
+    record = json.loads((export / "export.json").read_text())
+    assert record["targets"] == {
+        "x86-64-generic": {"machine": "x86_64", "flags": "-march=x86-64 -mtune=generic",
+                           "blasfeo_target": "X64_INTEL_SANDY_BRIDGE",
+                           "blasfeo_features": ["AVX"]},
+    }  # fmt: skip
+    carried = export / "lib" / "x86-64-generic" / "libblasfeo.so.0"
+    assert carried.read_bytes() == (folder / "libblasfeo.so").read_bytes()
+
+
+def test_a_generic_blasfeo_needing_more_than_avx_is_refused_in_one_line(tmp_path, monkeypatch,
+                                                                         capsys):  # fmt: skip
+    """AVX2 and FMA would narrow the CPUs the generic build runs on: that library is the
+    tuned target's (--blasfeo)."""
+    folder = _blasfeo_folder(tmp_path, ("AVX2", "FMA"), "X64_INTEL_HASWELL")
+    out = tmp_path / "export"
+    code, _, err = run_cli(monkeypatch, capsys, "export-c", "paper-ideal",
+                           "--generic-blasfeo", str(folder), "--out", str(out))  # fmt: skip
+    assert code == 2
+    # one line; the folder named after it, which the printer shortens when it is long
+    (line,) = err.strip().splitlines()
+    assert line.startswith(
+        "error: --generic-blasfeo: its BLASFEO needs AVX2, FMA, which x86-64-generic does not: "
+        "give it as --blasfeo (the tuned target) (got '"
+    )
+    assert not out.exists()
+
+
+# The BLASFEO for AVX that make blasfeo-avx builds into the environment.
+_AVX_BLASFEO = Path(
+    os.environ.get("AUVMPC_AVX_BLASFEO", Path(sys.prefix) / "blasfeo-x64-sandy-bridge")
+)
+
+
+@needs_cc
+@pytest.mark.skipif(
+    not (_AVX_BLASFEO / "libblasfeo.so").is_file() or missing_features(("AVX",)),
+    reason="no AVX BLASFEO (make blasfeo-avx) or no AVX on this CPU",
+)
+def test_the_generic_build_with_the_avx_blasfeo_reproduces_python(tmp_path):
+    """The real X64_INTEL_SANDY_BRIDGE build under the wheel's HPIPM: the commands within
+    verify-c's bound (its AVX kernels sum in another order than the GENERIC C), the statuses
+    the run's, no heap call in a step."""
+    resolved, run_dir = _run(tmp_path, "paper-obstacles", _FREE)
+    export_c(resolved, tmp_path / "export", generic_blasfeo=_AVX_BLASFEO)
+    result = verify_c(tmp_path / "export", run_dir)
+    assert result.target == "x86-64-generic"
+    assert result.max_difference_n <= COMMAND_TOLERANCE_N
+    assert result.status_differences == 0 and result.heap_calls == 0
+
+
+@needs_cc
 def test_verify_refuses_a_blasfeo_built_for_features_this_cpu_lacks(tmp_path):
     resolved, run_dir = _run(tmp_path, "paper-ideal", _FREE)
     folder = _blasfeo_folder(tmp_path, ("NO_SUCH_FEATURE",))

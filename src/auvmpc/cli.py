@@ -1039,6 +1039,15 @@ def export_c(
             "target aarch64",
         ),
     ] = None,
+    generic_blasfeo: Annotated[
+        Path | None,
+        typer.Option(
+            "--generic-blasfeo",
+            help="folder with a libblasfeo.so built for AVX (make blasfeo-avx): the target "
+            "x86-64-generic's BLASFEO instead of the wheel's GENERIC one, on the same CPUs "
+            "(docs/onboard.md)",
+        ),
+    ] = None,
 ) -> None:
     """Write the scenario's real-time controller (nmpc, every move free) as a self-contained
     C99 library that builds with `make` (`make TARGET=aarch64`) anywhere."""
@@ -1047,8 +1056,9 @@ def export_c(
 
     resolved = load_scenario(scenario, set_ or [])
     written = write_export(
-        resolved, out, overwrite=overwrite, blasfeo=blasfeo or (), aarch64=aarch64
-    )
+        resolved, out, overwrite=overwrite, blasfeo=blasfeo or (), aarch64=aarch64,
+        generic_blasfeo=generic_blasfeo,
+    )  # fmt: skip
     console.print(f"wrote {written}")
 
 

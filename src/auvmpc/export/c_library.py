@@ -56,6 +56,7 @@ from auvmpc.experiments.run_folder import RunFolder, read_run_folder
 from auvmpc.export.c_targets import (
     Target,
     aarch64_target,
+    generic_with,
     host_machine,
     hwcaps_level,
     makefile_table,
@@ -244,6 +245,7 @@ def export_c(
     overwrite: bool = False,
     blasfeo: Path | str | Sequence[Path | str] = (),
     aarch64: Path | str | None = None,
+    generic_blasfeo: Path | str | None = None,
 ) -> Path:
     """Write the export of ``resolved``'s controller into the folder ``out`` (auvmpc's output
     rules: a new or empty folder, or an earlier export with ``overwrite``). Returns it.
@@ -253,8 +255,10 @@ def export_c(
     HPIPM and BLASFEO in the folder ``aarch64`` (``make hpipm-aarch64``); ``x86-64-tuned`` or
     ``aarch64-tuned``, each folder in ``blasfeo`` (one per instruction set) with a
     ``libblasfeo.so`` built for one CPU, under the portable HPIPM of its instruction set
-    (solvers/blasfeo_target.py). Their libraries, headers and licences are copied in
-    (export/c_targets.py).
+    (solvers/blasfeo_target.py). ``generic_blasfeo``: a folder with a ``libblasfeo.so`` that
+    needs no CPU feature beyond the wheel's HPIPM's (AVX on x86-64: ``make blasfeo-avx``),
+    carried by this computer's portable target instead of the wheel's GENERIC one. Their
+    libraries, headers and licences are copied in (export/c_targets.py).
     """
     config, slots = _check_supported(resolved)
     six_dof = _kind(resolved) == _SIX_DOF
@@ -263,6 +267,9 @@ def export_c(
         raise ConfigError("casadi", ca.__version__, "this casadi wheel has no HPIPM to link")
     include, libraries = hpipm
     targets = [wheel_target(libraries, include)]
+    if generic_blasfeo is not None:
+        folder = blasfeo_folder(generic_blasfeo, include, field="--generic-blasfeo")
+        targets[0] = generic_with(targets[0], folder)
     if aarch64 is not None:
         targets.append(aarch64_target(aarch64, ca.__version__, include))
     portable = {t.machine: t for t in targets}

@@ -14,6 +14,10 @@ instruction beyond the base instruction set but the x86-64 wheel's HPIPM's, whic
 with AVX: docs/onboard.md), and ``x86-64-tuned`` or ``aarch64-tuned``: the
 wheel's HPIPM over the ``--blasfeo`` library, compiled for that BLASFEO's CPU.
 
+Since the generic x86-64 build needs AVX anyway, it can carry a BLASFEO built for AVX
+(``--generic-blasfeo``, X64_INTEL_SANDY_BRIDGE) instead of the GENERIC one: the same CPUs, a
+faster step (docs/onboard.md, measured).
+
 The generic x86-64 build also carries a tuned x86-64 BLASFEO where there is one, in
 ``lib/x86-64-generic/glibc-hwcaps/x86-64-vN/``: glibc's loader (2.33 on) takes a library from
 there instead on a CPU of that level (x86-64-v3: AVX2 and FMA, Haswell on), and the GENERIC
@@ -23,6 +27,7 @@ CPU allows (docs/onboard.md, measured).
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 import shutil
 from dataclasses import dataclass
@@ -35,6 +40,7 @@ __all__ = [
     "AARCH64_VERSION_FILE",
     "Target",
     "aarch64_target",
+    "generic_with",
     "host_machine",
     "hwcaps_level",
     "makefile_table",
@@ -59,6 +65,10 @@ _TUNED_FLAGS = {
     "ARMV8A_APPLE_M1": "-mcpu=apple-m1",
 }
 _LICENCES = {"hpipm": "HPIPM-LICENSE.txt", "blasfeo": "BLASFEO-LICENSE.txt"}
+# The CPU features each portable target's program already needs: the x86-64 casadi wheel's
+# libhpipm.so has AVX instructions (docs/onboard.md: it runs under qemu's SandyBridge, not
+# its Nehalem), so a BLASFEO that needs no more narrows none of the CPUs it runs on
+_PORTABLE_FEATURES = {"x86_64": ("AVX",)}
 # BLASFEO's x86 feature names -> the x86-64 microarchitecture level that has them
 _X86_LEVELS = {"SSE3": 2, "AVX": 3, "AVX2": 3, "FMA": 3, "AVX512F": 4}
 
@@ -145,6 +155,28 @@ def tuned_target(folder: Path, portable: dict[str, Target]) -> Target:
     flags = _TUNED_FLAGS.get(target, base.flags)
     name = ("x86-64" if machine == "x86_64" else machine) + "-tuned"
     return Target(name, machine, flags, base.hpipm, library, target, required_features(folder))
+
+
+def generic_with(portable: Target, folder: Path) -> Target:
+    """The portable target with the BLASFEO in ``folder`` (``--generic-blasfeo``, already
+    checked by blasfeo_folder) instead of the wheel's GENERIC one: a library for its
+    instruction set that needs no CPU feature its HPIPM does not already need (AVX on x86-64,
+    nothing on aarch64)."""
+    library = folder / LIBRARY
+    if elf_machine(library, "--generic-blasfeo") != portable.machine:
+        raise ConfigError("--generic-blasfeo", str(folder), f"not a library for {portable.machine}")
+    features = required_features(folder)
+    beyond = [f for f in features if f not in _PORTABLE_FEATURES.get(portable.machine, ())]
+    if beyond:
+        raise ConfigError(
+            "--generic-blasfeo", str(folder),
+            f"its BLASFEO needs {', '.join(beyond)}, which {portable.name} does not: give it "
+            "as --blasfeo (the tuned target)",
+        )  # fmt: skip
+    return dataclasses.replace(
+        portable, blasfeo=library, blasfeo_target=blasfeo_target(folder),
+        blasfeo_features=features,
+    )  # fmt: skip
 
 
 def hwcaps_level(target: Target) -> str | None:
