@@ -35,9 +35,10 @@ pytestmark = pytest.mark.slow
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 LONG_COMMANDS = {"reproduce", "bench", "campaign", "campaign-report", "identify", "animate"}
-# --blasfeo and --aarch64 name folders the reader fetches first (make blasfeo, make
-# hpipm-aarch64); --target aarch64 needs the export made with --aarch64 (tests/test_export_c.py)
-LONG_OPTIONS = {"--from-campaign", "--blasfeo", "--aarch64", "--target"}
+# --blasfeo, --generic-blasfeo and --aarch64 name folders the reader makes first (make
+# blasfeo, make blasfeo-avx, make hpipm-aarch64); --target aarch64 needs the export made with
+# --aarch64 (tests/test_export_c.py)
+LONG_OPTIONS = {"--from-campaign", "--blasfeo", "--generic-blasfeo", "--aarch64", "--target"}
 # Scenarios tests/test_six_dof_loop.py runs exactly (test_bluerov2_helix,
 # test_paper_6dof_within_twice_the_planar_error_with_depth_and_attitude_bounded).
 RUN_ELSEWHERE = {"bluerov2-helix", "paper-6dof"}
