@@ -56,10 +56,6 @@ class ReferenceSchedule:
         self._rows = np.empty((0, 0))  # the rows shown, from sample self._first on
         self._first = 0
 
-    @property
-    def slowed(self) -> bool:
-        return self.progress is not None
-
     def lag(self, k: int) -> float:
         """How many samples behind the mission's clock the schedule is at sample ``k``."""
         return 0.0 if self.progress is None else k - self.progress
@@ -93,16 +89,14 @@ class ReferenceSchedule:
 
     def _keep(self, k: int, reference: np.ndarray) -> None:
         """Add the rows shown at sample ``k`` (samples k, k + 1, ...), and forget those
-        before the schedule's place."""
-        reference = np.asarray(reference, dtype=float)
+        before the schedule's place (set)."""
         if self._rows.size == 0:
             self._rows, self._first = reference.copy(), k
             return
         known = self._first + len(self._rows)
         if k + len(reference) > known:
             self._rows = np.vstack([self._rows, reference[known - k :]])
-        behind = max(0, int(math.floor(self.progress if self.progress is not None else k))
-                     - self._first)  # fmt: skip
+        behind = max(0, int(math.floor(self.progress)) - self._first)
         self._rows, self._first = self._rows[behind:], self._first + behind
 
     def _at(self, samples: np.ndarray) -> np.ndarray:
