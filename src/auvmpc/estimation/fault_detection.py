@@ -52,7 +52,11 @@ when its score (the fit's gain over no fault, in the window's scatter: :data:`LO
 for a loss) is high enough, s is inside its limits, and the commands it failed to follow
 were on average :data:`STUCK_FOUND` of its range or more away from s; s is then refined by
 Gauss-Newton on the model itself (the tangent's error for a propeller) and told to the
-controller (``Observation.stuck_at``).
+controller (``Observation.stuck_at``). Beside the window, the inputs that can jam
+(``Actuator.jams``) are watched by a sequential stuck test (estimation/stuck_glr.py) that
+keeps the evidence of an onset for :data:`~auvmpc.estimation.stuck_glr.MEMORY_S`: a fin
+jammed near its command is found once the controller has moved the command away, after the
+onset has left the window.
 
 Limits, by design: a lost share below :data:`LOSS_FOUND` (the 6-DOF detector's
 :data:`SIX_DOF_LOSS_FOUND`) is not reported (model error of the size the presets carry,
