@@ -52,7 +52,11 @@ when its score (the fit's gain over no fault, in the window's scatter: :data:`LO
 for a loss) is high enough, s is inside its limits, and the commands it failed to follow
 were on average :data:`STUCK_FOUND` of its range or more away from s; s is then refined by
 Gauss-Newton on the model itself (the tangent's error for a propeller) and told to the
-controller (``Observation.stuck_at``).
+controller (``Observation.stuck_at``). Beside the window, the inputs that can jam
+(``Actuator.jams``) are watched by a sequential stuck test (estimation/stuck_glr.py) that
+keeps the evidence of an onset for :data:`~auvmpc.estimation.stuck_glr.MEMORY_S`: a fin
+jammed near its command is found once the controller has moved the command away, after the
+onset has left the window.
 
 Limits, by design: a lost share below :data:`LOSS_FOUND` (the 6-DOF detector's
 :data:`SIX_DOF_LOSS_FOUND`) is not reported (model error of the size the presets carry,
@@ -64,10 +68,12 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from functools import partial
 
 import casadi as ca
 import numpy as np
 
+from auvmpc.estimation.stuck_glr import MEMORY_S, StuckGLR, innovations, window_gain
 from auvmpc.models.discrete import DISTURBANCE_NAMES, horizontal_model
 from auvmpc.models.integrators import rk4
 from auvmpc.models.layout import HORIZONTAL
@@ -105,6 +111,9 @@ NOISE_FLOOR = 1e-3
 # least this share of its range away from the value it is found stuck at (model error must
 # not read as a jammed fin): measured, docs/faults.md.
 STUCK_FOUND = 0.05
+# The sequential stuck test's threshold (estimation/stuck_glr.py), its score read as the
+# window fit's: measured on the healthy presets (docs/faults.md).
+STUCK_SIGMAS = LOSS_SIGMAS
 # A stuck value this share of the range beyond the input's limits is no jammed actuator
 # (the model missed something else); within it, the value is clipped into the limits.
 STUCK_BEYOND = 0.25
@@ -249,18 +258,37 @@ class FaultDetector:
             jacobian = jacobian * self._weights[:, None]
         if not (np.isfinite(residual).all() and np.isfinite(regressors).all()):
             return None  # a state the model cannot step from says nothing of the thrusters
-        self._rows.append(
-            _Row(residual, regressors, jacobian, command, effectiveness, watched, before, measured)
+        row = _Row(
+            residual, regressors, jacobian, command, effectiveness, watched, before, measured
         )
-        if len(self._rows) < self.window:
-            return None
+        self._rows.append(row)
+        self._follow(row)
+        found = self._found_in_window() if len(self._rows) == self.window else None
+        if found is None:
+            found = self._found_sequentially(row)
+        if found is not None:  # the next fault starts afresh
+            self._rows.clear()
+            self._forget()
+        return found
+
+    def _found_in_window(self) -> FaultFound | None:
+        """The window fit's detection (module docstring), if this sample confirms one."""
         best = self._likeliest_fault()
         if best is None or not self._found(best):
             return None
         stuck_at = None if best.stuck_at is None else self._refined(best)
-        self._rows.clear()
         remaining = 0.0 if stuck_at is not None else self._remaining(best.lost)
         return FaultFound(best.index, best.lost, best.sigmas, stuck_at, remaining)
+
+    def _follow(self, row: _Row) -> None:
+        """A sequential test's update with this sample (none on the horizontal model)."""
+
+    def _found_sequentially(self, row: _Row) -> FaultFound | None:
+        """A sequential test's detection, if this sample confirms one (none here)."""
+        return None
+
+    def _forget(self) -> None:
+        """A sequential test's restart after a detection (none here)."""
 
     def _remaining(self, lost: float) -> float:
         """The share of its assumed wrench a lost input is taken to keep: none (module
@@ -376,6 +404,11 @@ class FaultDetector:
         )  # fmt: skip
 
 
+def _centred(residuals: np.ndarray) -> np.ndarray:
+    """The residuals (W, m) less the window's constant, their mean."""
+    return residuals - residuals.mean(axis=0)
+
+
 def _six_dof_one_step(model: VehicleParams, sample_time: float, substeps: int) -> ca.Function:
     """(x, F, e) -> (nu_next (6,), its Jacobian in F (6, n), the secants nu_next(e_i = 0) -
     nu_next(e) (6, n)): the 6-DOF model's RK4 step in still water under the commands F, each
@@ -422,9 +455,58 @@ class SixDofFaultDetector(FaultDetector):
         inputs = model.six_dof_actuators
         self._one_step = _six_dof_one_step(model, sample_time, substeps)
         limits = inputs.limits
+        self._jams = inputs.jams
         self._lower = np.broadcast_to(np.asarray(limits.lower, dtype=float), (inputs.size,))
         self._upper = np.broadcast_to(np.asarray(limits.upper, dtype=float), (inputs.size,))
         self._watch(inputs.size, SIX_DOF.size, sample_time, velocity_noise)
+        memory = max(self.window, round(MEMORY_S / sample_time))
+        self._glr = StuckGLR(inputs.size, len(velocity_noise), window_gain(self.window), memory)
+        # The rows the sequential test remembers, and a window before (its stuck value is
+        # refined on them, the filter's mean settled over that window first).
+        self._history: deque[_Row] = deque(maxlen=memory + self.window)
+
+    def _follow(self, row: _Row) -> None:
+        self._glr.update(row.residual, row.jacobian, row.loss, row.command)
+        self._history.append(row)
+
+    def _forget(self) -> None:
+        self._glr.reset()
+        self._history.clear()
+
+    def _found_sequentially(self, row: _Row) -> FaultFound | None:
+        """The sequential test's stuck input (estimation/stuck_glr.py), among those that can
+        jam (``Actuator.jams``): the highest score at least :data:`STUCK_SIGMAS` whose value
+        is inside the input's limits and far enough from its commands since (as the window
+        fit's, :meth:`_stuck_plausible`), and whose fit is the likelier of stuck and lost.
+        Likelier, not clearly better as in the window: once the filter has taken up the jam's
+        constant wrench, what is left of a jam is that the input stopped answering its
+        command, which a loss of all its wrench fits as well but for the step at the onset;
+        a jam is what a fin's fault is, and inputs that fail by weakening are not tested."""
+        fits = self._glr.fits()
+        if fits is None:
+            return None
+        span = self._upper - self._lower
+        beyond = STUCK_BEYOND * span
+        candidate = (
+            row.watched
+            & self._jams
+            & (fits.score >= STUCK_SIGMAS)
+            & (fits.stuck_at >= self._lower - beyond)
+            & (fits.stuck_at <= self._upper + beyond)
+            & (fits.gap >= STUCK_FOUND * span)
+            & (fits.versus_loss < 1.0)
+        )
+        if not candidate.any():
+            return None
+        onset, i = np.unravel_index(
+            np.argmax(np.where(candidate, fits.score, -1.0)), candidate.shape
+        )
+        age = int(fits.ages[onset])
+        rows = list(self._history)[-(age + self.window) :]
+        on = np.arange(len(rows)) >= len(rows) - age
+        filtered = partial(innovations, gain=self._glr.gain)
+        stuck_at = self._gauss_newton(int(i), float(fits.stuck_at[onset, i]), rows, on, filtered)
+        return FaultFound(int(i), None, float(fits.score[onset, i]), stuck_at, 0.0)
 
     def _predict(
         self, before: np.ndarray, command: np.ndarray, effectiveness: np.ndarray
@@ -451,9 +533,16 @@ class SixDofFaultDetector(FaultDetector):
     def _refined(self, fit: _Fit) -> float:
         """The stuck value by Gauss-Newton on the model from the linear fit's (the window's
         constant refitted each step), to convergence, clipped into the input's limits."""
-        i, rows = fit.index, list(self._rows)
+        rows = list(self._rows)
         on = np.arange(len(rows)) >= fit.onset
-        stuck = float(fit.stuck_at)
+        return self._gauss_newton(fit.index, float(fit.stuck_at), rows, on, _centred)
+
+    def _gauss_newton(
+        self, i: int, stuck: float, rows: list[_Row], on: np.ndarray, nuisance
+    ) -> float:
+        """Input i's stuck value, from ``stuck``, by Gauss-Newton on the model over ``rows``,
+        stuck in those ``on``; ``nuisance`` takes the nuisance's estimate out of a sequence
+        of weighted residuals (rows by sample), and is linear."""
         for _ in range(STUCK_REFINEMENTS):
             errors, columns = [], []
             for row, acts in zip(rows, on, strict=True):
@@ -463,8 +552,7 @@ class SixDofFaultDetector(FaultDetector):
                 predicted, jacobian, _ = self._one_step(row.before, command, row.effectiveness)
                 errors.append((row.measured - np.asarray(predicted).ravel()) * self._weights)
                 columns.append(acts * np.asarray(jacobian)[:, i] * self._weights)
-            error, column = np.array(errors), np.array(columns)
-            error, column = error - error.mean(axis=0), column - column.mean(axis=0)
+            error, column = nuisance(np.array(errors)), nuisance(np.array(columns))
             spread = float(np.einsum("km,km->", column, column))
             if not spread > 0.0:
                 break

@@ -93,6 +93,9 @@ class Actuator(Protocol):
     upper: float
     rate: float  # largest command change per second
     unit: str  # the command's unit, e.g. "N", "rpm", "deg" (plot labels; optional: "")
+    # Whether it can jam at a command and keep acting there, as a fin's lift does: the fault
+    # detector's sequential stuck test watches it (optional: False).
+    jams: bool
 
     @property
     def linear(self) -> bool:

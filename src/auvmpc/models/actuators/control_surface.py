@@ -67,6 +67,7 @@ class ControlSurface:
 
     linear = False
     unit = "deg"  # its command's unit (plots, docs)
+    jams = True  # a jammed fin holds its angle, and its lift still acts
 
     def __post_init__(self) -> None:
         check_fields(self, ("area", "lift_slope", "stall_angle", "density", "rate"), unit="axis")

@@ -57,6 +57,7 @@ class Propeller:
 
     linear = False
     unit = "rpm"  # its command's unit (plots, docs)
+    jams = False  # a failed propeller stops or weakens (a loss)
 
     def __post_init__(self) -> None:
         check_fields(self, ("diameter", "density", "rate"), unit="direction")

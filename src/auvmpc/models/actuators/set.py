@@ -45,6 +45,14 @@ class ActuatorSet:
         return tuple(getattr(actuator, "unit", "") for actuator in self.actuators)
 
     @cached_property
+    def jams(self) -> np.ndarray:
+        """(n,) bool: whether each input can jam at a command and keep acting there
+        (``Actuator.jams``; False for a kind that does not say)."""
+        jams = np.array([bool(getattr(actuator, "jams", False)) for actuator in self.actuators])
+        jams.setflags(write=False)
+        return jams
+
+    @cached_property
     def limits(self) -> ActuatorLimits:
         """Per-input command box and rate."""
         return ActuatorLimits(*(self._per_input(part) for part in ("lower", "upper", "rate")))

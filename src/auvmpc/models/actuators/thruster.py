@@ -43,6 +43,7 @@ class FixedThruster:
 
     linear = True
     unit = "N"  # its command's unit (plots, docs)
+    jams = False  # a failed thruster stops or weakens (a loss)
 
     @classmethod
     def planar(cls, name: str, position: tuple[float, float], angle_deg: float,
