@@ -72,7 +72,7 @@ import numpy as np
 from pydantic import Field
 
 from auvmpc.angles import wrap_angle
-from auvmpc.config import NonNegative
+from auvmpc.config import NonNegative, Positive
 from auvmpc.controllers.base import Observation
 from auvmpc.controllers.config import (
     ControllerType,
@@ -85,6 +85,7 @@ from auvmpc.controllers.pace import DepthHoldingPace
 from auvmpc.controllers.schedule import ReferenceSchedule
 from auvmpc.controllers.shell import Proposal, ShelledController
 from auvmpc.errors import ConfigError
+from auvmpc.estimation.six_dof_current import SixDofCurrentEkf
 from auvmpc.models.integrators import rk4
 from auvmpc.models.level_flight import LevelFlight, fastest_level_flight
 from auvmpc.models.six_dof import (
@@ -126,6 +127,12 @@ _RIDGE = 1e-2
 _RIDGE_FLOOR = 1e-12
 # Below this ground speed (m/s) the path gives no direction: hold the reference's heading.
 _STILL_M_PER_S = 1e-3
+# The EKF's defaults (SixDofNmpcConfig's descriptions say where they come from).
+_MEASUREMENT_STD = (0.1, 0.1, 0.02, 0.005, 0.005, 0.005, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005)
+_PROCESS_STD = (
+    9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 3e-5, 1.2e-2, 1e-4, 4.5e-2, 6e-2, 3e-2, 2e-4,
+)  # fmt: skip
+_CURRENT_RATE_STD = 1e-3
 
 
 class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
@@ -160,6 +167,38 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
         "dead-reckoned from the last estimate with the measured velocities, taken into the "
         "position the prediction starts from (1: the raw fix)",
     )  # fmt: skip
+    estimator: Literal["filters", "ekf"] = Field(
+        default="filters",
+        description="what the program starts from and the current it predicts with: "
+        "'filters', the position fix's complementary filter and the current observer "
+        "(position_fix_gain, current_gain); 'ekf', one extended Kalman filter of the 6-DOF "
+        "state and the horizontal current on the prediction model "
+        "(estimation/six_dof_current.py; measurement_std, process_std, current_rate_std, "
+        "initial_current_std)",
+    )  # fmt: skip
+    measurement_std: tuple[(Positive,) * NX] = Field(
+        default=_MEASUREMENT_STD,
+        description="the EKF's sensor noise of [x, y, z, phi, theta, psi, u, v, w, p, q, r] "
+        "(m, rad, m/s, rad/s): the REMUS 100 presets' sensing (x, y 0.1; psi 0.005; u, v "
+        "0.01; r 0.005; depth 0.02); roll and pitch as the heading, w as u and v, p and q as "
+        "r (the simulated sensor measures these exactly: an AHRS and a DVL do them no worse)",
+    )  # fmt: skip
+    process_std: tuple[(Positive,) * NX] = Field(
+        default=_PROCESS_STD,
+        description="the EKF's model error per sample on the 6-DOF state (same order and "
+        "units), chosen by measurement on the REMUS 100 presets (plant 20 % off in added mass "
+        "and damping): heading, sway and yaw rate at their measured one-step prediction error "
+        "(noise-free runs), the other states 30 times theirs, since their error is a bias in "
+        "turns and dives the filter must follow (docs/remus100.md)",
+    )  # fmt: skip
+    current_rate_std: Positive = Field(
+        default=_CURRENT_RATE_STD,
+        description="the EKF's random walk of each horizontal current component "
+        "(m/s per sqrt(s)): larger follows a changing current (and model error) faster",
+    )  # fmt: skip
+    initial_current_std: Positive = Field(
+        default=0.5, description="the EKF's prior uncertainty of each current component (m/s)"
+    )
     max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
 
     def _filled(self, model: VehicleParams, sample_time: float) -> dict[str, Any]:
@@ -251,6 +290,13 @@ class SixDofNmpc(ShelledController):
             "prediction", [x, u, current, share],
             [predicted, ca.jacobian(predicted, current)[:, 0:2]],
         )  # fmt: skip
+        self._ekf = None
+        if config.estimator == "ekf":
+            self._ekf = SixDofCurrentEkf(
+                step, self.sample_time, np.array(config.measurement_std),
+                np.array(config.process_std), config.current_rate_std,
+                config.initial_current_std,
+            )  # fmt: skip
         # One stage, written once and mapped over the horizon: its shooting gap and its cost.
         reached, previous = ca.SX.sym("x_next", NX), ca.SX.sym("u_previous", nu)
         node = ca.SX.sym("node", _NODE)  # x, y, z, psi, u, r, theta of the node reached
@@ -324,12 +370,17 @@ class SixDofNmpc(ShelledController):
         self._level_flights: dict[tuple, LevelFlight | None] = {}  # by the fault (_pace's key)
         self._depth_pace = DepthHoldingPace(self.sample_time)
         self._depth_target: float | None = None  # the last sample's flown depth reference
+        if self._ekf is not None:
+            self._ekf.reset(np.asarray(initial_state, dtype=float))
 
     def propose(self, observation: Observation, previous: np.ndarray) -> Proposal:
         state = np.asarray(observation.state, dtype=float)
         share = np.asarray(self.effectiveness, dtype=float)
         share, lower, upper, previous, stuck = self._fixed_at_stuck(observation, share, previous)
-        self._estimate_current(state)
+        if self._ekf is None:
+            self._estimate_current(state)
+        else:  # the program starts from the estimate, with the estimated current
+            state, self._current[:2] = self._ekf.correct(state)
         self._sample = (state, share, stuck)
         speed = self._pace(share, lower, upper, previous, observation.reference, state)
         shown = observation.reference  # as many rows as the loop shows, for the recovery
@@ -368,6 +419,9 @@ class SixDofNmpc(ShelledController):
         self._guess = None if fell_back else self._solution
         state, share, stuck = self._sample
         acting = command if stuck is None else np.where(np.isnan(stuck), command, stuck)
+        if self._ekf is not None:
+            self._ekf.predict(acting, share)
+            return
         predicted, sensitivity = self._prediction(state, acting, self._current, share)
         self._predicted = np.asarray(predicted, dtype=float).ravel()
         self._sensitivity = np.asarray(sensitivity, dtype=float)
