@@ -130,9 +130,9 @@ _STILL_M_PER_S = 1e-3
 # The EKF's defaults (SixDofNmpcConfig's descriptions say where they come from).
 _MEASUREMENT_STD = (0.1, 0.1, 0.02, 0.005, 0.005, 0.005, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005)
 _PROCESS_STD = (
-    9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 3e-5, 1.2e-2, 1e-4, 4.5e-2, 6e-2, 3e-2, 2e-4,
+    9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 1e-4, 1.2e-2, 3e-4, 4.5e-2, 6e-2, 3e-2, 1e-3,
 )  # fmt: skip
-_CURRENT_RATE_STD = 1e-3
+_CURRENT_RATE_STD = 1e-2
 
 
 class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
@@ -187,9 +187,9 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
         default=_PROCESS_STD,
         description="the EKF's model error per sample on the 6-DOF state (same order and "
         "units), chosen by measurement on the REMUS 100 presets (plant 20 % off in added mass "
-        "and damping): heading, sway and yaw rate at their measured one-step prediction error "
-        "(noise-free runs), the other states 30 times theirs, since their error is a bias in "
-        "turns and dives the filter must follow (docs/remus100.md)",
+        "and damping): from the one-step prediction error measured on noise-free runs, "
+        "heading, sway and yaw rate about 3 times theirs, the other states 30 times, since "
+        "the error is a bias in turns and dives the filter must follow (docs/remus100.md)",
     )  # fmt: skip
     current_rate_std: Positive = Field(
         default=_CURRENT_RATE_STD,
