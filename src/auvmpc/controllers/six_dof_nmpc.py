@@ -37,7 +37,11 @@ chased its noise with the rudder (docs/remus100.md: 0.1 m of fix noise alone mad
 of the depth change's cross-track error, against 1.1 mm without noise). Nothing in the
 vehicle's motion depends on where it is, so starting from the filtered position is the
 program started from the fix with the position targets moved back by the filter's
-correction (``_nodes``).
+correction (``_nodes``). ``estimator: ekf`` replaces both with one extended Kalman filter of
+the 6-DOF state and the horizontal current on the prediction's own RK4 model, its gains from
+the sensors' noise against the model's error (estimation/six_dof_current.py): the program then
+starts from the estimate. It is the better of the two on the depth change and the worse in
+the turns of the survey and the helix (docs/remus100.md), so it is not the default.
 
 A vehicle that a fault leaves unable to keep the mission's pace (a stuck input, declared or
 found; an input below full effectiveness) is flown no faster than its fastest straight,
