@@ -118,13 +118,14 @@ def test_the_pace_share_flies_the_speed_through_the_water():
 
 def test_the_schedule_hands_on_the_mission_until_it_must_slow():
     """At the mission's pace the rows are the loop's own object; slowed, the rows are the
-    path's at tau + n rho, tau moving on by rho each sample, and the lag is t - tau."""
+    path's at tau + n rho, tau moving on by rho each sample, their rates times rho, and the
+    lag is t - tau."""
     dt, speed = 0.5, 1.0
-    schedule = ReferenceSchedule(dt, heading_column=2)
+    schedule = ReferenceSchedule(dt, heading_column=2, rate_columns=(3,))
 
-    def reference(k):  # a straight line east at 2 m/s, preview of 4 samples
+    def reference(k):  # a straight line east at 2 m/s (its speed in column 3), 4 ahead
         t = dt * (k + np.arange(5))
-        return np.column_stack([np.zeros(5), 2.0 * t, np.full(5, math.pi / 2)])
+        return np.column_stack([np.zeros(5), 2.0 * t, np.full(5, math.pi / 2), np.full(5, 2.0)])
 
     still = np.zeros(2)
     shown = reference(0)
@@ -135,6 +136,7 @@ def test_the_schedule_hands_on_the_mission_until_it_must_slow():
         place = 1.0 + (k - 1) * 0.5  # rho = 1 / 2, slowed from sample 1
         np.testing.assert_allclose(rows[:, 1], 2.0 * dt * (place + 0.5 * np.arange(5)))
         np.testing.assert_allclose(rows[:, 2], math.pi / 2)
+        np.testing.assert_allclose(rows[:, 3], 1.0)  # the speed along the slower clock
         assert schedule.lag(k) == pytest.approx(k - place)
 
 

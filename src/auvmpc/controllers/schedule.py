@@ -46,11 +46,15 @@ def pace_share(ground: np.ndarray, current: np.ndarray, speed: float) -> float:
 class ReferenceSchedule:
     """The controller's own place on the reference (module docstring): rows whose first two
     columns are the horizontal position (m), one sample apart; ``heading_column``: their
-    heading (unwrapped when interpolated)."""
+    heading (unwrapped when interpolated); ``rate_columns``: their rates along the mission's
+    clock (speeds, the turn rate, the climb rate), which the slower clock scales by rho."""
 
-    def __init__(self, sample_time: float, heading_column: int) -> None:
+    def __init__(
+        self, sample_time: float, heading_column: int, rate_columns: tuple[int, ...] = ()
+    ) -> None:
         self.sample_time = sample_time
         self.heading_column = heading_column
+        self.rate_columns = list(rate_columns)
         self.progress: float | None = None  # tau / Te now; None: on the mission's clock
         self._next = 0.0  # tau / Te at the next sample
         self._rows = np.empty((0, 0))  # the rows shown, from sample self._first on
@@ -79,7 +83,9 @@ class ReferenceSchedule:
         share = 1.0 if speed is None else pace_share(self._ground(self._rows, place), current,
                                                      speed)  # fmt: skip
         self._next = self.progress + share
-        return self._at(self.progress + share * np.arange(count + 1))
+        rows = self._at(self.progress + share * np.arange(count + 1))
+        rows[:, self.rate_columns] *= share
+        return rows
 
     def _ground(self, rows: np.ndarray, place: float) -> np.ndarray:
         """The path's ground velocity (m/s) at the fractional row ``place`` of ``rows``: that

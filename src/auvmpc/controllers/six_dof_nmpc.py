@@ -111,6 +111,7 @@ NX = SIX_DOF.size
 # [x, y, psi, u, v, r, z, z'].
 _REF_XY, _REF_R, _REF_Z = slice(0, 2), 5, 6
 _REF_PSI = 2
+_REF_RATES = (3, 4, 5, 7)  # u, v, r, z': what a slower clock makes slower
 _XY = SIX_DOF.span("x", "y")
 _Z, _PHI, _THETA, _PSI = (SIX_DOF.index(name) for name in ("z", "phi", "theta", "psi"))
 _U = SIX_DOF.index("u")
@@ -370,7 +371,7 @@ class SixDofNmpc(ShelledController):
         self._sample: tuple | None = None  # (state, share, stuck values or None) now
         self._fix_correction = np.zeros(2)  # filtered less measured horizontal position (m)
         self._last_fix: tuple[np.ndarray, np.ndarray] | None = None
-        self._schedule = ReferenceSchedule(self.sample_time, _REF_PSI)
+        self._schedule = ReferenceSchedule(self.sample_time, _REF_PSI, _REF_RATES)
         self._level_flights: dict[tuple, LevelFlight | None] = {}  # by the fault (_pace's key)
         self._depth_pace = DepthHoldingPace(self.sample_time)
         self._depth_target: float | None = None  # the last sample's flown depth reference
