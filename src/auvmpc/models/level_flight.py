@@ -28,6 +28,7 @@ rudder jammed over: no sideslip balances both its side force and its yaw moment)
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import casadi as ca
@@ -84,7 +85,8 @@ def fastest_level_flight(
     ``flow(x, c)``: the model's state derivative (12,) in still water for the inputs ``c``
     as the vehicle is now (its faults in it); ``lower``, ``upper``: each input's bounds,
     equal for an input held at a value; ``tilt_bound``: the largest roll and pitch (rad);
-    ``start``: the inputs to start from (the middle of their ranges if None)."""
+    ``start``: inputs to start from besides the middle of their ranges (a command held in a
+    turn, its rudder hard over, starts the least squares far from a straight flight)."""
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     free = upper > lower
     velocity, attitude = ca.SX.sym("nu_linear", 3), ca.SX.sym("phi_theta", 2)
@@ -101,8 +103,8 @@ def fastest_level_flight(
     equations = ca.Function("level", [unknowns], [steady, ca.jacobian(steady, unknowns)])
     low = np.concatenate([[_SLOWEST * cap, -cap, -cap], [-tilt_bound] * 2, lower[free]])
     high = np.concatenate([[cap, cap, cap], [tilt_bound] * 2, upper[free]])
-    guess = 0.5 * (lower + upper) if start is None else np.asarray(start, dtype=float)
-    guess = np.clip(guess, lower, upper)[free]
+    middle = 0.5 * (lower + upper)
+    guesses = [middle] if start is None else [np.asarray(start, dtype=float), middle]
     scale = np.maximum(high - low, 1e-3)  # rpm and radians alike, over their ranges
 
     def residual(z, pull):
@@ -114,8 +116,10 @@ def fastest_level_flight(
         return np.vstack([rows, pull * np.eye(1, z.size)])
 
     best: np.ndarray | None = None
-    for share in _STARTS:
-        z = np.concatenate([[share * cap, 0.0, 0.0], [0.0, 0.0], guess])
+    for share, guess in itertools.product(_STARTS, guesses):
+        z = np.concatenate(
+            [[share * cap, 0.0, 0.0], [0.0, 0.0], np.clip(guess, lower, upper)[free]]
+        )
         for pull in (_PULL, 0.0):
             z = least_squares(residual, np.clip(z, low, high), jacobian, (low, high),
                               x_scale=scale, args=(pull,), xtol=1e-14, ftol=1e-14,
