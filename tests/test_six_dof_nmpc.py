@@ -69,12 +69,16 @@ def test_a_torpedo_cannot_push_sideways_a_thruster_vehicle_can():
     assert load_vehicle(HEAVY).six_dof_actuators.pushes_sideways
 
 
-def test_the_observer_finds_a_steady_current():
+@pytest.mark.parametrize("estimator", ["filters", "ekf"])
+def test_the_observer_finds_a_steady_current(estimator):
     """Held still in a 0.2 m/s current by the controller on the nominal model, the estimate
-    converges on the true current: within 2 % after 10 s (the observer's gain 0.2 per sample
+    converges on the true current, with either estimator (the filters' current observer, or
+    the EKF of estimation/six_dof_current.py on exact measurements): within 2 % after 10 s
+    (the observer's gain 0.2 per sample
     leaves 0.8^50 of the first error; the rest is the model's own prediction error)."""
     vehicle = load_vehicle(HEAVY)
-    controller = SixDofNmpc(vehicle, SixDofNmpcConfig(prediction_horizon=5, jit=False))
+    config = SixDofNmpcConfig(prediction_horizon=5, jit=False, estimator=estimator)
+    controller = SixDofNmpc(vehicle, config)
     model = six_dof.six_dof_model(vehicle)
     current = np.array([0.2, -0.1, 0.0])
     state = np.zeros(12)
@@ -239,23 +243,3 @@ def test_a_position_fix_gain_of_one_steers_the_raw_fix():
     rows = np.array([[1.0 * k, 2.0, 0.0, 1.5, 0.0, 0.0, 5.0, 0.0] for k in range(4)])
     nodes = controller._nodes(np.zeros(12), rows)
     np.testing.assert_array_equal(nodes[0:2], rows[1:, 0:2].T)
-
-
-def test_the_ekf_finds_a_steady_current():
-    """As the observer above, with ``estimator: ekf`` (estimation/six_dof_current.py): on the
-    nominal model and exact measurements the EKF's current converges on the true current."""
-    vehicle = load_vehicle(HEAVY)
-    config = SixDofNmpcConfig(prediction_horizon=5, jit=False, estimator="ekf")
-    controller = SixDofNmpc(vehicle, config)
-    model = six_dof.six_dof_model(vehicle)
-    current = np.array([0.2, -0.1, 0.0])
-    state = np.zeros(12)
-    state[2] = 2.0
-    thrust = np.zeros(vehicle.six_dof_actuators.size)
-    controller.reset(state, thrust)
-    hold = np.tile([0, 0, 0, 0, 0, 0, 2.0, 0], (6, 1))  # [x, y, psi, u, v, r, z, z']
-    for k in range(50):
-        result = controller.compute(Observation(k, 0.2 * k, state.copy(), hold))
-        substeps = controller.config.model_substeps
-        state = six_dof.integrate(model, state, result.thrust, 0.2, substeps, held_current=current)
-    np.testing.assert_allclose(controller._current[:2], current[:2], rtol=0.02)
