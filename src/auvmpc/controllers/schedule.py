@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ["ReferenceSchedule", "pace_share"]
+__all__ = ["ReferenceSchedule", "pace_share", "rows_at"]
 
 # A reference moving slower than this over ground (m/s) has no pace to slow.
 _STILL_M_PER_S = 1e-6
@@ -106,9 +106,14 @@ class ReferenceSchedule:
         self._rows, self._first = self._rows[behind:], self._first + behind
 
     def _at(self, samples: np.ndarray) -> np.ndarray:
-        """The rows at fractional ``samples``, linear in between (the heading unwrapped)."""
-        rows = self._rows.copy()
-        rows[:, self.heading_column] = np.unwrap(rows[:, self.heading_column])
-        index = samples - self._first
-        grid = np.arange(len(rows), dtype=float)
-        return np.column_stack([np.interp(index, grid, rows[:, j]) for j in range(rows.shape[1])])
+        """The rows at fractional ``samples``."""
+        grid = np.arange(len(self._rows), dtype=float)
+        return rows_at(self._rows, grid, samples - self._first, self.heading_column)
+
+
+def rows_at(rows: np.ndarray, grid: np.ndarray, at: np.ndarray, heading_column: int) -> np.ndarray:
+    """Reference ``rows`` (M, nr) given at ``grid`` (M,), at ``at`` instead: linear in
+    between, the heading (column ``heading_column``) unwrapped first."""
+    rows = np.array(rows, dtype=float)
+    rows[:, heading_column] = np.unwrap(rows[:, heading_column])
+    return np.column_stack([np.interp(at, grid, column) for column in rows.T])

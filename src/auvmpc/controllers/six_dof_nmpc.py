@@ -463,7 +463,7 @@ class SixDofNmpc(ShelledController):
         is, whatever comes of it). The fastest level flight (models/level_flight.py), no
         faster than twice what the mission asks over the preview, solved once per fault,
         trimmed by the depth error (controllers/pace.py)."""
-        if np.all(share >= 1.0) and np.array_equal(lower, self._lbw):
+        if np.all(share >= 1.0) and lower is self._lbw:  # healthy: nothing held either
             return None
         first = self._n_states  # the first move's bounds: the stuck inputs' values in them
         low, high = lower[first : first + self.n_inputs], upper[first : first + self.n_inputs]

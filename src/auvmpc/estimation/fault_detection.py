@@ -485,15 +485,11 @@ class SixDofFaultDetector(FaultDetector):
         fits = self._glr.fits()
         if fits is None:
             return None
-        span = self._upper - self._lower
-        beyond = STUCK_BEYOND * span
         candidate = (
             row.watched
             & self._jams
             & (fits.score >= STUCK_SIGMAS)
-            & (fits.stuck_at >= self._lower - beyond)
-            & (fits.stuck_at <= self._upper + beyond)
-            & (fits.gap >= STUCK_FOUND * span)
+            & self._plausible(fits.stuck_at, fits.gap)
             & (fits.versus_loss < 1.0)
         )
         if not candidate.any():
@@ -522,13 +518,16 @@ class SixDofFaultDetector(FaultDetector):
         return float(np.clip(1.0 - lost, 0.0, 1.0))
 
     def _stuck_plausible(self, fit: _Fit) -> bool:
-        """Inside the input's limits (to STUCK_BEYOND of its range) and far enough from the
-        commands it did not follow (STUCK_FOUND of its range)."""
-        i = fit.index
-        span = self._upper[i] - self._lower[i]
-        beyond = STUCK_BEYOND * span
-        inside = self._lower[i] - beyond <= fit.stuck_at <= self._upper[i] + beyond
-        return bool(inside and fit.gap >= STUCK_FOUND * span)
+        return bool(self._plausible(fit.stuck_at, fit.gap, fit.index))
+
+    def _plausible(self, stuck_at, gap, inputs: int | slice = slice(None)):
+        """Whether a value found stuck (of the inputs ``inputs``; arrays: input-wise) is
+        inside the input's limits (to STUCK_BEYOND of its range) and ``gap``, how far the
+        commands it did not follow were from it, at least STUCK_FOUND of its range."""
+        lower, upper = self._lower[inputs], self._upper[inputs]
+        beyond = STUCK_BEYOND * (upper - lower)
+        inside = (stuck_at >= lower - beyond) & (stuck_at <= upper + beyond)
+        return inside & (gap >= STUCK_FOUND * (upper - lower))
 
     def _refined(self, fit: _Fit) -> float:
         """The stuck value by Gauss-Newton on the model from the linear fit's (the window's

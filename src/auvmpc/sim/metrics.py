@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from auvmpc.angles import wrap_angle
 from auvmpc.controllers.base import ControlStatus
+from auvmpc.controllers.schedule import rows_at
 from auvmpc.environment.obstacles import ObstacleConfig
 from auvmpc.models.layout import DEPTH, HORIZONTAL
 from auvmpc.models.six_dof import SIX_DOF
@@ -546,10 +547,7 @@ def reference_as_flown(log: SimLog) -> SimLog:
     if not lag.any():
         return log
     flown = log.first(len(log.t))
-    rows = log.reference.copy()
-    rows[:, _HEADING] = np.unwrap(rows[:, _HEADING])
-    at = log.t - lag
-    flown.reference = np.column_stack([np.interp(at, log.t, column) for column in rows.T])
+    flown.reference = rows_at(log.reference, log.t, log.t - lag, _HEADING)
     return flown
 
 
