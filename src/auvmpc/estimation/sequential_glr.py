@@ -1,5 +1,6 @@
-"""A sequential test for an input stuck at a value: the generalised likelihood ratio of "input
-i has been stuck at s since sample j" against "healthy", kept up to date sample by sample for
+"""A sequential test for an input stuck at a value or weakened: the generalised likelihood
+ratio of "input i has been stuck at s since sample j" and of "input i has made only (1 -
+lambda) of its wrench since sample j" against "healthy", kept up to date sample by sample for
 every onset j of the last :data:`MEMORY_S` (a window-limited GLR: Willsky and Jones, "A
 generalized likelihood ratio approach to the detection and estimation of jumps in linear
 systems", IEEE TAC 21(1), 1976; Lai, "Sequential changepoint detection in quality control
@@ -10,27 +11,28 @@ two from where it is commanded gives a small residual at the onset, and by the t
 controller, not knowing, has moved its command far enough for the fit to be sure, the onset
 has left the 2 s window; from then on the fit reads the jam's constant wrench as its window's
 constant ``c``. What still tells the jam then is that the input no longer answers its
-command's changes. This test keeps that evidence for as long as the onset is remembered.
+command's changes. This test keeps that evidence for as long as the onset is remembered. A
+propeller that loses half its thrust is the other case: the window holds too few samples of
+the step for its score (measured on remus100-stuck-fin: 11.6 against 12), and a nuisance
+followed more slowly than the window's constant lets the step's evidence add up for longer.
 
 The residual r_k (measured less predicted velocities, noise-weighted, as the window fit's)
 carries a slowly varying unknown ``c_k`` (a current, the model's own error), taken as a random
 walk and followed by the exponentially weighted mean ``c_{k+1} = c_k + K (r_k - c_k)`` (the
-steady-state Kalman filter of a random walk in white noise), :data:`WINDOW_GAIN` chosen so its
-mean age is the window fit's: what the window's constant absorbed, this absorbs. Healthy, the
-filter's innovations ``nu_k = r_k - c_k`` are the noise. Stuck at s from j, the residual has
-in addition ``m_k = B_ki (s - F_ki)`` for k >= j (B: the step's Jacobian in the command, as in
-the window fit), and the same filter run on ``r - m`` has the innovations ``nu_k - rho_k(s)``,
-where the signature ``rho_k = m_k - (the filter's mean of m up to k)`` is linear in s: ``rho_k
-= s rho^B_k + rho^A_k`` with the signatures of ``B_ki`` and of ``-B_ki F_ki``. For each onset
-and input the least-squares s and the drop in the innovations' sum of squares (the GLR's gain,
-twice its log) follow from a few running sums. A loss of a share lambda of the input's wrench
-(the window fit's secant regressor ``g_ki``) is tested the same way, so that a stuck value is
-reported only where it explains the innovations clearly better than a loss (the window fit's
-rule, :data:`~auvmpc.estimation.fault_detection.ISOLATION`): a dead thruster is as well
-explained by either, and a weak propeller must not be held at an rpm.
+steady-state Kalman filter of a random walk in white noise), its gain K given (the stuck test's
+:func:`window_gain` of the window fit's length: what the window's constant absorbed, this
+absorbs). Healthy, the filter's innovations ``nu_k = r_k - c_k`` are the noise. Stuck at s
+from j, the residual has in addition ``m_k = B_ki (s - F_ki)`` for k >= j (B: the step's
+Jacobian in the command, as in the window fit), and the same filter run on ``r - m`` has the
+innovations ``nu_k - rho_k(s)``, where the signature ``rho_k = m_k - (the filter's mean of m up
+to k)`` is linear in s: ``rho_k = s rho^B_k + rho^A_k`` with the signatures of ``B_ki`` and of
+``-B_ki F_ki``. A loss of a share lambda of the input's wrench (the window fit's secant
+regressor ``g_ki``) has the signature ``lambda rho^g_k``. For each onset and input the
+least-squares s and lambda and the drops in the innovations' sum of squares (the GLR's gains,
+twice their logs) follow from a few running sums.
 
-The score is the window fit's: the gain in the stuck fit's scatter (at least the noise), so the
-same threshold reads the same way; its threshold is measured on the healthy presets
+The scores are the window fit's: each hypothesis's gain in its own fit's scatter (at least the
+noise), so the same threshold reads the same way; it is measured on the healthy presets
 (docs/faults.md).
 """
 
@@ -40,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["StuckFits", "StuckGLR", "innovations", "window_gain"]
+__all__ = ["SequentialFits", "SequentialGLR", "innovations", "window_gain"]
 
 # How far back an onset is remembered (s): long enough for a controller that does not know
 # of the jam to move its command well away from it (measured on remus100-stuck-fin: 2 to 6 s
@@ -50,17 +52,22 @@ MEMORY_S = 10.0
 
 
 @dataclass(frozen=True)
-class StuckFits:
-    """Each remembered onset's (rows) stuck fit of each input (columns): the onset ``ages``
-    (onsets,) in samples (1: the last sample), the least-squares ``stuck_at``, its ``score``,
-    the RMS distance ``gap`` of the commands since the onset from it, and its innovations' sum
-    of squares over a loss's at the same onset (``versus_loss``)."""
+class SequentialFits:
+    """Each remembered onset's (rows) fits of each input (columns): the onset ``ages``
+    (onsets,) in samples (1: the last sample); stuck: the least-squares ``stuck_at``, its
+    ``score``, the RMS distance ``gap`` of the commands since the onset from it, and its
+    innovations' sum of squares over a loss's at the same onset (``versus_loss``); lost: the
+    least-squares share ``lost`` (lambda), its ``loss_score`` and its innovations' sum of
+    squares ``loss_rss``."""
 
     ages: np.ndarray
     stuck_at: np.ndarray
     score: np.ndarray
     gap: np.ndarray
     versus_loss: np.ndarray
+    lost: np.ndarray
+    loss_score: np.ndarray
+    loss_rss: np.ndarray
 
 
 def window_gain(window: int) -> float:
@@ -72,7 +79,7 @@ def window_gain(window: int) -> float:
 def innovations(residuals: np.ndarray, gain: float) -> np.ndarray:
     """The innovations ``r_k - c_k`` (K, m) of the residuals (K, m) about their exponentially
     weighted mean ``c_{k+1} = c_k + gain (r_k - c_k)``, from ``c_0 = r_0``: what
-    :class:`StuckGLR` tests, for a whole sequence at once (linear in the residuals)."""
+    :class:`SequentialGLR` tests, for a whole sequence at once (linear in the residuals)."""
     out = np.empty_like(residuals, dtype=float)
     mean = np.array(residuals[0], dtype=float)
     for k, residual in enumerate(residuals):
@@ -81,7 +88,7 @@ def innovations(residuals: np.ndarray, gain: float) -> np.ndarray:
     return out
 
 
-class StuckGLR:
+class SequentialGLR:
     """The window-limited GLR (module docstring) over ``n_inputs`` inputs and ``n_rows``
     residual rows, its nuisance followed with ``gain`` K, onsets remembered ``memory``
     samples."""
@@ -138,8 +145,9 @@ class StuckGLR:
         self._innovation += float(nu @ nu)
         self._count += 1
 
-    def fits(self) -> StuckFits | None:
-        """Every remembered onset's stuck fit of every input; None before the first sample."""
+    def fits(self) -> SequentialFits | None:
+        """Every remembered onset's stuck and loss fits of every input; None before the first
+        sample."""
         begun = self._count > 0
         if not begun.any():
             return None
@@ -150,13 +158,20 @@ class StuckGLR:
         stuck = np.where(usable, bv / np.where(usable, bb, 1.0), 0.0)
         rss = vv1 - stuck * bv  # |nu - rho(s)|^2 at the least-squares s
         gain = np.where(usable, innovation - rss, 0.0)
-        scatter = np.maximum(rss / np.maximum(self.n_rows * count - 1.0, 1.0), 1.0)
+        dof = np.maximum(self.n_rows * count - 1.0, 1.0)
+        scatter = np.maximum(rss / dof, 1.0)
         lossy = gg > 1e-12
-        loss_rss = innovation - np.where(lossy, gv**2 / np.where(lossy, gg, 1.0), 0.0)
-        return StuckFits(
+        lost = np.where(lossy, gv / np.where(lossy, gg, 1.0), 0.0)
+        loss_gain = lost * gv  # gv^2 / gg: the drop in the innovations' sum of squares
+        loss_rss = innovation - loss_gain
+        loss_scatter = np.maximum(loss_rss / dof, 1.0)
+        return SequentialFits(
             ages=np.flatnonzero(begun) + 1,
             stuck_at=stuck,
             score=np.where(usable, np.sqrt(np.maximum(gain, 0.0) / scatter), 0.0),
             gap=np.sqrt(np.maximum(ff / count - 2.0 * stuck * f / count + stuck**2, 0.0)),
             versus_loss=rss / np.maximum(loss_rss, 1e-300),
+            lost=lost,
+            loss_score=np.where(lossy, np.sqrt(np.maximum(loss_gain, 0.0) / loss_scatter), 0.0),
+            loss_rss=loss_rss,
         )

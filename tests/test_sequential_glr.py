@@ -1,4 +1,4 @@
-"""The sequential stuck test (estimation/stuck_glr.py): its recursion against the batch
+"""The sequential stuck test (estimation/sequential_glr.py): its recursion against the batch
 statement it stands for, its estimate against noise-free truth, and, in the 6-DOF detector, a
 stern plane jammed near the angles it is commanded to found where the 2 s window alone does
 not find it, while a healthy fin is left alone."""
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from auvmpc.estimation.fault_detection import SixDofFaultDetector
-from auvmpc.estimation.stuck_glr import StuckGLR, innovations, window_gain
+from auvmpc.estimation.sequential_glr import SequentialGLR, innovations, window_gain
 from auvmpc.models.six_dof import SIX_DOF, integrate, six_dof_model, stable_substeps
 from auvmpc.models.vehicle import load_vehicle
 
@@ -45,7 +45,7 @@ def _problem(rng, samples=30, rows=6, inputs=3):
 
 
 def _fed(residuals, jacobians, commands, gain=0.3, memory=40):
-    glr = StuckGLR(jacobians.shape[2], jacobians.shape[1], gain, memory)
+    glr = SequentialGLR(jacobians.shape[2], jacobians.shape[1], gain, memory)
     for r, b, f in zip(residuals, jacobians, commands, strict=True):
         glr.update(r, b, np.zeros_like(b), f)
     return glr
