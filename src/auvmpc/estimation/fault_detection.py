@@ -495,22 +495,20 @@ class SixDofFaultDetector(FaultDetector):
         return self._stuck_since(fits, candidate)
 
     def _found_in_window(self) -> FaultFound | None:
-        """The window fit's detection; on an input that can jam, told as the sequential
-        test's stuck fit instead, at the remembered onset where stuck is likeliest against a
-        loss (:attr:`~auvmpc.estimation.stuck_glr.StuckFits.over_loss`), where any onset
-        finds it likelier stuck (:meth:`_stuck_likelier`). The window tells a jam from a loss
-        of all the input's wrench, and where it is jammed, only by the step at the onset:
-        a jam the window scores high enough only after the onset has left it (the command
-        moved away late: in a turn, 2.5 s after a -10 deg stern-plane jam on
-        remus100-stuck-fin) is read as the loss of all the fin's wrench, or as stuck near
-        the commands before the move, the jam's constant wrench taken by the window's
-        constant; the controller then flies a fin whose jammed lift still acts as dead, or
-        at the wrong angle, and loses the depth (docs/faults.md). The sequential test
-        remembers the onset: the window's score says there is a fault, the test which kind,
-        and where."""
+        """The window fit's detection; a loss of an input that can jam told as the
+        sequential test's stuck fit instead, at the remembered onset where stuck is likeliest
+        against a loss (:attr:`~auvmpc.estimation.stuck_glr.StuckFits.over_loss`), where any
+        onset finds it likelier stuck (:meth:`_stuck_likelier`). The window tells a jam from
+        a loss of all the input's wrench only by the step at the onset: a jam the window
+        scores high enough only after the onset has left it (the command moved away late: in
+        a turn, 2.5 s after a -10 deg stern-plane jam on remus100-stuck-fin) is read as the
+        loss of all the fin's wrench, the jam's constant wrench taken by the window's
+        constant; the controller then flies a fin whose jammed lift still acts as dead, and
+        loses the depth (docs/faults.md). The sequential test remembers the onset: the
+        window's score says there is a fault, the test which kind, and where."""
         found = super()._found_in_window()
-        if found is None or not self._jams[found.index]:
-            return found
+        if found is None or found.stuck_at is not None or not self._jams[found.index]:
+            return found  # (a stuck fit the window found has its onset in view: kept)
         fits = self._glr.fits()
         if fits is None:
             return found
