@@ -70,13 +70,19 @@ the window cannot be told from the constant ``c`` and is found only once its com
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import casadi as ca
 import numpy as np
 
-from auvmpc.estimation.sequential_glr import MEMORY_S, SequentialGLR, innovations, window_gain
+from auvmpc.estimation.sequential_glr import (
+    MEMORY_S,
+    SequentialFits,
+    SequentialGLR,
+    innovations,
+    window_gain,
+)
 from auvmpc.models.discrete import DISTURBANCE_NAMES, horizontal_model
 from auvmpc.models.integrators import rk4
 from auvmpc.models.layout import HORIZONTAL
@@ -538,24 +544,55 @@ class SixDofFaultDetector(FaultDetector):
         fits = self._glr.fits()
         if fits is None:
             return None
-        candidate = (
-            row.watched
-            & self._jams
-            & (fits.score >= STUCK_SIGMAS)
-            & self._plausible(fits.stuck_at, fits.gap)
-            & (fits.versus_loss < 1.0)
-        )
+        candidate = row.watched & (fits.score >= STUCK_SIGMAS) & self._stuck_likelier(fits)
+        return self._stuck_since(fits, candidate)
+
+    def _found_in_window(self) -> FaultFound | None:
+        """The window fit's detection; a loss of an input that can jam told as the
+        sequential test's stuck fit instead, at the remembered onset where stuck is likeliest
+        against a loss (:attr:`SequentialFits.over_loss`), where any
+        onset finds it likelier stuck (:meth:`_stuck_likelier`). The window tells a jam from
+        a loss of all the input's wrench only by the step at the onset: a jam the window
+        scores high enough only after the onset has left it (the command moved away late: in
+        a turn, 2.5 s after a -10 deg stern-plane jam on remus100-stuck-fin) is read as the
+        loss of all the fin's wrench, the jam's constant wrench taken by the window's
+        constant; the controller then flies a fin whose jammed lift still acts as dead, and
+        loses the depth (docs/faults.md). The sequential test remembers the onset: the
+        window's score says there is a fault, the test which kind, and where."""
+        found = super()._found_in_window()
+        if found is None or found.stuck_at is not None or not self._jams[found.index]:
+            return found  # (a stuck fit the window found has its onset in view: kept)
+        fits = self._glr.fits()
+        if fits is None:
+            return found
+        candidate = self._stuck_likelier(fits) & (np.arange(self.n_inputs) == found.index)
+        stuck = self._stuck_since(fits, candidate)
+        return found if stuck is None else replace(stuck, sigmas=found.sigmas)
+
+    def _stuck_likelier(self, fits: SequentialFits) -> np.ndarray:
+        """(onsets, inputs): where the sequential test's stuck fit is of an input that can
+        jam, plausible (:meth:`_plausible`) and likelier than a loss at the same onset."""
+        return self._jams & self._plausible(fits.stuck_at, fits.gap) & (fits.versus_loss < 1.0)
+
+    def _stuck_since(self, fits: SequentialFits, candidate: np.ndarray) -> FaultFound | None:
+        """The stuck input of the sequential test's ``fits`` among the ``candidate`` (onsets,
+        inputs) where stuck is likeliest against a loss (``over_loss``: the onset's step is
+        what tells the two apart, and its value; the highest score alone picked, after the
+        command had moved, an onset just before the move and the value the fin was
+        commanded to there: measured, tests/test_sequential_glr.py), the value refined on the
+        rows since; None without a candidate."""
         if not candidate.any():
             return None
         onset, i = np.unravel_index(
-            np.argmax(np.where(candidate, fits.score, -1.0)), candidate.shape
+            np.argmax(np.where(candidate, fits.over_loss, -np.inf)), candidate.shape
         )
+        onset, i = int(onset), int(i)
         age = int(fits.ages[onset])
         rows = list(self._history)[-(age + self.window) :]
         on = np.arange(len(rows)) >= len(rows) - age
         filtered = partial(innovations, gain=self._glr.gain)
-        stuck_at = self._gauss_newton(int(i), float(fits.stuck_at[onset, i]), rows, on, filtered)
-        return FaultFound(int(i), None, float(fits.score[onset, i]), stuck_at, 0.0)
+        stuck_at = self._gauss_newton(i, float(fits.stuck_at[onset, i]), rows, on, filtered)
+        return FaultFound(i, None, float(fits.score[onset, i]), stuck_at, 0.0)
 
     def _predict(
         self, before: np.ndarray, command: np.ndarray, effectiveness: np.ndarray

@@ -55,16 +55,19 @@ MEMORY_S = 10.0
 class SequentialFits:
     """Each remembered onset's (rows) fits of each input (columns): the onset ``ages``
     (onsets,) in samples (1: the last sample); stuck: the least-squares ``stuck_at``, its
-    ``score``, the RMS distance ``gap`` of the commands since the onset from it, and its
-    innovations' sum of squares over a loss's at the same onset (``versus_loss``); lost: the
-    least-squares share ``lost`` (lambda), its ``loss_score`` and its innovations' sum of
-    squares ``loss_rss``."""
+    ``score``, the RMS distance ``gap`` of the commands since the onset from it, its
+    innovations' sum of squares over a loss's at the same onset (``versus_loss``), and how
+    much less that sum is than the loss's, in the stuck fit's scatter (``over_loss``: the
+    log-likelihood ratio of stuck against lost, twice, as ``score`` squared is against
+    healthy); lost: the least-squares share ``lost`` (lambda), its ``loss_score`` and its
+    innovations' sum of squares ``loss_rss``."""
 
     ages: np.ndarray
     stuck_at: np.ndarray
     score: np.ndarray
     gap: np.ndarray
     versus_loss: np.ndarray
+    over_loss: np.ndarray
     lost: np.ndarray
     loss_score: np.ndarray
     loss_rss: np.ndarray
@@ -171,6 +174,7 @@ class SequentialGLR:
             score=np.where(usable, np.sqrt(np.maximum(gain, 0.0) / scatter), 0.0),
             gap=np.sqrt(np.maximum(ff / count - 2.0 * stuck * f / count + stuck**2, 0.0)),
             versus_loss=rss / np.maximum(loss_rss, 1e-300),
+            over_loss=np.where(usable, (loss_rss - rss) / scatter, 0.0),
             lost=lost,
             loss_score=np.where(lossy, np.sqrt(np.maximum(loss_gain, 0.0) / loss_scatter), 0.0),
             loss_rss=loss_rss,
