@@ -235,9 +235,7 @@ def test_the_filters_mean_age_is_the_windows():
     assert (1 - gain) / gain == pytest.approx((8 - 1) / 2, abs=ROUND_OFF)
 
 
-def _watched(
-    jam_deg, seed, sequential=True, propeller_share=None, noise=PRESET_NOISE, planes=None
-):
+def _watched(jam_deg, seed, sequential=True, propeller_share=None, noise=PRESET_NOISE, planes=None):
     """The REMUS 100's nominal 6-DOF model as the plant in a 0.3 m/s cross current, the fins
     moved at random within COMMAND_SPREAD_DEG of 0 and the propeller about 900 rpm, the
     velocity ``noise``; the stern planes held at ``jam_deg`` from FAILS_AT on (None:
