@@ -99,7 +99,7 @@ from auvmpc.models.six_dof import (
     six_dof_model,
     stable_substeps,
 )
-from auvmpc.models.vehicle import VehicleParams
+from auvmpc.models.vehicle import VehicleParams, scaled
 from auvmpc.native import compiler, shared_library
 from auvmpc.solvers.ipopt import ipopt_options, warm_start_options
 
@@ -139,9 +139,11 @@ _STILL_M_PER_S = 1e-3
 # The EKF's defaults (SixDofNmpcConfig's descriptions say where they come from).
 _MEASUREMENT_STD = (0.1, 0.1, 0.02, 0.005, 0.005, 0.005, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005)
 _PROCESS_STD = (
-    9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 1e-4, 1.2e-2, 3e-4, 4.5e-2, 6e-2, 3e-2, 1e-3,
+    9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 3e-5, 1.2e-2, 1e-4, 4.5e-2, 6e-2, 3e-2, 2e-4,
 )  # fmt: skip
-_CURRENT_RATE_STD = 1e-2
+_CURRENT_RATE_STD = 3e-3
+# What the model's error in the EKF's process noise varies (models/vehicle.py, scaled).
+_UNCERTAIN_PARTS = ("added_mass", "linear_damping", "quadratic_damping")
 
 
 class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
@@ -177,7 +179,7 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
         "position the prediction starts from (1: the raw fix)",
     )  # fmt: skip
     estimator: Literal["filters", "ekf"] = Field(
-        default="filters",
+        default="ekf",
         description="what the program starts from and the current it predicts with: "
         "'filters', the position fix's complementary filter and the current observer "
         "(position_fix_gain, current_gain); 'ekf', one extended Kalman filter of the 6-DOF "
@@ -208,6 +210,18 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
     initial_current_std: Positive = Field(
         default=0.5, description="the EKF's prior uncertainty of each current component (m/s)"
     )
+    model_uncertainty: float = Field(
+        default=0.2, ge=0.0, le=1.0,
+        description="the EKF's relative uncertainty of the model's added mass, linear and "
+        "quadratic damping (each): how far one sample's prediction moves when each is off by "
+        "it, times model_error_gain, adds to the process noise where the vehicle is (0: the "
+        "fixed process_std alone)",
+    )  # fmt: skip
+    model_error_gain: float = Field(
+        default=3.0, ge=0.0,
+        description="the model's error per sample as a multiple of one sample's spread "
+        "(model_uncertainty): the error is a bias that persists, not white noise",
+    )  # fmt: skip
     max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
 
     def _filled(self, model: VehicleParams, sample_time: float) -> dict[str, Any]:
@@ -283,13 +297,15 @@ class SixDofNmpc(ShelledController):
         current, share = ca.SX.sym("v_c", 3), ca.SX.sym("e", nu)
         still = ca.DM.zeros(3)
 
-        def f(state, command):
-            return derivative(state, command, current, still, share)
+        def sample(derivative):
+            """One sample of RK4 on ``derivative`` from x under u, current and share."""
 
-        step = ca.Function(
-            "step", [x, u, current, share],
-            [rk4(f, x, u, self.sample_time, config.model_substeps)],
-        )  # fmt: skip
+            def f(state, command):
+                return derivative(state, command, current, still, share)
+
+            return rk4(f, x, u, self.sample_time, config.model_substeps)
+
+        step = ca.Function("step", [x, u, current, share], [sample(derivative)])
         # The observer's one-step prediction and how it moves with the horizontal current,
         # from one evaluation (one call per sample on the controller's step).
         predicted = step(x, u, current, share)
@@ -304,7 +320,7 @@ class SixDofNmpc(ShelledController):
             self._ekf = SixDofCurrentEkf(
                 step, self.sample_time, np.array(config.measurement_std),
                 np.array(config.process_std), config.current_rate_std,
-                config.initial_current_std,
+                config.initial_current_std, self._model_spread(sample, x, u, current, share),
             )  # fmt: skip
         # One stage, written once and mapped over the horizon: its shooting gap and its cost.
         reached, previous = ca.SX.sym("x_next", NX), ca.SX.sym("u_previous", nu)
@@ -349,6 +365,25 @@ class SixDofNmpc(ShelledController):
         self._lbg = np.concatenate([zeros, -max_change])
         self._ubg = np.concatenate([zeros, max_change])
         self._n_states = NX * (n + 1)
+
+    def _model_spread(self, sample, x, u, current, share) -> ca.Function | None:
+        """(x, u, v_c, e) -> (NX, 3): how far one sample's prediction (``sample`` of a
+        derivative) moves when each of the model's uncertain parts is off by
+        ``model_uncertainty`` (its added mass, its linear and its quadratic damping, each
+        scaled alone), times ``model_error_gain``; None without uncertainty. The EKF adds
+        their outer products to its process covariance each sample: the model's error where
+        the vehicle is, large in a turn (sideslip, yaw rate), small on a straight crab."""
+        config = self.config
+        if config.model_uncertainty == 0.0:
+            return None
+        nominal = sample(six_dof_model(self.model).derivative_with_effectiveness)
+        columns = [
+            config.model_error_gain * (sample(six_dof_model(off).derivative_with_effectiveness)
+                                       - nominal)
+            for off in (scaled(self.model, {part: 1.0 + config.model_uncertainty})
+                        for part in _UNCERTAIN_PARTS)
+        ]  # fmt: skip
+        return ca.Function("model_spread", [x, u, current, share], [ca.horzcat(*columns)])
 
     def _stage_cost(self, command, reached, previous, node):
         """The cost of one stage (module docstring): the move's change over each input's

@@ -44,7 +44,9 @@ class SixDofCurrentEkf:
         process_std: np.ndarray,
         current_rate_std: float,
         initial_current_std: float,
+        model_spread: ca.Function | None = None,
     ) -> None:
+        self._spread = model_spread
         z = ca.SX.sym("z", NX + NC)
         u = ca.SX.sym("u", step.size1_in(1))
         share = ca.SX.sym("e", step.size1_in(3))
@@ -80,5 +82,12 @@ class SixDofCurrentEkf:
         return estimate[:NX].copy(), estimate[NX:].copy()
 
     def predict(self, applied_input: np.ndarray, effectiveness: np.ndarray) -> None:
-        """Propagate over one sample with the input that acted, at ``effectiveness``."""
+        """Propagate over one sample with the input that acted, at ``effectiveness``; the
+        model's spread where the estimate was (``model_spread``) adds to the covariance."""
+        estimate = self._filter.estimate
         self._filter.predict(applied_input, effectiveness)
+        if self._spread is None:
+            return
+        water = np.concatenate([estimate[NX:], [0.0]])
+        spread = np.asarray(self._spread(estimate[:NX], applied_input, water, effectiveness))
+        self._filter.covariance[:NX, :NX] += spread @ spread.T
