@@ -27,21 +27,22 @@ vehicle that can push sideways tracks the reference's heading; one that cannot (
 no actuator makes a sway force at rest) is asked for the crab heading that holds the path's
 ground track through the estimated current (the velocity through the water is the path's
 ground velocity less the current), not to point along a path it can only follow crabbing.
-The current is estimated offset-free from the one-step prediction error of the position and
-velocity: a damped Gauss-Newton step of the world-frame horizontal current each sample
-(``current_gain``). The horizontal position the prediction starts from is not the raw fix
-(USBL- or INS-grade, noisy by a decimetre) but a complementary filter's: the last estimate
-dead-reckoned with the measured velocities (a DVL's, far less noisy), moved by
-``position_fix_gain`` of the new fix's difference from it. Steering the raw fix, the MPC
-chased its noise with the rudder (docs/remus100.md: 0.1 m of fix noise alone made 2.2 cm
-of the depth change's cross-track error, against 1.1 mm without noise). Nothing in the
-vehicle's motion depends on where it is, so starting from the filtered position is the
-program started from the fix with the position targets moved back by the filter's
-correction (``_nodes``). ``estimator: ekf`` replaces both with one extended Kalman filter of
-the 6-DOF state and the horizontal current on the prediction's own RK4 model, its gains from
-the sensors' noise against the model's error (estimation/six_dof_current.py): the program then
-starts from the estimate. It is the better of the two on the depth change and the worse in
-the turns of the survey and the helix (docs/remus100.md), so it is not the default.
+The program starts from an extended Kalman filter's estimate of the 6-DOF state and the
+horizontal current (``estimator: ekf``, the default; estimation/six_dof_current.py) on the
+prediction's own RK4 model: the fix (USBL- or INS-grade, noisy by a decimetre) is filtered
+with the model and the commands, and the current the prediction uses is the filter's. Its
+process noise is where the model's error is: beside a fixed part that trusts the model on a
+straight line (heading, sway and yaw rate at their one-step error there), each sample adds
+how far the prediction moves when the model's added mass, linear or quadratic damping is
+off by ``model_uncertainty`` (``_model_spread``), which is large in a turn (sideslip, yaw
+rate) and small on a straight crab. With fixed noise alone the filter either trusted the
+model in the turns, where its error is a bias, or let the fix's noise through on straight
+legs (docs/remus100.md). ``estimator: filters`` is the former chain: the position fix
+dead-reckoned with the measured velocities and moved by ``position_fix_gain`` of each new
+fix's difference (a complementary filter; nothing in the vehicle's motion depends on where
+it is, so this is the program started from the fix with the position targets moved back by
+the filter's correction, ``_nodes``), and the current a damped Gauss-Newton step of the
+one-step prediction error each sample (``current_gain``).
 
 A vehicle that a fault leaves unable to keep the mission's pace (a stuck input, declared or
 found; an input below full effectiveness) is flown no faster than its fastest straight,
@@ -180,12 +181,13 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
     )  # fmt: skip
     estimator: Literal["filters", "ekf"] = Field(
         default="ekf",
-        description="what the program starts from and the current it predicts with: "
-        "'filters', the position fix's complementary filter and the current observer "
-        "(position_fix_gain, current_gain); 'ekf', one extended Kalman filter of the 6-DOF "
-        "state and the horizontal current on the prediction model "
-        "(estimation/six_dof_current.py; measurement_std, process_std, current_rate_std, "
-        "initial_current_std)",
+        description="what the program starts from and the current it predicts with: 'ekf', "
+        "one extended Kalman filter of the 6-DOF state and the horizontal current on the "
+        "prediction model, its process noise the model's spread where the vehicle is "
+        "(estimation/six_dof_current.py; measurement_std, process_std, model_uncertainty, "
+        "model_error_gain, current_rate_std, initial_current_std); 'filters', the position "
+        "fix's complementary filter and the current observer (position_fix_gain, "
+        "current_gain)",
     )  # fmt: skip
     measurement_std: tuple[(Positive,) * NX] = Field(
         default=_MEASUREMENT_STD,
@@ -196,11 +198,11 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
     )  # fmt: skip
     process_std: tuple[(Positive,) * NX] = Field(
         default=_PROCESS_STD,
-        description="the EKF's model error per sample on the 6-DOF state (same order and "
-        "units), chosen by measurement on the REMUS 100 presets (plant 20 % off in added mass "
-        "and damping): from the one-step prediction error measured on noise-free runs, "
-        "heading, sway and yaw rate about 3 times theirs, the other states 30 times, since "
-        "the error is a bias in turns and dives the filter must follow (docs/remus100.md)",
+        description="the EKF's fixed model error per sample on the 6-DOF state (same order "
+        "and units), beside the model's spread (model_uncertainty): heading, sway and yaw rate "
+        "at about the one-step prediction error measured on the REMUS 100 presets' straight "
+        "legs (plant 20 % off in added mass and damping, noise-free), the other states 30 "
+        "times theirs, chosen by measurement (docs/remus100.md)",
     )  # fmt: skip
     current_rate_std: Positive = Field(
         default=_CURRENT_RATE_STD,

@@ -5,7 +5,11 @@ state (models/six_dof.py, SIX_DOF) and the world-frame horizontal current, a ran
 The prediction is the caller's own one-step model (six-dof-nmpc's RK4 step, with the applied
 command and the actuators' effectiveness), its Jacobian from CasADi; the measurement is the
 whole 6-DOF state (H = [I 0]). The filter itself is :class:`~auvmpc.estimation.ekf.AugmentedEkf`
-(Joseph-form update, bounded covariance), the one the 3-DOF offset-free MPC uses.
+(Joseph-form update, bounded covariance), the one the 3-DOF offset-free MPC uses. The
+process noise is a fixed covariance plus, where the caller gives one, the outer product of a
+``model_spread`` (x, u, v_c, e) -> (12, k) each sample: how far the prediction moves under
+each of k plausible errors of the model, so the filter trusts the model where it is right
+and follows the measurements where it is not.
 
 Why one filter rather than a position filter and a separate current observer in a chain: the
 gains then come from the sensors' noise weighed against the model's error, jointly for every
