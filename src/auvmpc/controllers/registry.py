@@ -54,6 +54,8 @@ from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
+    "DEFAULT_TYPE",
+    "DEFAULT_TYPE_CONTEXT",
     "DEPTH_REGISTRY",
     "REGISTRY",
     "ControllerChoice",
@@ -107,8 +109,11 @@ RECOVERED_TYPES = {
 }
 # A registered name: lower-case words joined by hyphens, as the built-in ones.
 _NAME = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
-# The horizontal type a ``controller`` mapping without ``type`` has.
+# The horizontal type a ``controller`` mapping without ``type`` has, unless the validation
+# context names another under DEFAULT_TYPE_CONTEXT (a scenario's vehicle decides it: a 6-DOF
+# scenario's torpedo flies six-dof-nmpc, scenario.loader.validate_document).
 DEFAULT_TYPE = ControllerType.NMPC
+DEFAULT_TYPE_CONTEXT = "default_controller_type"
 # The union member of the controllers registered at run time.
 _REGISTERED = "registered"
 _BUILT_IN = {name: entry.config for name, entry in REGISTRY.items()}
@@ -203,17 +208,33 @@ def _registered_config(value: Any, info: ValidationInfo) -> Any:
 def _checked_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
     """The type named first (a known one, or any name in a saved run), then the mapping
     validated as that type's configuration; an error names the field without the union
-    member pydantic puts in its location."""
+    member pydantic puts in its location. A mapping without ``type`` is the default type's
+    configuration: the context's (DEFAULT_TYPE_CONTEXT), else DEFAULT_TYPE."""
     if isinstance(value, Mapping):
-        given = value.get("type", DEFAULT_TYPE)
-        saved = (info.context or {}).get(SAVED_RUN)
+        context = info.context or {}
+        default = context.get(DEFAULT_TYPE_CONTEXT, DEFAULT_TYPE)
+        given = value.get("type", default)
         if given == DEPTH_MPC:
             where = "kind: depth scenarios, six-dof depth_controller"
             raise FieldError("type", given, f"the depth controller ({where})")
-        if not (isinstance(given, str) and (given in REGISTRY or saved)):
+        if not (isinstance(given, str) and (given in REGISTRY or context.get(SAVED_RUN))):
             known = ", ".join(repr(name) for name in horizontal_types())
             raise FieldError("type", given, f"input should be one of {known}")
+        if "type" not in value:
+            # The discriminator reads no context: the default's configuration is named here
+            # (``type`` stays unset, as the user left it).
+            return _validated_as(REGISTRY[given].config, value, info)
     return _validated_member(value, handler)
+
+
+def _validated_as(config: type[StrictModel], value: Any, info: ValidationInfo) -> Any:
+    """``value`` validated as ``config``; an error names the field within the mapping."""
+    try:
+        return config.model_validate(value, context=info.context)
+    except ValidationError as error:
+        problem = format_validation_error(error)
+        field = "" if problem.field == "<root>" else problem.field
+        raise FieldError(field, problem.value, problem.reason) from None
 
 
 def _validated_member(value: Any, handler: Any) -> Any:
