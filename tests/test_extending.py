@@ -13,7 +13,7 @@ import pytest
 
 import auvmpc
 from auvmpc.controllers.base import Controller
-from auvmpc.controllers.registry import RECOVERED_TYPES, REGISTRY, register_controller
+from auvmpc.controllers.registry import REGISTRY, register_controller
 from auvmpc.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "own_controller.py"
@@ -28,8 +28,7 @@ def example():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     yield module
-    REGISTRY.pop(NAME, None)
-    RECOVERED_TYPES.discard(NAME)
+    REGISTRY.pop(NAME, None)  # its entry holds its recovery too
 
 
 def test_a_name_is_refused_until_it_is_registered():

@@ -111,3 +111,56 @@ def test_what_cannot_fly_it_is_refused_in_one_line(monkeypatch, capsys, override
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err
     assert lines[0].lower().startswith(f"error: {field}:"), lines[0]
+
+
+def test_a_knob_of_the_vehicles_default_controller_is_taken_without_naming_its_type(
+    monkeypatch, capsys, tmp_path
+):
+    """remus100's default controller is six-dof-nmpc: a knob of it set on a controller mapping
+    without ``type`` is that controller's (validated as it before the resolution, where the
+    vehicle is known), the same configuration as with the type named, and it takes effect:
+    the run's record says so and the built controller runs the EKF."""
+    from auvmpc.api import override
+    from auvmpc.controllers.registry import build_controller
+
+    unnamed = load_scenario(SHORT, ["controller.estimator=ekf"])
+    named = load_scenario(SHORT, ["controller.type=six-dof-nmpc", "controller.estimator=ekf"])
+    assert unnamed.scenario.controller == named.scenario.controller
+    assert unnamed.scenario.controller.estimator == "ekf"
+    assert "type" not in unnamed.given.controller.model_fields_set  # still the vehicle's
+    assert unnamed.choices["type"]["value"] == "six-dof-nmpc"
+    assert build_controller(unnamed.scenario.controller, unnamed.model)._ekf is not None
+    # the library's override, from the scenario as written, the same
+    again = override(load_scenario(SHORT), {"controller.estimator": "ekf"})
+    assert again.scenario.controller == named.scenario.controller
+    out = tmp_path / "run"
+    code, _, err = run_cli(
+        monkeypatch, capsys, "run", str(SHORT), "--set", "controller.estimator=ekf",
+        "--set", "duration=1.0", "--out", str(out), "--no-figures",
+    )  # fmt: skip
+    assert code == 0, err
+    controller = json.loads((out / "run.json").read_text())["scenario"]["controller"]
+    assert (controller["type"], controller["estimator"]) == ("six-dof-nmpc", "ekf")
+
+
+@pytest.mark.parametrize(
+    ("override", "expected"),
+    [
+        ("controller.nmpc_mode=full", "a knob of nmpc, not of controller type six-dof-nmpc"),
+        ("controller.estimatr=ekf", "unknown key"),
+        ("controller.estimator=kalman", "input should be 'filters' or 'ekf'"),
+    ],
+)
+def test_a_wrong_knob_of_the_vehicles_default_controller_is_one_line(
+    monkeypatch, capsys, override, expected
+):
+    """Validated as six-dof-nmpc's: another type's knob, an unknown key and a bad value of
+    its own knob each refused in one line naming the field and the value."""
+    field, _, value = override.partition("=")
+    code, _, err = run_cli(monkeypatch, capsys, "run", str(SHORT), "--set", override,
+                           "--out", "never")  # fmt: skip
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err
+    assert lines[0].startswith(f"error: {field}: {expected}"), lines[0]
+    assert value in lines[0]

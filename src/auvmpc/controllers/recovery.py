@@ -14,39 +14,62 @@ the inertia. Never blind plan-following for long, never zero thrust.
 The shell also applies it while the vehicle spins (``shell.spin_limit``), then starts the
 optimiser again cold (docs/recovery.md).
 
-A torpedo flown by the whole vehicle's MPC (``six-dof-nmpc``) has no fixed thrusters for that
-law: its recovery is :class:`AutopilotFeedback`, the torpedo's own classical autopilot
-(``los-pid``: LOS guidance and PID loops designed on the same nominal model), engaged afresh
-each time the optimiser hands over.
-
 The depth MPC's recovery is :class:`DepthFeedback`: a critically damped PD on depth through
 the nominal heave model (its damping, net buoyancy and the estimated force cancelled), on
 the depth MPC's own estimate of depth and heave rate.
+
+The whole vehicle's MPC (``six-dof-nmpc``) recovers with what flies the vehicle without an
+optimiser. A torpedo (no fixed thrusters for the law above) gets :class:`AutopilotFeedback`,
+its own classical autopilot (``los-pid``: LOS guidance and PID loops designed on the same
+nominal model), engaged afresh each time the optimiser hands over. A thruster vehicle the
+channel pair can fly (the BlueROV2 Heavy: horizontal thrusters, a heave section and vertical
+thrusters after them) gets :class:`ChannelFeedback`: the two feedbacks above on the 6-DOF
+measurement, the stabilising one on the horizontal thrusters and the depth one on the
+vertical, split over them as the pair's depth channel splits it (controllers/channels.py),
+each allocation over the thrusters as they act, so a dead one is asked for nothing.
+
+Which recovery a controller type's shell gets is its registry entry's (controllers/
+registry.py): :func:`stabilising_recovery`, :func:`depth_recovery` or
+:func:`whole_vehicle_recovery`.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from auvmpc.controllers.base import Controller, Observation
 from auvmpc.controllers.baseline import BaselineConfig
+from auvmpc.controllers.channels import ThrustMapping
+from auvmpc.controllers.los_pid import LosPid, LosPidConfig, flies
 from auvmpc.controllers.tracking_law import (
     LAW_OUTPUTS,
     REFERENCE_ROWS,
     apply_law,
     tracking_law,
 )
-from auvmpc.models.heave import heave_damping_force
+from auvmpc.errors import FieldError
+from auvmpc.models.heave import heave_damping_force, resolve_heave
 from auvmpc.models.layout import DEPTH, HORIZONTAL, PLANAR_FORCE
-from auvmpc.models.six_dof import SIX_DOF
+from auvmpc.models.six_dof import SIX_DOF, depth_rate, horizontal_state
 from auvmpc.models.vehicle import HeaveParams, VehicleParams
+from auvmpc.models.vehicle import dynamics as planar_dynamics
 
 if TYPE_CHECKING:
-    from auvmpc.controllers.shell import Proposal
+    from auvmpc.controllers.shell import Proposal, ShelledController
 
-__all__ = ["AutopilotFeedback", "DepthFeedback", "StabilisingFeedback"]
+__all__ = [
+    "AutopilotFeedback",
+    "ChannelFeedback",
+    "DepthFeedback",
+    "Recovery",
+    "StabilisingFeedback",
+    "depth_recovery",
+    "stabilising_recovery",
+    "whole_vehicle_recovery",
+]
 
 _POSITION, _HEADING = HORIZONTAL.position, HORIZONTAL.heading
 # The baseline's gains without integrators: the optimiser's estimate stands in for them.
@@ -193,3 +216,139 @@ class AutopilotFeedback:
             self.autopilot.reset(np.asarray(observation.state, dtype=float), previous)
             self._engaged = True
         return self.autopilot.compute(observation).thrust
+
+
+_DEPTH_NED = SIX_DOF.index("z")  # the 6-DOF state's depth (m, down)
+
+
+class ChannelFeedback:
+    """The shell's recovery law for a thruster vehicle flown by a controller of the whole
+    vehicle (module docstring): on the 6-DOF measurement ``[x y z phi theta psi u v w p q r]``
+    and the 3-D reference rows ``[x y psi u v r z z']`` (NED), :class:`StabilisingFeedback`
+    commands the horizontal thrusters and :class:`DepthFeedback` the heave force, which the
+    depth channel's :class:`~auvmpc.controllers.channels.ThrustMapping` splits over the
+    vertical thrusters. Roll and pitch are left to passive stability, as the pair leaves
+    them. The stabilising law is fed the optimiser's estimate of the current
+    (``Proposal.current``) as the force it makes on the nominal 3-DOF model; the depth law
+    the measured depth and depth rate, with no force estimate (the nominal net buoyancy
+    only)."""
+
+    watches_yaw = True  # the shell judges spins by the yaw rate of the 6-DOF state
+    yaw_rate_index = SIX_DOF.index("r")
+
+    def __init__(self, model: VehicleParams, sample_time: float, keep_out_extra: float) -> None:
+        self.horizontal = StabilisingFeedback(model, sample_time, keep_out_extra)
+        self.depth = DepthFeedback(resolve_heave(model, {}), sample_time)
+        self.mapping = ThrustMapping(model, sample_time)
+        self._model = model
+
+    def release(self) -> None:
+        """The optimiser is in control again: the next hold starts afresh."""
+        self.horizontal.release()
+        self.depth.release()
+
+    def _current_force(self, planar: np.ndarray, current: np.ndarray) -> np.ndarray:
+        """The optimiser's current as the force estimate the stabilising law cancels: world
+        [X, Y] and N that make the nominal 3-DOF model at ``planar`` ([x y psi u v r])
+        accelerate as the water velocity ``current`` (world, m/s) makes it, i.e. its inertia
+        times its accelerations with the current less those without (thrust enters both
+        alike)."""
+        model = self._model
+        idle = np.zeros(model.n_thrusters)
+        change = (
+            planar_dynamics(planar, idle, model, current_world=current)
+            - planar_dynamics(planar, idle, model)
+        )[HORIZONTAL.span("u", "r")]
+        body = np.array([model.m11, model.m22, model.Iz]) * change
+        psi = planar[HORIZONTAL.heading]
+        c, s = np.cos(psi), np.sin(psi)
+        return np.array([c * body[0] - s * body[1], s * body[0] + c * body[1], body[2]])
+
+    def command(
+        self, observation: Observation, previous: np.ndarray, proposal: Proposal
+    ) -> np.ndarray:
+        """Every thruster's force for the coming sample (the shell projects it into the hard
+        limits): the horizontal ones' first, then the vertical ones' (the 6-DOF layout)."""
+        state = np.asarray(observation.state, dtype=float)
+        reference = np.asarray(observation.reference, dtype=float)
+        n = self.mapping.n_horizontal
+        told = observation.effectiveness
+        planar = horizontal_state(state)
+        estimate = (
+            None if proposal.current is None else self._current_force(planar, proposal.current)
+        )
+        horizontal_observation = replace(
+            observation,
+            state=planar,
+            reference=reference[:, : HORIZONTAL.size],
+            effectiveness=None if told is None else told[:n],
+        )
+        horizontal = self.horizontal.command(
+            horizontal_observation, previous[:n], replace(proposal, disturbance=estimate)
+        )
+        # The depth channel's view: z and its rate up (DEPTH), as the pair gives its MPC.
+        depth = np.array([-state[_DEPTH_NED], -depth_rate(state)])
+        vertical_share = None if told is None else told[n:]
+        depth_observation = replace(
+            observation,
+            state=depth,
+            reference=-reference[:, HORIZONTAL.size :],
+            effectiveness=vertical_share,
+        )
+        measured = replace(proposal, estimated_state=depth, disturbance=None)
+        heave = self.depth.command(depth_observation, previous[n:], measured)
+        if vertical_share is None:
+            vertical = self.mapping.vertical(float(heave.sum()))
+        else:  # the heave force those thrusts make as they act, split as the pair splits it
+            vertical = self.mapping.vertical(float(heave @ vertical_share), vertical_share)
+        return np.concatenate([horizontal, vertical])
+
+
+# What a shell may apply when no optimiser is in control (ShelledController.recovery).
+Recovery = StabilisingFeedback | DepthFeedback | AutopilotFeedback | ChannelFeedback
+
+# Which recovery a controller type's shell gets (its registry entry's ``recovery``): built
+# from the controller, its nominal vehicle and its configuration filled in for the vehicle.
+
+
+def stabilising_recovery(
+    controller: ShelledController, model: VehicleParams, config: Any
+) -> StabilisingFeedback:
+    """A horizontal MPC's: the stabilising feedback, keeping its obstacle clearance."""
+    keep_out = config.vehicle_radius + config.obstacle_margin
+    return StabilisingFeedback(model, controller.sample_time, keep_out)
+
+
+def depth_recovery(
+    controller: ShelledController, model: VehicleParams, config: Any
+) -> DepthFeedback:
+    """The depth MPC's: the depth feedback on its heave model."""
+    return DepthFeedback(controller.heave, controller.sample_time)
+
+
+def whole_vehicle_recovery(
+    controller: ShelledController, model: VehicleParams, config: Any
+) -> AutopilotFeedback | ChannelFeedback | None:
+    """A controller of the whole vehicle's, by what ``model`` has: a torpedo its autopilot
+    at the optimiser's sample time, a vehicle the channel pair can fly that pair's
+    feedbacks; None for any other (the shell then holds the plan's last move)."""
+    if flies(model):
+        autopilot = LosPid(model, LosPidConfig(sample_time=controller.sample_time))
+        return AutopilotFeedback(autopilot)
+    if _pair_flies(model):
+        keep_out = config.vehicle_radius + config.obstacle_margin
+        return ChannelFeedback(model, controller.sample_time, keep_out)
+    return None
+
+
+def _pair_flies(model: VehicleParams) -> bool:
+    """Whether the channel pair's feedbacks can fly ``model``: horizontal thrusters first in
+    its ``six_dof`` thrusters, then the ``heave`` section's vertical ones (what a 6-DOF
+    scenario checks before it flies the pair, scenario/resolved.py)."""
+    if not model.has_thrusters or model.heave is None or model.six_dof is None:
+        return False
+    try:
+        model.check_six_dof_layout()
+    except FieldError:
+        return False
+    return model.six_dof.n_thrusters > model.n_thrusters

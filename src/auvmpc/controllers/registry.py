@@ -13,7 +13,7 @@ the same over the depth kind's types (:data:`DEPTH_REGISTRY`)."""
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, Union
 
@@ -42,18 +42,25 @@ from auvmpc.controllers.config import (
 )
 from auvmpc.controllers.depth_mpc import DepthControllerConfig, DepthMpc
 from auvmpc.controllers.dompc import DoMpcConfig, DoMpcController
-from auvmpc.controllers.los_pid import LosPid, LosPidConfig, flies
+from auvmpc.controllers.los_pid import LosPid, LosPidConfig
 from auvmpc.controllers.ltv import LtvMpc, LtvMpcConfig
 from auvmpc.controllers.mpc import PaperMpc, PaperMpcConfig
 from auvmpc.controllers.nmpc import NmpcConfig, NonlinearMpc
 from auvmpc.controllers.playback import DepthPlaybackConfig, ThrustPlayback, ThrustPlaybackConfig
-from auvmpc.controllers.recovery import AutopilotFeedback, DepthFeedback, StabilisingFeedback
+from auvmpc.controllers.recovery import (
+    Recovery,
+    depth_recovery,
+    stabilising_recovery,
+    whole_vehicle_recovery,
+)
 from auvmpc.controllers.shell import ShelledController
-from auvmpc.controllers.six_dof_nmpc import SIX_DOF_NMPC, SixDofNmpc, SixDofNmpcConfig
+from auvmpc.controllers.six_dof_nmpc import SixDofNmpc, SixDofNmpcConfig
 from auvmpc.errors import FieldError, format_validation_error
 from auvmpc.models.vehicle import VehicleParams
 
 __all__ = [
+    "DEFAULT_TYPE",
+    "DEFAULT_TYPE_CONTEXT",
     "DEPTH_REGISTRY",
     "REGISTRY",
     "ControllerChoice",
@@ -71,44 +78,47 @@ __all__ = [
 
 @dataclass(frozen=True)
 class ControllerEntry:
-    """A controller type: the configuration its ``controller`` mapping validates as, and the
-    class built from it."""
+    """A controller type: the configuration its ``controller`` mapping validates as, the
+    class built from it, and what builds the recovery its safety shell applies when no
+    optimiser is in control (controllers/recovery.py; None: none, the shell holds the plan's
+    last move)."""
 
     config: type[StrictModel]
     controller: type[Controller]
+    recovery: Callable[[ShelledController, VehicleParams, Any], Recovery | None] | None = None
 
 
 # do-mpc itself is imported only when its controller is built (an optional extra).
+# The optimising horizontal controllers' shells recover with the stabilising feedback (the
+# baseline is that feedback), the whole vehicle's MPC's by the vehicle (a torpedo's autopilot,
+# a thruster vehicle's channel feedbacks).
 REGISTRY: dict[str, ControllerEntry] = {
     ControllerType.BASELINE: ControllerEntry(BaselineControllerConfig, BaselineController),
-    ControllerType.MPC: ControllerEntry(PaperMpcConfig, PaperMpc),
-    ControllerType.LTV_MPC: ControllerEntry(LtvMpcConfig, LtvMpc),
-    ControllerType.NMPC: ControllerEntry(NmpcConfig, NonlinearMpc),
-    ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController),
+    ControllerType.MPC: ControllerEntry(PaperMpcConfig, PaperMpc, stabilising_recovery),
+    ControllerType.LTV_MPC: ControllerEntry(LtvMpcConfig, LtvMpc, stabilising_recovery),
+    ControllerType.NMPC: ControllerEntry(NmpcConfig, NonlinearMpc, stabilising_recovery),
+    ControllerType.DO_MPC: ControllerEntry(DoMpcConfig, DoMpcController, stabilising_recovery),
     ControllerType.THRUST_PLAYBACK: ControllerEntry(ThrustPlaybackConfig, ThrustPlayback),
-    ControllerType.SIX_DOF_NMPC: ControllerEntry(SixDofNmpcConfig, SixDofNmpc),
+    ControllerType.SIX_DOF_NMPC: ControllerEntry(
+        SixDofNmpcConfig, SixDofNmpc, whole_vehicle_recovery
+    ),
     ControllerType.LOS_PID: ControllerEntry(LosPidConfig, LosPid),
 }
 # The depth kind's (a depth scenario's ``controller``, a 6-DOF scenario's
 # ``depth_controller``, which takes only the depth MPC): thrust-playback's configuration
-# there is the depth one, whose table holds the vertical thrusts.
+# there is the depth one, whose table holds the vertical thrusts. The depth MPC's shell
+# recovers with the depth feedback.
 DEPTH_REGISTRY: dict[str, ControllerEntry] = {
-    DEPTH_MPC: ControllerEntry(DepthControllerConfig, DepthMpc),
+    DEPTH_MPC: ControllerEntry(DepthControllerConfig, DepthMpc, depth_recovery),
     ControllerType.THRUST_PLAYBACK: ControllerEntry(DepthPlaybackConfig, ThrustPlayback),
-}
-
-# The optimising horizontal controllers, whose shell recovers with the stabilising feedback
-# (the baseline is that feedback); the depth MPC's shell recovers with the depth feedback.
-RECOVERED_TYPES = {
-    ControllerType.MPC,
-    ControllerType.LTV_MPC,
-    ControllerType.NMPC,
-    ControllerType.DO_MPC,
 }
 # A registered name: lower-case words joined by hyphens, as the built-in ones.
 _NAME = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
-# The horizontal type a ``controller`` mapping without ``type`` has.
+# The horizontal type a ``controller`` mapping without ``type`` has, unless the validation
+# context names another under DEFAULT_TYPE_CONTEXT (a scenario's vehicle decides it: a 6-DOF
+# scenario's torpedo flies six-dof-nmpc, scenario.loader.validate_document).
 DEFAULT_TYPE = ControllerType.NMPC
+DEFAULT_TYPE_CONTEXT = "default_controller_type"
 # The union member of the controllers registered at run time.
 _REGISTERED = "registered"
 _BUILT_IN = {name: entry.config for name, entry in REGISTRY.items()}
@@ -145,9 +155,9 @@ def register_controller(
         raise ValueError(f"{config!r} is not a controllers.config.HorizontalControllerConfig")
     if recovered and not issubclass(controller, ShelledController):
         raise ValueError(f"{controller.__name__}: only a ShelledController has a shell to recover")
-    REGISTRY[name] = ControllerEntry(config, controller)
-    if recovered:
-        RECOVERED_TYPES.add(name)
+    REGISTRY[name] = ControllerEntry(
+        config, controller, stabilising_recovery if recovered else None
+    )
 
 
 def _entry(config: Any) -> ControllerEntry:
@@ -203,17 +213,33 @@ def _registered_config(value: Any, info: ValidationInfo) -> Any:
 def _checked_type(value: Any, handler: Any, info: ValidationInfo) -> Any:
     """The type named first (a known one, or any name in a saved run), then the mapping
     validated as that type's configuration; an error names the field without the union
-    member pydantic puts in its location."""
+    member pydantic puts in its location. A mapping without ``type`` is the default type's
+    configuration: the context's (DEFAULT_TYPE_CONTEXT), else DEFAULT_TYPE."""
     if isinstance(value, Mapping):
-        given = value.get("type", DEFAULT_TYPE)
-        saved = (info.context or {}).get(SAVED_RUN)
+        context = info.context or {}
+        default = context.get(DEFAULT_TYPE_CONTEXT, DEFAULT_TYPE)
+        given = value.get("type", default)
         if given == DEPTH_MPC:
             where = "kind: depth scenarios, six-dof depth_controller"
             raise FieldError("type", given, f"the depth controller ({where})")
-        if not (isinstance(given, str) and (given in REGISTRY or saved)):
+        if not (isinstance(given, str) and (given in REGISTRY or context.get(SAVED_RUN))):
             known = ", ".join(repr(name) for name in horizontal_types())
             raise FieldError("type", given, f"input should be one of {known}")
+        if "type" not in value:
+            # The discriminator reads no context: the default's configuration is named here
+            # (``type`` stays unset, as the user left it).
+            return _validated_as(REGISTRY[given].config, value, info)
     return _validated_member(value, handler)
+
+
+def _validated_as(config: type[StrictModel], value: Any, info: ValidationInfo) -> Any:
+    """``value`` validated as ``config``; an error names the field within the mapping."""
+    try:
+        return config.model_validate(value, context=info.context)
+    except ValidationError as error:
+        problem = format_validation_error(error)
+        field = "" if problem.field == "<root>" else problem.field
+        raise FieldError(field, problem.value, problem.reason) from None
 
 
 def _validated_member(value: Any, handler: Any) -> Any:
@@ -349,23 +375,15 @@ def build_controller(
 
     ``surroundings``: what else the scenario says that the controller is built for, by
     name (a depth controller's ``water_depth_m``)."""
-    controller_class = class_of(config)
+    entry = _entry(config)
     filled = config.for_vehicle(model)
-    if not hasattr(controller_class, "from_config"):
-        return controller_class(model, filled)
-    controller = controller_class.from_config(
+    if not hasattr(entry.controller, "from_config"):
+        return entry.controller(model, filled)
+    controller = entry.controller.from_config(
         model, filled, obstacle_count=obstacle_count, **surroundings
     )
     if not isinstance(controller, ShelledController):
         return controller  # its own safety rules (the C controller's shell is in its C)
-    if config.type in RECOVERED_TYPES:
-        controller.recovery = StabilisingFeedback(
-            model, controller.sample_time, filled.vehicle_radius + filled.obstacle_margin
-        )
-    elif config.type == DEPTH_MPC:
-        controller.recovery = DepthFeedback(controller.heave, controller.sample_time)
-    elif config.type == SIX_DOF_NMPC and flies(model):
-        # a torpedo: its classical autopilot, at the optimiser's sample time
-        autopilot = LosPid(model, LosPidConfig(sample_time=controller.sample_time))
-        controller.recovery = AutopilotFeedback(autopilot)
+    if entry.recovery is not None:
+        controller.recovery = entry.recovery(controller, model, filled)
     return controller

@@ -7,8 +7,8 @@ A back end (the paper's MPC, LTV-MPC, NMPC, the do-mpc yardstick, the depth MPC)
   replaced by the previous plan's next move (FALLBACK) for at most
   :data:`PLAN_FALLBACK_STEPS` samples in a row; after that, without a plan, and
   whenever the vehicle spins, by a stabilising feedback (RECOVERY, controllers/recovery.py)
-  where the controller has one (the horizontal MPCs and the depth MPC), and the back end
-  starts again cold;
+  where the controller has one (the horizontal MPCs, the depth MPC, six-dof-nmpc on a torpedo
+  or a thruster vehicle the channel pair flies), and the back end starts again cold;
 * whatever is applied is projected into the hard thrust and thrust-rate box, so no back end
   can command thrust outside the limits;
 * the status says what happened (OK, RELAXED when a soft constraint's slack is active,
@@ -35,7 +35,7 @@ from auvmpc.controllers.base import (
 from auvmpc.models.layout import HORIZONTAL, PLANAR_FORCE
 
 if TYPE_CHECKING:
-    from auvmpc.controllers.recovery import DepthFeedback, StabilisingFeedback
+    from auvmpc.controllers.recovery import Recovery
 
 __all__ = [
     "BACKOFF_KEYS",
@@ -110,6 +110,9 @@ class Proposal:
     disturbance: np.ndarray | None = None  # the force estimate used, if any: horizontal
     # world [X, Y, N] (PLANAR_FORCE); the depth MPC's heave force [Z]
     estimated_state: np.ndarray | None = None  # the state the back end estimated, if any
+    # The water velocity the back end predicted with, if it estimates one (six-dof-nmpc):
+    # world-frame horizontal [x', y'] (m/s); what the recovery of a thruster vehicle cancels.
+    current: np.ndarray | None = None
     limited: bool = False  # the back end itself cut its demand to fit the limits
     details: dict[str, float] = field(default_factory=dict)  # back-end-specific, in ``info``
     # The reference rows the back end flies, where they are not the loop's (a crippled
@@ -126,10 +129,10 @@ class ShelledController(Controller):
 
     limits: ActuatorLimits
     solver_time_limit_ms: float | None = None
-    # What the shell applies when no optimiser is in control (set by the registry for the
-    # horizontal MPCs and the depth MPC); None: the previous plan's moves, then the last
-    # command held.
-    recovery: StabilisingFeedback | DepthFeedback | None = None
+    # What the shell applies when no optimiser is in control (set by the registry: its
+    # entry's recovery, controllers/recovery.py); None: the previous plan's moves, then the
+    # last command held.
+    recovery: Recovery | None = None
 
     @classmethod
     def from_config(cls, model, config, obstacle_count: int = 0) -> ShelledController:

@@ -56,11 +56,13 @@ Safety shell (controllers/shell.py, the one every optimising controller has): on
 converged solve is a proposal; one that failed, did not converge within ``max_iterations`` or
 came later than ``solver_time_limit_ms`` is replaced by the previous plan's next move
 (``fallback``) for at most ``PLAN_FALLBACK_STEPS`` samples, then by the recovery feedback the
-registry gives it: for a torpedo (a propeller, a rudder and stern planes) its classical
-autopilot, ``los-pid`` (controllers/recovery.py, AutopilotFeedback), until a solve converges
-again; a vehicle without them has none and keeps the plan's last move. Whatever is applied is
-projected into the hard box and rate limits (a move the projection changed is logged
-``saturated``).
+registry gives it (controllers/recovery.py, whole_vehicle_recovery) until a solve converges
+again: for a torpedo (a propeller, a rudder and stern planes) its classical autopilot,
+``los-pid`` (AutopilotFeedback); for a thruster vehicle the channel pair flies (the BlueROV2
+Heavy) the pair's stabilising and depth feedbacks on its horizontal and vertical thrusters
+(ChannelFeedback); any other vehicle has none and keeps the plan's last move. Whatever is
+applied is projected into the hard box and rate limits (a move the projection changed is
+logged ``saturated``).
 """
 
 from __future__ import annotations
@@ -451,13 +453,15 @@ class SixDofNmpc(ShelledController):
         if not (stats["success"] and np.all(np.isfinite(w))):
             self._solution = None
             return Proposal(None, solve_time, iterations, details=self._details(observation.k),
-                            reference=self._flown(reference, observation))  # fmt: skip
+                            reference=self._flown(reference, observation),
+                            current=self._current[:2].copy())  # fmt: skip
         states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
         plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
         self._solution = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
         return Proposal(plan, solve_time, iterations, predicted_states=states.T,
                         details=self._details(observation.k),
-                        reference=self._flown(reference, observation))  # fmt: skip
+                        reference=self._flown(reference, observation),
+                        current=self._current[:2].copy())  # fmt: skip
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Warm-start the next solve from this one's (none after a fallback), and predict

@@ -11,8 +11,10 @@ import yaml
 from pydantic import ValidationError
 
 from auvmpc.config import builtin_descriptions
+from auvmpc.controllers.registry import DEFAULT_TYPE_CONTEXT
 from auvmpc.errors import ConfigError, format_validation_error
 from auvmpc.models.layout import WORLD_VECTOR
+from auvmpc.models.vehicle import VehicleParams
 from auvmpc.safe_yaml import load_yaml, read_text_file, read_yaml_mapping, yaml_problem
 from auvmpc.scenario.depth import DepthScenario
 from auvmpc.scenario.model import Scenario, SixDofScenario
@@ -20,6 +22,7 @@ from auvmpc.scenario.resolved import (
     ResolvedDepthScenario,
     ResolvedScenario,
     ResolvedSixDofScenario,
+    load_vehicle_relative,
 )
 
 __all__ = [
@@ -108,18 +111,42 @@ def resolve_document(
     document without a known ``kind`` is a horizontal one (which refuses a ``kind`` it is
     not: "kind: input should be 'horizontal'"). ``notes``: what the overrides decided that
     the user should hear of (run.json ``warnings``)."""
-    document = validate_document(data)
+    document = validate_document(data, base_dir)
     scenario = SCENARIO_KINDS[document.kind][1](document, base_dir)
     scenario.notes = [*notes, *scenario.notes]
     return scenario
 
 
-def validate_document(data: dict[str, Any]) -> Scenario | DepthScenario:
+def validate_document(
+    data: dict[str, Any], base_dir: Path | None = None
+) -> Scenario | DepthScenario:
     """A scenario document validated by the schema its ``kind`` names (a horizontal one's
-    without a known ``kind``), not yet resolved for its vehicle; a bad field is one line."""
+    without a known ``kind``), not yet resolved for its vehicle; a bad field is one line.
+
+    A ``controller`` mapping without ``type`` is validated as the default type for the
+    document's vehicle (a 6-DOF torpedo's is six-dof-nmpc), read from ``base_dir`` as the
+    resolution reads it (None: the working directory)."""
     kind = data.get("kind")
     known = kind if isinstance(kind, str) and kind in SCENARIO_KINDS else "horizontal"
-    return _validated(SCENARIO_KINDS[known][0], data)
+    schema, resolved = SCENARIO_KINDS[known]
+    context = None
+    if issubclass(resolved, ResolvedScenario):  # a depth scenario's controller is depth-mpc's
+        vehicle = _vehicle_or_none(data.get("vehicle", schema.model_fields["vehicle"].default),
+                                   base_dir or Path.cwd())  # fmt: skip
+        if vehicle is not None:
+            context = {DEFAULT_TYPE_CONTEXT: resolved.default_controller_type(vehicle)}
+    return _validated(schema, data, context)
+
+
+def _vehicle_or_none(source: Any, base_dir: Path) -> VehicleParams | None:
+    """The vehicle a document names, or None where it names none that loads (the resolution
+    says what is wrong with it, after the fields are checked)."""
+    if not isinstance(source, str | dict):
+        return None
+    try:
+        return load_vehicle_relative(source, base_dir)
+    except ConfigError:
+        return None
 
 
 def validate_scenario(data: dict[str, Any]) -> Scenario:
@@ -127,9 +154,9 @@ def validate_scenario(data: dict[str, Any]) -> Scenario:
     return _validated(Scenario, data)
 
 
-def _validated(schema: type, data: dict[str, Any]) -> Any:
+def _validated(schema: type, data: dict[str, Any], context: dict[str, Any] | None = None) -> Any:
     try:
-        return schema.model_validate(data)
+        return schema.model_validate(data, context=context)
     except ValidationError as error:
         raise format_validation_error(error) from None
 

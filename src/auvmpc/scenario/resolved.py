@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from auvmpc.controllers.config import ControllerType
-from auvmpc.controllers.registry import REGISTRY, retyped, whole_vehicle
+from auvmpc.controllers.registry import DEFAULT_TYPE, REGISTRY, retyped, whole_vehicle
 from auvmpc.errors import ConfigError, FieldError
 from auvmpc.models.actuators import ActuatorSet
 from auvmpc.models.heave import resolve_heave
@@ -73,6 +73,12 @@ class ResolvedScenario:
         """The inputs ``initial_thrust`` gives one value each, within their limits: the
         horizontal thrusters (a 6-DOF vehicle's vertical ones start at 0)."""
         return self.model.actuators
+
+    @classmethod
+    def default_controller_type(cls, vehicle: VehicleParams) -> str:
+        """The type a ``controller`` mapping without one has on ``vehicle`` (what the
+        scenario loader validates it as)."""
+        return DEFAULT_TYPE
 
     def _check_vehicle(self, scenario: Scenario) -> None:
         """Refuse a vehicle the scenario's controller cannot command (one line)."""
@@ -174,6 +180,12 @@ class ResolvedSixDofScenario(ResolvedScenario):
             return super().initial_inputs
         return self.model.six_dof_actuators
 
+    @classmethod
+    def default_controller_type(cls, vehicle: VehicleParams) -> str:
+        """A vehicle with ``actuators:`` (a propeller and fins): six-dof-nmpc, the only
+        controller that flies them; one with thrusters: the horizontal default."""
+        return DEFAULT_TYPE if vehicle.has_thrusters else ControllerType.SIX_DOF_NMPC
+
     def _check_vehicle(self, scenario: Scenario) -> None:
         if not whole_vehicle(scenario.controller):  # the pair: fixed thrusters, checked below
             super()._check_vehicle(scenario)
@@ -271,20 +283,22 @@ class ResolvedSixDofScenario(ResolvedScenario):
 def _typed_for(scenario: SixDofScenario, vehicle: VehicleParams) -> SixDofScenario:
     """``scenario`` with ``controller.type: six-dof-nmpc`` if it names no type and its vehicle
     has ``actuators:`` (the default nmpc, a horizontal controller on thrusters, cannot fly a
-    propeller and fins); else as it is. A knob of the mapping that six-dof-nmpc has not is
-    one line naming it."""
+    propeller and fins); else as it is. The loader validated a ``controller`` mapping as the
+    vehicle's default already; this types the omitted one, and a scenario validated without
+    the loader, whose knob that six-dof-nmpc has not is one line naming it."""
     config = scenario.controller
-    if vehicle.has_thrusters or "type" in config.model_fields_set:
+    default = ResolvedSixDofScenario.default_controller_type(vehicle)
+    if default == DEFAULT_TYPE or "type" in config.model_fields_set:
         return scenario
-    target = REGISTRY[ControllerType.SIX_DOF_NMPC].config
+    target = REGISTRY[default].config
     for knob in sorted(config.model_fields_set):
         if knob not in target.model_fields:
             raise ConfigError(
                 f"controller.{knob}", getattr(config, knob),
-                f"not a knob of {ControllerType.SIX_DOF_NMPC}, the default controller of "
+                f"not a knob of {default}, the default controller of "
                 f"{vehicle.name} (a vehicle with actuators:); name controller.type to use it",
             )  # fmt: skip
-    typed = retyped(config, ControllerType.SIX_DOF_NMPC)
+    typed = retyped(config, default)
     return scenario.model_copy(update={"controller": typed})
 
 

@@ -337,7 +337,9 @@ def validate_campaign(
         for yardstick in twins:
             where = f"run {index}{' yardstick' if yardstick else ''}"
             try:
-                validate_document(plan_run(campaign, index, yardstick=yardstick).data)
+                validate_document(
+                    plan_run(campaign, index, yardstick=yardstick).data, Path(campaign.base_dir)
+                )
             except ConfigError as error:
                 raise _blame(campaign, error, None, where, yardstick) from None
 
