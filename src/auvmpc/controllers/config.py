@@ -264,6 +264,11 @@ class HorizontalControllerConfig(TypedControllerConfig):
         """Whether this controller type has ``knob``."""
         return knob in type(self).model_fields
 
+    def for_sensing(self, sensing: Any) -> tuple[HorizontalControllerConfig, dict[str, Any]]:
+        """This config with what it takes from the scenario's sensors (``sensing``) filled in
+        where omitted, and those choices (run.json's ``choices``): none but a type's own."""
+        return self, {}
+
     def for_vehicle(self, model: VehicleParams) -> HorizontalControllerConfig:
         """This config with every setting that was omitted filled in for ``model``: the
         sample time, the RK4 steps, the thrust weights and the estimator's disturbance statistics

@@ -145,6 +145,9 @@ _PROCESS_STD = (
     9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 3e-5, 1.2e-2, 1e-4, 4.5e-2, 6e-2, 3e-2, 2e-4,
 )  # fmt: skip
 _CURRENT_RATE_STD = 3e-3
+# The EKF's measurement noise where the scenario's sensor has none: a measurement it then
+# follows, with a covariance far from singular.
+_NOISELESS_STD = 1e-6
 # What the model's error in the EKF's process noise varies (models/vehicle.py, scaled).
 _UNCERTAIN_PARTS = ("added_mass", "linear_damping", "quadratic_damping")
 
@@ -227,6 +230,25 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
         "(model_uncertainty): the error is a bias that persists, not white noise",
     )  # fmt: skip
     max_iterations: int = Field(default=100, ge=1, le=3000, description="IPOPT's cap per sample")
+
+    def for_sensing(self, sensing: Any) -> tuple[SixDofNmpcConfig, dict[str, Any]]:
+        """The EKF's ``measurement_std`` from the scenario's sensors where omitted: the
+        navigation's x, y, heading, u, v, r and the depth's noise as they are; roll and
+        pitch as the heading, w as u and v, p and q as r (the simulated sensor measures these
+        exactly: an AHRS and a DVL do them no worse); a noise-free entry at _NOISELESS_STD."""
+        if "measurement_std" in self.model_fields_set:
+            return self, {}
+        x, y, psi, u, v, r = (float(entry) for entry in sensing.std)
+        z = float(getattr(sensing, "depth_std_m", 0.0))
+        std = tuple(
+            max(entry, _NOISELESS_STD)
+            for entry in (x, y, z, psi, psi, psi, u, v, max(u, v), r, r, r)
+        )
+        why = ("the scenario's sensing (std, depth_std_m); roll and pitch as the heading, w "
+               "as u and v, p and q as r")  # fmt: skip
+        return self.model_copy(update={"measurement_std": std}), {
+            "measurement_std": {"value": list(std), "why": why}
+        }
 
     def _filled(self, model: VehicleParams, sample_time: float) -> dict[str, Any]:
         """The RK4 steps per sample, where omitted."""

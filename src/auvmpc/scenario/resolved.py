@@ -126,6 +126,8 @@ class ResolvedScenario:
                 f" x the position noise's {noise:g} m std (sensing.std): the controller "
                 "steers the position it measures",
             }
+        controller, sensed = controller.for_sensing(scenario.sensing)
+        self.choices |= sensed
         self.scenario = scenario = scenario.model_copy(
             update={
                 "controller": controller,
