@@ -167,6 +167,29 @@ def test_in_a_turn_the_spread_keeps_the_sway_estimate_on_a_model_20_percent_off(
     assert errors[0.2] < 0.7 * errors[0.0]
 
 
+def test_the_ekf_assumes_the_noise_the_scenario_says_its_sensors_have():
+    """Omitted, measurement_std is the scenario's sensing, entry by entry (the REMUS presets'
+    gives the former fixed default exactly); a sensor without noise is followed (1e-6); one
+    the user names is kept. run.json's choices say where it came from."""
+    helix = load_scenario("bluerov2-helix", ["controller.type=six-dof-nmpc"])
+    assert helix.scenario.controller.measurement_std == (
+        0.01, 0.01, 0.01, 0.005, 0.005, 0.005, 0.01, 0.01, 0.01, 0.005, 0.005, 0.005
+    )  # fmt: skip
+    assert "sensing" in helix.choices["measurement_std"]["why"]
+    survey = load_scenario("remus100-survey")
+    default = SixDofNmpcConfig.model_fields["measurement_std"].default
+    assert survey.scenario.controller.measurement_std == default
+    still = load_scenario(
+        "bluerov2-helix",
+        ["controller.type=six-dof-nmpc", "sensing.std=[0,0,0,0,0,0]", "sensing.depth_std_m=0"],
+    )
+    assert still.scenario.controller.measurement_std == (1e-6,) * 12
+    named = [0.2] * 12
+    given = load_scenario("remus100-survey", [f"controller.measurement_std={named}"])
+    assert given.scenario.controller.measurement_std == tuple(named)
+    assert "measurement_std" not in given.choices
+
+
 def test_it_flies_the_six_dof_helix_within_the_hard_limits():
     """BlueROV2 Heavy, 8 s of the helix: every sample solved, no input beyond its limits or
     rate, position within 5 cm and depth within 2 cm after 4 s (the helix starts on the
