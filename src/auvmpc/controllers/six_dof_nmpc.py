@@ -145,9 +145,11 @@ _PROCESS_STD = (
     9e-4, 9e-4, 6e-3, 9e-3, 6e-3, 3e-5, 1.2e-2, 1e-4, 4.5e-2, 6e-2, 3e-2, 2e-4,
 )  # fmt: skip
 _CURRENT_RATE_STD = 3e-3
-# The EKF's measurement noise where the scenario's sensor has none: a measurement it then
-# follows, with a covariance far from singular.
-_NOISELESS_STD = 1e-6
+# The EKF's measurement noise at least this share of its default (the REMUS presets'
+# sensors), where the scenario's sensor has less or none: the filter then follows the
+# measurement closely; at 1e-6 its covariance against the model's spread (1e-2 m/s a sample
+# on the surge) was too ill-conditioned to decompose (numpy: eigenvalues did not converge).
+_LEAST_NOISE_SHARE = 0.1
 # What the model's error in the EKF's process noise varies (models/vehicle.py, scaled).
 _UNCERTAIN_PARTS = ("added_mass", "linear_damping", "quadratic_damping")
 
@@ -235,14 +237,16 @@ class SixDofNmpcConfig(SolverTimeLimit, PredictionModel, WholeVehicleConfig):
         """The EKF's ``measurement_std`` from the scenario's sensors where omitted: the
         navigation's x, y, heading, u, v, r and the depth's noise as they are; roll and
         pitch as the heading, w as u and v, p and q as r (the simulated sensor measures these
-        exactly: an AHRS and a DVL do them no worse); a noise-free entry at _NOISELESS_STD."""
+        exactly: an AHRS and a DVL do them no worse); none below _LEAST_NOISE_SHARE of the
+        default."""
         if "measurement_std" in self.model_fields_set:
             return self, {}
         x, y, psi, u, v, r = (float(entry) for entry in sensing.std)
         z = float(getattr(sensing, "depth_std_m", 0.0))
+        sensed = (x, y, z, psi, psi, psi, u, v, max(u, v), r, r, r)
         std = tuple(
-            max(entry, _NOISELESS_STD)
-            for entry in (x, y, z, psi, psi, psi, u, v, max(u, v), r, r, r)
+            max(entry, _LEAST_NOISE_SHARE * least)
+            for entry, least in zip(sensed, _MEASUREMENT_STD, strict=True)
         )
         why = ("the scenario's sensing (std, depth_std_m); roll and pitch as the heading, w "
                "as u and v, p and q as r")  # fmt: skip
