@@ -335,7 +335,8 @@ class SixDofNmpc(ShelledController):
 
             return rk4(f, x, u, self.sample_time, config.model_substeps)
 
-        step = ca.Function("step", [x, u, current, share], [sample(derivative)])
+        stepped = sample(derivative)
+        step = ca.Function("step", [x, u, current, share], [stepped])
         # The observer's one-step prediction and how it moves with the horizontal current,
         # from one evaluation (one call per sample on the controller's step).
         predicted = step(x, u, current, share)
@@ -350,7 +351,8 @@ class SixDofNmpc(ShelledController):
             self._ekf = SixDofCurrentEkf(
                 step, self.sample_time, np.array(config.measurement_std),
                 np.array(config.process_std), config.current_rate_std,
-                config.initial_current_std, self._model_spread(sample, x, u, current, share),
+                config.initial_current_std,
+                self._model_spread(sample, stepped, x, u, current, share),
             )  # fmt: skip
         # One stage, written once and mapped over the horizon: its shooting gap and its cost.
         reached, previous = ca.SX.sym("x_next", NX), ca.SX.sym("u_previous", nu)
@@ -396,9 +398,9 @@ class SixDofNmpc(ShelledController):
         self._ubg = np.concatenate([zeros, max_change])
         self._n_states = NX * (n + 1)
 
-    def _model_spread(self, sample, x, u, current, share) -> ca.Function | None:
-        """(x, u, v_c, e) -> (NX, 3): how far one sample's prediction (``sample`` of a
-        derivative) moves when each of the model's uncertain parts is off by
+    def _model_spread(self, sample, nominal, x, u, current, share) -> ca.Function | None:
+        """(x, u, v_c, e) -> (NX, 3): how far one sample's prediction (``nominal``; ``sample``
+        of another vehicle's derivative) moves when each of the model's uncertain parts is off by
         ``model_uncertainty`` (its added mass, its linear and its quadratic damping, each
         scaled alone), times ``model_error_gain``; None without uncertainty. The EKF adds
         their outer products to its process covariance each sample: the model's error where
@@ -406,7 +408,6 @@ class SixDofNmpc(ShelledController):
         config = self.config
         if config.model_uncertainty == 0.0:
             return None
-        nominal = sample(six_dof_model(self.model).derivative_with_effectiveness)
         columns = [
             config.model_error_gain * (sample(six_dof_model(off).derivative_with_effectiveness)
                                        - nominal)
@@ -476,18 +477,18 @@ class SixDofNmpc(ShelledController):
         w = np.asarray(solution["x"], dtype=float).ravel()
         # Only a converged solve is a proposal: one cut short by the iteration cap (or the
         # time limit) is a failure, so the run's fallback metrics see every such sample.
+        told = {  # what the shell and the log get either way
+            "details": self._details(observation.k),
+            "reference": self._flown(reference, observation),
+            "current": self._current[:2].copy(),
+        }
         if not (stats["success"] and np.all(np.isfinite(w))):
             self._solution = None
-            return Proposal(None, solve_time, iterations, details=self._details(observation.k),
-                            reference=self._flown(reference, observation),
-                            current=self._current[:2].copy())  # fmt: skip
+            return Proposal(None, solve_time, iterations, **told)
         states = w[: self._n_states].reshape((NX, self.horizon + 1), order="F")
         plan = w[self._n_states :].reshape((self.n_inputs, self.horizon), order="F").T
         self._solution = self._shifted(states, plan, np.asarray(solution["lam_g"]).ravel())
-        return Proposal(plan, solve_time, iterations, predicted_states=states.T,
-                        details=self._details(observation.k),
-                        reference=self._flown(reference, observation),
-                        current=self._current[:2].copy())  # fmt: skip
+        return Proposal(plan, solve_time, iterations, predicted_states=states.T, **told)
 
     def applied(self, command: np.ndarray, fell_back: bool) -> None:
         """Warm-start the next solve from this one's (none after a fallback), and predict

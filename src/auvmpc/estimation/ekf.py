@@ -221,9 +221,16 @@ class AugmentedEkf:
         self.covariance = condition_covariance(np.asarray(joseph), self._floor, self._ceiling)
         return self.estimate.copy()
 
-    def predict(self, applied_input: np.ndarray, effectiveness: np.ndarray | None = None) -> None:
+    def predict(
+        self,
+        applied_input: np.ndarray,
+        effectiveness: np.ndarray | None = None,
+        added_covariance: np.ndarray | None = None,
+    ) -> None:
         """Propagate over one sample with the input actually applied, acting with
-        ``effectiveness`` (n,; None: all healthy).
+        ``effectiveness`` (n,; None: all healthy); ``added_covariance`` (n x n), process noise
+        of this sample beyond the fixed one (a model's error where the state is), is added to
+        the propagated covariance.
 
         If the prediction is not finite (the model's integration diverged, e.g. an RK4
         step too long for the estimated speed), the filter restarts from the next
@@ -248,6 +255,8 @@ class AugmentedEkf:
             return
         self.estimate = next_estimate
         self.covariance = condition_covariance(propagated, self._floor, self._ceiling)
+        if added_covariance is not None:
+            self.covariance = self.covariance + added_covariance
 
 
 def ekf_functions(

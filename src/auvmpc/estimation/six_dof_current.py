@@ -88,10 +88,11 @@ class SixDofCurrentEkf:
     def predict(self, applied_input: np.ndarray, effectiveness: np.ndarray) -> None:
         """Propagate over one sample with the input that acted, at ``effectiveness``; the
         model's spread where the estimate was (``model_spread``) adds to the covariance."""
-        estimate = self._filter.estimate
-        self._filter.predict(applied_input, effectiveness)
-        if self._spread is None:
-            return
-        water = np.concatenate([estimate[NX:], [0.0]])
-        spread = np.asarray(self._spread(estimate[:NX], applied_input, water, effectiveness))
-        self._filter.covariance[:NX, :NX] += spread @ spread.T
+        added = None
+        if self._spread is not None:
+            estimate = self._filter.estimate
+            water = np.concatenate([estimate[NX:], [0.0]])
+            spread = np.asarray(self._spread(estimate[:NX], applied_input, water, effectiveness))
+            added = np.zeros((NX + NC, NX + NC))
+            added[:NX, :NX] = spread @ spread.T
+        self._filter.predict(applied_input, effectiveness, added)
